@@ -1,0 +1,308 @@
+"""The interface every recognition method implements (Fig. 1 as a contract).
+
+A recognizer is fitted on known classes, routes each sample to the known-class
+classifier (FC_Y) or the novel-class classifier (FC_Z) by a novelty score, and
+grows by zero-shot enrollment (``add_novel_classes``) and one-shot samples
+(``add_one_shot``). Both return a *new* recognizer; the original is untouched,
+so a service can keep serving it while the new one is built.
+
+Novelty scores are oriented so that higher means more novel; for the paper's
+GMM the score is the negated weighted log-likelihood and the threshold is
+-sigma_nov.
+"""
+
+from __future__ import annotations
+
+import copy
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Self
+
+import numpy as np
+
+from app.data.dataset import TactileDataset
+from app.framework.errors import (
+    AttributeVectorError,
+    DuplicateClassError,
+    InputShapeError,
+    NonFiniteInputError,
+    NotFittedError,
+    UnknownClassError,
+)
+
+
+@dataclass(frozen=True)
+class ClassScore:
+    class_name: str
+    probability: float
+
+
+@dataclass(frozen=True)
+class Recognition:
+    """The answer for one sample."""
+
+    class_name: str
+    kind: str  # "known" | "novel"
+    is_novel: bool
+    novelty_score: float
+    top_k: tuple[ClassScore, ...]
+
+
+@dataclass
+class NoveltyTuning:
+    """How the novelty threshold was chosen (Sect. VI-B, Fig. 7)."""
+
+    thresholds: np.ndarray
+    known_kept: np.ndarray  # accuracy of calling held-out known samples known, per threshold
+    val_novel: np.ndarray  # accuracy of calling validation-novel samples novel, per threshold
+    threshold: float
+    known_kept_at_threshold: float
+    val_novel_at_threshold: float
+    auroc: float = float("nan")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "thresholds": self.thresholds.tolist(),
+            "known_kept": self.known_kept.tolist(),
+            "val_novel": self.val_novel.tolist(),
+            "threshold": self.threshold,
+            "known_kept_at_threshold": self.known_kept_at_threshold,
+            "val_novel_at_threshold": self.val_novel_at_threshold,
+            "auroc": self.auroc,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> NoveltyTuning:
+        return cls(
+            thresholds=np.asarray(d["thresholds"], dtype=np.float64),
+            known_kept=np.asarray(d["known_kept"], dtype=np.float64),
+            val_novel=np.asarray(d["val_novel"], dtype=np.float64),
+            threshold=float(d["threshold"]),
+            known_kept_at_threshold=float(d["known_kept_at_threshold"]),
+            val_novel_at_threshold=float(d["val_novel_at_threshold"]),
+            auroc=float(d.get("auroc", float("nan"))),
+        )
+
+
+@dataclass
+class ClassRegistry:
+    """Known and novel classes with their attribute vectors, and novel classes' real samples."""
+
+    attribute_names: tuple[str, ...] = ()
+    known_names: list[str] = field(default_factory=list)
+    known_attributes: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.float32))
+    novel_names: list[str] = field(default_factory=list)
+    novel_attributes: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.float32))
+    # real samples that arrived for novel classes (one-shot learning), by class name
+    novel_samples: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def all_names(self) -> list[str]:
+        return self.known_names + self.novel_names
+
+    def kind_of(self, name: str) -> str:
+        if name in self.known_names:
+            return "known"
+        if name in self.novel_names:
+            return "novel"
+        raise UnknownClassError(f"unknown class '{name}'")
+
+
+class TactileRecognizer(ABC):
+    """Base class of recognition methods; see the module docstring."""
+
+    method: ClassVar[str] = "abstract"
+
+    def __init__(self) -> None:
+        self.input_shape: tuple[int, ...] | None = None
+        self.registry = ClassRegistry()
+        self.novelty_threshold: float = float("inf")
+        self.novelty_tuning: NoveltyTuning | None = None
+        self.metrics: dict[str, Any] = {}
+
+    # ----------------------------------------------------------------- fitting
+    def fit(self, dataset: TactileDataset, progress: bool = False) -> Self:
+        """Train on ``dataset``; every class in it becomes a known class."""
+        if len(dataset) == 0:
+            raise NotFittedError("cannot fit on an empty dataset")
+        self.input_shape = dataset.input_shape
+        self.registry = ClassRegistry(
+            attribute_names=dataset.attribute_names,
+            known_names=list(dataset.class_names),
+            known_attributes=dataset.class_attributes.copy(),
+            novel_names=[],
+            novel_attributes=np.zeros((0, dataset.n_attributes), np.float32),
+        )
+        self._fit(dataset, progress)
+        return self
+
+    @abstractmethod
+    def _fit(self, dataset: TactileDataset, progress: bool) -> None:
+        """Train the known-class classifier and the novelty detector (threshold tuned)."""
+
+    # --------------------------------------------------------------- inference
+    @abstractmethod
+    def _known_proba(self, samples: np.ndarray) -> np.ndarray:
+        """(N, K) probabilities over the known classes."""
+
+    @abstractmethod
+    def _novel_proba(self, samples: np.ndarray) -> np.ndarray:
+        """(N, L) probabilities over the novel classes (L >= 1)."""
+
+    @abstractmethod
+    def _novelty_score(self, samples: np.ndarray) -> np.ndarray:
+        """(N,) novelty scores, higher = more novel."""
+
+    def known_proba(self, samples: np.ndarray) -> np.ndarray:
+        return self._known_proba(self.validate_samples(samples))
+
+    def novel_proba(self, samples: np.ndarray) -> np.ndarray:
+        if not self.registry.novel_names:
+            raise UnknownClassError("the model has no novel classes yet")
+        return self._novel_proba(self.validate_samples(samples))
+
+    def novelty_score(self, samples: np.ndarray) -> np.ndarray:
+        return self._novelty_score(self.validate_samples(samples))
+
+    def is_novel(self, samples: np.ndarray) -> np.ndarray:
+        return self.novelty_score(samples) > self.novelty_threshold
+
+    def recognize(self, samples: np.ndarray, top_k: int = 3) -> list[Recognition]:
+        """Fig. 1: ND(x) routes each sample to FC_Y or FC_Z."""
+        x = self.validate_samples(samples)
+        scores = self._novelty_score(x)
+        novel = scores > self.novelty_threshold
+        reg = self.registry
+        known_p = self._known_proba(x)
+        novel_p = self._novel_proba(x) if reg.novel_names else None
+        results = []
+        for i in range(len(x)):
+            # Without novel classes a novel sample can only be answered from the known ones.
+            if novel[i] and novel_p is not None:
+                probs, names, kind = novel_p[i], reg.novel_names, "novel"
+            else:
+                probs, names, kind = known_p[i], reg.known_names, "known"
+            order = np.argsort(-probs)[: max(1, top_k)]
+            results.append(
+                Recognition(
+                    class_name=names[order[0]],
+                    kind=kind,
+                    is_novel=bool(novel[i]),
+                    novelty_score=float(scores[i]),
+                    top_k=tuple(ClassScore(names[j], float(probs[j])) for j in order),
+                )
+            )
+        return results
+
+    # --------------------------------------------------------------- enrolment
+    def add_novel_classes(
+        self, names: Sequence[str], attribute_vectors: np.ndarray | Sequence[Sequence[float]], **options: Any
+    ) -> Self:
+        """Zero-shot enrolment: a new recognizer that also recognises these classes."""
+        self._require_fitted()
+        names = [str(n) for n in names]
+        vectors = self.validate_attribute_vectors(attribute_vectors)
+        if len(names) != len(vectors):
+            raise AttributeVectorError(f"{len(names)} names but {len(vectors)} attribute vectors")
+        reg = self.registry
+        existing = set(reg.all_names)
+        all_vectors = np.concatenate([reg.known_attributes, reg.novel_attributes])
+        for i, name in enumerate(names):
+            if not name.strip():
+                raise DuplicateClassError("a class name must not be empty")
+            if name in existing or names.count(name) > 1:
+                raise DuplicateClassError(f"class '{name}' already exists")
+            same = np.flatnonzero((all_vectors == vectors[i]).all(axis=1))
+            if len(same):
+                other = reg.all_names[same[0]]
+                raise DuplicateClassError(
+                    f"class '{name}' has the same attribute vector as existing class '{other}'"
+                )
+            same_new = [names[j] for j in range(i) if (vectors[j] == vectors[i]).all()]
+            if same_new:
+                raise DuplicateClassError(
+                    f"classes '{same_new[0]}' and '{name}' have the same attribute vector"
+                )
+        new = copy.deepcopy(self)
+        new.registry.novel_names = reg.novel_names + names
+        new.registry.novel_attributes = np.concatenate([reg.novel_attributes, vectors]).astype(np.float32)
+        new._refit_novel(**options)
+        return new
+
+    def add_one_shot(self, class_name: str, samples: np.ndarray, **options: Any) -> Self:
+        """One-shot learning: real samples of a novel class refine FC_Z (Sect. IV-F)."""
+        self._require_fitted()
+        kind = self.registry.kind_of(class_name)
+        if kind != "novel":
+            raise UnknownClassError(
+                f"class '{class_name}' is a known class; one-shot samples are for novel classes"
+            )
+        x = self.validate_samples(samples)
+        new = copy.deepcopy(self)
+        prev = new.registry.novel_samples.get(class_name)
+        new.registry.novel_samples[class_name] = x if prev is None else np.concatenate([prev, x])
+        new._refit_novel(**options)
+        return new
+
+    @abstractmethod
+    def _refit_novel(self, **options: Any) -> None:
+        """Rebuild FC_Z from the registry's novel classes and their real samples."""
+
+    # -------------------------------------------------------------- validation
+    def validate_samples(self, samples: np.ndarray) -> np.ndarray:
+        """float32 array of shape (N, *input_shape); a single sample gets a batch axis."""
+        self._require_fitted()
+        try:
+            x = np.asarray(samples, dtype=np.float32)
+        except (TypeError, ValueError) as exc:
+            raise InputShapeError(f"samples are not a numeric array: {exc}") from None
+        if x.shape == self.input_shape:
+            x = x[None]
+        if x.ndim != len(self.input_shape) + 1 or x.shape[1:] != self.input_shape:
+            raise InputShapeError(
+                f"expected samples of shape (N, {', '.join(map(str, self.input_shape))}), got {x.shape}"
+            )
+        if len(x) == 0:
+            raise InputShapeError("expected at least one sample, got an empty batch")
+        if not np.isfinite(x).all():
+            bad = int((~np.isfinite(x)).reshape(len(x), -1).any(axis=1).argmax())
+            raise NonFiniteInputError(f"sample {bad} contains NaN or infinity")
+        return x
+
+    def validate_attribute_vectors(self, vectors: Any) -> np.ndarray:
+        m = len(self.registry.attribute_names)
+        try:
+            v = np.asarray(vectors, dtype=np.float32)
+        except (TypeError, ValueError) as exc:
+            raise AttributeVectorError(f"attribute vectors are not numeric: {exc}") from None
+        if v.ndim == 1:
+            v = v[None]
+        if v.ndim != 2 or v.shape[1] != m:
+            raise AttributeVectorError(f"expected attribute vectors of length {m}, got shape {v.shape}")
+        if not np.isin(v, (0.0, 1.0)).all():
+            raise AttributeVectorError("attribute vectors must contain only 0 and 1")
+        if (v.sum(axis=1) == 0).any():
+            raise AttributeVectorError("an attribute vector must have at least one attribute set")
+        return v
+
+    def attribute_vector(self, attribute_names: Sequence[str]) -> np.ndarray:
+        """0/1 vector from attribute names; unknown names raise AttributeVectorError."""
+        vocab = self.registry.attribute_names
+        unknown = [a for a in attribute_names if a not in vocab]
+        if unknown:
+            raise AttributeVectorError(f"unknown attribute(s): {', '.join(map(str, unknown))}")
+        return np.array([1.0 if a in set(attribute_names) else 0.0 for a in vocab], np.float32)
+
+    def _require_fitted(self) -> None:
+        if self.input_shape is None:
+            raise NotFittedError(f"{type(self).__name__} is not fitted; call fit() first")
+
+    # ------------------------------------------------------------ persistence
+    @abstractmethod
+    def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """(JSON-serialisable config and metadata, named float arrays) of the method's own parts."""
+
+    @abstractmethod
+    def set_state(self, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        """Restore what ``get_state`` returned."""

@@ -1,0 +1,33 @@
+"""Recognition methods by name, so bundles and ``evaluate --methods`` can find them."""
+
+from __future__ import annotations
+
+import importlib
+
+from app.framework.recognizer import TactileRecognizer
+
+# name -> "module:Class"; imported lazily so that listing methods stays cheap.
+METHODS: dict[str, str] = {
+    "paper": "app.framework.paper:PaperRecognizer",
+}
+
+DEFAULT_METHOD = "paper"
+
+
+class UnknownMethodError(ValueError):
+    """A method name that is not registered."""
+
+
+def method_class(name: str) -> type[TactileRecognizer]:
+    try:
+        target = METHODS[name]
+    except KeyError:
+        raise UnknownMethodError(
+            f"unknown method '{name}'; choose from {', '.join(sorted(METHODS))}"
+        ) from None
+    module, _, cls = target.partition(":")
+    return getattr(importlib.import_module(module), cls)
+
+
+def make_method(name: str, **params) -> TactileRecognizer:
+    return method_class(name)(**params)
