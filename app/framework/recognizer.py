@@ -154,6 +154,11 @@ class TactileRecognizer(ABC):
     def _novelty_score(self, samples: np.ndarray) -> np.ndarray:
         """(N,) novelty scores, higher = more novel."""
 
+    def _all_scores(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Novelty scores, known and novel probabilities in one pass; override to share work."""
+        novel_p = self._novel_proba(x) if self.registry.novel_names else None
+        return self._novelty_score(x), self._known_proba(x), novel_p
+
     def known_proba(self, samples: np.ndarray) -> np.ndarray:
         return self._known_proba(self.validate_samples(samples))
 
@@ -171,11 +176,9 @@ class TactileRecognizer(ABC):
     def recognize(self, samples: np.ndarray, top_k: int = 3) -> list[Recognition]:
         """Fig. 1: ND(x) routes each sample to FC_Y or FC_Z."""
         x = self.validate_samples(samples)
-        scores = self._novelty_score(x)
+        scores, known_p, novel_p = self._all_scores(x)
         novel = scores > self.novelty_threshold
         reg = self.registry
-        known_p = self._known_proba(x)
-        novel_p = self._novel_proba(x) if reg.novel_names else None
         results = []
         for i in range(len(x)):
             # Without novel classes a novel sample can only be answered from the known ones.

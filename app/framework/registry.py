@@ -9,6 +9,10 @@ from app.framework.recognizer import TactileRecognizer
 # name -> "module:Class"; imported lazily so that listing methods stays cheap.
 METHODS: dict[str, str] = {
     "paper": "app.framework.paper:PaperRecognizer",
+    # baselines of issue 5 (evaluation-only: no model bundles)
+    "extratrees": "app.baselines.extra_trees:ExtraTreesRecognizer",
+    "dap": "app.baselines.dap:DAPRecognizer",
+    "eszsl": "app.baselines.eszsl:ESZSLRecognizer",
 }
 
 DEFAULT_METHOD = "paper"

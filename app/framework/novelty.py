@@ -1,0 +1,126 @@
+"""ND(x): novelty detection by a Gaussian mixture, and the Sect. VI-B threshold tuning.
+
+A sample is novel when the fitted GMM's weighted log-likelihood of it is below
+sigma_nov. Scores here are oriented "higher = more novel", so the score is the
+negated log-likelihood and the threshold is -sigma_nov.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from sklearn.decomposition import PCA
+from sklearn.metrics import roc_auc_score
+from sklearn.mixture import GaussianMixture
+
+from app.data.dataset import DatasetError, TactileDataset
+from app.framework.recognizer import NoveltyTuning
+
+
+class GMMNoveltyDetector:
+    """PCA to ``pca_dims`` (a full-covariance GMM cannot be fitted in 960-D from
+    ~500 samples), then scikit-learn's GaussianMixture."""
+
+    def __init__(self, n_components: int = 4, covariance_type: str = "full", pca_dims: int = 16,
+                 reg_covar: float = 1e-3, seed: int = 0) -> None:
+        self.n_components = n_components
+        self.covariance_type = covariance_type
+        self.pca_dims = pca_dims
+        self.reg_covar = reg_covar
+        self.seed = seed
+        self.pca_: PCA | None = None
+        self.gmm_: GaussianMixture | None = None
+
+    def fit(self, x: np.ndarray) -> GMMNoveltyDetector:
+        x = x.reshape(len(x), -1)
+        dims = min(self.pca_dims, x.shape[1], len(x) - 1)
+        self.pca_ = PCA(n_components=dims, random_state=self.seed).fit(x)
+        z = self.pca_.transform(x)
+        k = min(self.n_components, len(x))
+        self.gmm_ = GaussianMixture(k, covariance_type=self.covariance_type, reg_covar=self.reg_covar,
+                                    random_state=self.seed, n_init=2).fit(z)
+        return self
+
+    def log_likelihood(self, x: np.ndarray) -> np.ndarray:
+        """Weighted log-likelihood log sum_k w_k N(x | mu_k, Sigma_k)."""
+        return self.gmm_.score_samples(self.pca_.transform(x.reshape(len(x), -1)))
+
+    def novelty_score(self, x: np.ndarray) -> np.ndarray:
+        return -self.log_likelihood(x)
+
+    # Stored as plain arrays so a bundle never needs pickle.
+    def get_state(self) -> dict[str, np.ndarray]:
+        g, p = self.gmm_, self.pca_
+        return {"pca_mean": p.mean_, "pca_components": p.components_, "weights": g.weights_,
+                "means": g.means_, "covariances": g.covariances_,
+                "precisions_cholesky": g.precisions_cholesky_}
+
+    def set_state(self, a: dict[str, np.ndarray]) -> None:
+        p = PCA(n_components=len(a["pca_components"]))
+        p.mean_, p.components_ = a["pca_mean"], a["pca_components"]
+        p.n_components_ = len(a["pca_components"])
+        p.whiten = False
+        g = GaussianMixture(len(a["weights"]), covariance_type=self.covariance_type)
+        g.weights_, g.means_, g.covariances_ = a["weights"], a["means"], a["covariances"]
+        g.precisions_cholesky_ = a["precisions_cholesky"]
+        g.precisions_ = _precisions(a["precisions_cholesky"], self.covariance_type)
+        g.converged_, g.n_iter_, g.lower_bound_ = True, 0, 0.0
+        self.pca_, self.gmm_ = p, g
+
+
+def _precisions(chol: np.ndarray, covariance_type: str) -> np.ndarray:
+    if covariance_type == "full":
+        return np.einsum("kij,klj->kil", chol, chol)
+    if covariance_type == "tied":
+        return chol @ chol.T
+    return chol**2
+
+
+def tune_threshold(known_scores: np.ndarray, novel_scores: np.ndarray, n_thresholds: int = 200) -> NoveltyTuning:
+    """Pick the threshold that maximises the mean of the accuracy of calling known
+    samples known and novel samples novel (Sect. VI-B, Fig. 7)."""
+    known_scores = np.asarray(known_scores, np.float64)
+    novel_scores = np.asarray(novel_scores, np.float64)
+    if len(known_scores) == 0 or len(novel_scores) == 0:
+        raise ValueError("threshold tuning needs both known and validation-novel samples")
+    both = np.concatenate([known_scores, novel_scores])
+    grid = np.unique(np.quantile(both, np.linspace(0, 1, n_thresholds)))
+    # a sample is novel when its score is strictly above the threshold
+    known_kept = (known_scores[None, :] <= grid[:, None]).mean(axis=1)
+    val_novel = (novel_scores[None, :] > grid[:, None]).mean(axis=1)
+    best = int(np.argmax(known_kept + val_novel))
+    labels = np.r_[np.zeros(len(known_scores)), np.ones(len(novel_scores))]
+    return NoveltyTuning(
+        thresholds=grid,
+        known_kept=known_kept,
+        val_novel=val_novel,
+        threshold=float(grid[best]),
+        known_kept_at_threshold=float(known_kept[best]),
+        val_novel_at_threshold=float(val_novel[best]),
+        auroc=float(roc_auc_score(labels, both)),
+    )
+
+
+def novelty_validation_split(
+    dataset: TactileDataset, val_fraction: float = 0.1, holdout_trials: int = 1, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sect. VI-B: (fit_idx, known_heldout_idx, val_novel_idx) into ``dataset``.
+
+    ``val_fraction`` of the classes (at least one) act as validation-novel objects;
+    of each remaining class, ``holdout_trials`` whole trials are held out as known
+    validation samples and the rest fit the detector.
+    """
+    rng = np.random.default_rng(seed)
+    k = dataset.n_classes
+    n_val = max(1, int(round(val_fraction * k)))
+    if k - n_val < 1:
+        raise DatasetError(f"novelty tuning needs at least 2 classes, got {k}")
+    val_classes = rng.choice(k, size=n_val, replace=False)
+    is_val = np.isin(dataset.labels, val_classes)
+    heldout = np.zeros(len(dataset), dtype=bool)
+    for c in np.setdiff1d(np.arange(k), val_classes):
+        trials = np.unique(dataset.trials[dataset.labels == c])
+        if len(trials) > holdout_trials:
+            chosen = rng.choice(trials, size=holdout_trials, replace=False)
+            heldout |= np.isin(dataset.trials, chosen) & (dataset.labels == c)
+    fit = ~is_val & ~heldout
+    return np.flatnonzero(fit), np.flatnonzero(heldout), np.flatnonzero(is_val)

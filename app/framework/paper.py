@@ -1,0 +1,366 @@
+"""The paper's pipeline (Fig. 1): CONV_XF + FC_Y, GMM novelty detection, G trained by
+Algorithms 1 and 2, FC_Z trained by NEIGHB-F (or GEN-F), and one-shot learning."""
+
+from __future__ import annotations
+
+import copy
+import time
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+from tqdm.auto import tqdm
+
+from app.data.dataset import TactileDataset
+from app.framework.adversarial import train_adversarially, train_generator_through_classifier
+from app.framework.classifiers import FullyConnectedClassifier, fit_classifier
+from app.framework.discriminator import build_discriminator
+from app.framework.encoder import build_encoder
+from app.framework.errors import FrameworkError
+from app.framework.generator import build_generator, noisy
+from app.framework.novelty import GMMNoveltyDetector, novelty_validation_split, tune_threshold
+from app.framework.one_shot import one_shot_training_set
+from app.framework.recognizer import TactileRecognizer
+from app.framework.scaling import RobustInputScaler
+from app.framework.synthesis import generate_features, nearest_real_features
+
+SYNTHESIS = ("neighbf", "genf")
+GENERATORS = ("adversarial", "alg1")
+NOVELTY_SPACES = ("input", "features")
+
+
+class PaperRecognizer(TactileRecognizer):
+    """Hyper-parameters follow Sect. V-B where the paper gives them (batches of 50,
+    noise N(0, 0.1), 10 generated features per novel class); epochs are far fewer
+    than the paper's 600 because our datasets are 10x smaller and CPU time matters."""
+
+    method = "paper"
+
+    def __init__(
+        self,
+        seed: int = 0,
+        encoder_epochs: int | None = None,
+        lr: float = 1e-3,
+        weight_decay: float = 1e-4,
+        batch_size: int = 50,
+        mlp_hidden: int = 256,
+        mlp_features: int = 128,
+        alg1_epochs: int = 200,
+        alg2_epochs: int = 60,
+        sigma_d: float = 0.45,
+        sigma_g: float = 0.8,
+        max_phase_steps: int = 25,
+        noise_std: float = 0.1,
+        samples_per_class: int = 10,
+        fc_z_epochs: int = 100,
+        synthesis: str = "neighbf",
+        one_shot_k: int = 5,
+        finetune_steps: int = 30,
+        gmm_components: int = 4,
+        gmm_covariance: str = "full",
+        novelty_pca_dims: int = 16,
+        novelty_space: str = "input",
+        novelty_val_fraction: float = 0.1,
+    ) -> None:
+        super().__init__()
+        self.seed = seed
+        self.encoder_epochs = encoder_epochs
+        self.lr = lr
+        self.weight_decay = weight_decay
+        self.batch_size = batch_size
+        self.mlp_hidden = mlp_hidden
+        self.mlp_features = mlp_features
+        self.alg1_epochs = alg1_epochs
+        self.alg2_epochs = alg2_epochs
+        self.sigma_d = sigma_d
+        self.sigma_g = sigma_g
+        self.max_phase_steps = max_phase_steps
+        self.noise_std = noise_std
+        self.samples_per_class = samples_per_class
+        self.fc_z_epochs = fc_z_epochs
+        self.synthesis = synthesis
+        self.one_shot_k = one_shot_k
+        self.finetune_steps = finetune_steps
+        self.gmm_components = gmm_components
+        self.gmm_covariance = gmm_covariance
+        self.novelty_pca_dims = novelty_pca_dims
+        self.novelty_space = novelty_space
+        self.novelty_val_fraction = novelty_val_fraction
+        self._check_params()
+
+    _PARAMS = (
+        "seed", "encoder_epochs", "lr", "weight_decay", "batch_size", "mlp_hidden", "mlp_features",
+        "alg1_epochs", "alg2_epochs", "sigma_d", "sigma_g", "max_phase_steps", "noise_std",
+        "samples_per_class", "fc_z_epochs", "synthesis", "one_shot_k", "finetune_steps",
+        "gmm_components", "gmm_covariance", "novelty_pca_dims", "novelty_space", "novelty_val_fraction",
+    )
+
+    def get_params(self) -> dict[str, Any]:
+        return {p: getattr(self, p) for p in self._PARAMS}
+
+    def _check_params(self) -> None:
+        if self.synthesis not in SYNTHESIS:
+            raise FrameworkError(f"synthesis must be one of {SYNTHESIS}, got {self.synthesis!r}")
+        if self.novelty_space not in NOVELTY_SPACES:
+            raise FrameworkError(f"novelty_space must be one of {NOVELTY_SPACES}, got {self.novelty_space!r}")
+        for p in ("batch_size", "samples_per_class", "alg1_epochs", "alg2_epochs", "fc_z_epochs"):
+            if int(getattr(self, p)) < 1:
+                raise FrameworkError(f"{p} must be at least 1, got {getattr(self, p)}")
+
+    # ---------------------------------------------------------------- building
+    def _build(self, n_known: int, n_attributes: int) -> None:
+        torch.manual_seed(self.seed)
+        self.scaler_ = RobustInputScaler()
+        self.encoder_ = build_encoder(self.input_shape, self.mlp_hidden, self.mlp_features)
+        feature_shape = self.encoder_.feature_shape
+        self.feature_shape_ = tuple(feature_shape)
+        self.fc_y_ = FullyConnectedClassifier(self.encoder_.feature_dim, n_known)
+        self.generator_ = build_generator(n_attributes, feature_shape)
+        self.discriminator_ = build_discriminator(feature_shape)
+        self.generator_alg1_: nn.Module | None = None
+        self.fc_z_: FullyConnectedClassifier | None = None
+        self.novelty_ = self._new_detector()
+        self.finetuned_on_: dict[str, int] = {}
+
+    def _new_detector(self) -> GMMNoveltyDetector:
+        return GMMNoveltyDetector(self.gmm_components, self.gmm_covariance, self.novelty_pca_dims, seed=self.seed)
+
+    def _epochs(self) -> int:
+        if self.encoder_epochs is not None:
+            return int(self.encoder_epochs)
+        return 60 if len(self.input_shape) == 2 else 150
+
+    # ----------------------------------------------------------------- fitting
+    def _fit(self, dataset: TactileDataset, progress: bool) -> None:
+        self._check_params()
+        t0 = time.perf_counter()
+        timings: dict[str, float] = {}
+        self._build(dataset.n_classes, dataset.n_attributes)
+        x = self.scaler_.fit_transform(dataset.samples)
+        y = dataset.labels
+
+        # (1) CONV_XF + FC_Y on the known classes
+        self._train_encoder(x, y, progress)
+        timings["encoder_s"] = time.perf_counter() - t0
+        self.real_features_ = self._features(x)
+        self.real_labels_ = y.copy()
+
+        # novelty detection, sigma_nov tuned by Sect. VI-B
+        t = time.perf_counter()
+        self._fit_novelty(dataset, x, self.real_features_)
+        timings["novelty_s"] = time.perf_counter() - t
+
+        # (2) Algorithm 1, then (3) Algorithm 2
+        t = time.perf_counter()
+        alg1 = train_generator_through_classifier(
+            self.generator_, self.fc_y_, dataset.class_attributes, self.alg1_epochs, self.noise_std,
+            self.batch_size, seed=self.seed, progress=progress,
+        )
+        self.generator_alg1_ = copy.deepcopy(self.generator_)
+        alg2 = train_adversarially(
+            self.generator_, self.discriminator_, self.fc_y_, dataset.class_attributes,
+            self.real_features_, y, self.alg2_epochs, self.sigma_d, self.sigma_g, self.max_phase_steps,
+            self.noise_std, self.batch_size, seed=self.seed, progress=progress,
+        )
+        timings["generator_s"] = time.perf_counter() - t
+        timings["total_s"] = time.perf_counter() - t0
+        with torch.no_grad():
+            train_acc = float((self.fc_y_(torch.as_tensor(self.real_features_)).argmax(1).numpy() == y).mean())
+        self.metrics = {
+            "n_train_samples": int(len(dataset)),
+            "n_known_classes": int(dataset.n_classes),
+            "train_known_acc": train_acc,
+            "nd_known_kept": self.novelty_tuning.known_kept_at_threshold,
+            "nd_val_novel": self.novelty_tuning.val_novel_at_threshold,
+            "nd_val_auroc": self.novelty_tuning.auroc,
+            "alg1_final_loss": alg1[-1],
+            "alg2_final_loss_d": alg2["loss_d"][-1] if alg2["loss_d"] else None,
+            "alg2_final_loss_fc": alg2["loss_fc"][-1] if alg2["loss_fc"] else None,
+            "alg2_phase_switches": len(alg2["switches"]),
+            "timings": timings,
+            "params": self.get_params(),
+        }
+
+    def _train_encoder(self, x: np.ndarray, y: np.ndarray, progress: bool) -> None:
+        gen = torch.Generator().manual_seed(self.seed)
+        xt, yt = torch.as_tensor(x), torch.as_tensor(y, dtype=torch.long)
+        model = nn.Sequential(self.encoder_, self.fc_y_)
+        opt = torch.optim.Adam(model.parameters(), lr=self.lr, weight_decay=self.weight_decay)
+        loss_fn = nn.CrossEntropyLoss()
+        model.train()
+        bar = tqdm(range(self._epochs()), desc="CONV_XF + FC_Y", disable=not progress, leave=False)
+        for _ in bar:
+            for idx in torch.randperm(len(xt), generator=gen).split(self.batch_size):
+                opt.zero_grad()
+                loss = loss_fn(model(xt[idx]), yt[idx])
+                loss.backward()
+                opt.step()
+            bar.set_postfix(loss=f"{loss.item():.3f}")
+        model.eval()
+
+    def _novelty_input(self, x_scaled: np.ndarray, features: np.ndarray) -> np.ndarray:
+        return x_scaled if self.novelty_space == "input" else features
+
+    def _fit_novelty(self, dataset: TactileDataset, x: np.ndarray, feats: np.ndarray) -> None:
+        fit_idx, known_idx, val_idx = novelty_validation_split(
+            dataset, self.novelty_val_fraction, holdout_trials=1, seed=self.seed
+        )
+        z = self._novelty_input(x, feats)
+        tuning_detector = self._new_detector().fit(z[fit_idx])
+        self.novelty_tuning = tune_threshold(
+            tuning_detector.novelty_score(z[known_idx]), tuning_detector.novelty_score(z[val_idx])
+        )
+        # The deployed detector covers every known class; it keeps the tuned threshold.
+        self.novelty_ = self._new_detector().fit(z)
+        self.novelty_threshold = self.novelty_tuning.threshold
+
+    # --------------------------------------------------------------- inference
+    @torch.no_grad()
+    def _features(self, x_scaled: np.ndarray) -> np.ndarray:
+        self.encoder_.eval()
+        return self.encoder_(torch.as_tensor(x_scaled)).numpy()
+
+    def extract_features(self, samples: np.ndarray) -> np.ndarray:
+        """CONV_XF(x) for raw samples."""
+        return self._features(self.scaler_.transform(self.validate_samples(samples)))
+
+    @staticmethod
+    @torch.no_grad()
+    def _softmax(classifier: nn.Module, feats: np.ndarray) -> np.ndarray:
+        return torch.softmax(classifier(torch.as_tensor(feats)), dim=1).numpy()
+
+    def _known_proba(self, samples: np.ndarray) -> np.ndarray:
+        return self._softmax(self.fc_y_, self._features(self.scaler_.transform(samples)))
+
+    def _novel_proba(self, samples: np.ndarray) -> np.ndarray:
+        return self._softmax(self.fc_z_, self._features(self.scaler_.transform(samples)))
+
+    def _novelty_score(self, samples: np.ndarray) -> np.ndarray:
+        x = self.scaler_.transform(samples)
+        feats = self._features(x) if self.novelty_space == "features" else None
+        return self.novelty_.novelty_score(self._novelty_input(x, feats))
+
+    def _all_scores(self, samples):
+        x = self.scaler_.transform(samples)
+        feats = self._features(x)  # one encoder pass serves ND, FC_Y and FC_Z
+        novel_p = self._softmax(self.fc_z_, feats) if self.registry.novel_names else None
+        return (self.novelty_.novelty_score(self._novelty_input(x, feats)),
+                self._softmax(self.fc_y_, feats), novel_p)
+
+    # -------------------------------------------------------------- enrolment
+    def _refit_novel(self, synthesis: str | None = None, generator: str = "adversarial",
+                     finetune_generator: bool = True) -> None:
+        """(4) GEN-F / NEIGHB-F and (5) one-shot: rebuild FC_Z over all novel classes.
+
+        CONV_XF, FC_Y and the novelty detector are untouched. New real samples first
+        fine-tune G (beyond the paper, as the service design asks).
+        """
+        synthesis = synthesis or self.synthesis
+        if synthesis not in SYNTHESIS:
+            raise FrameworkError(f"synthesis must be one of {SYNTHESIS}, got {synthesis!r}")
+        if generator not in GENERATORS:
+            raise FrameworkError(f"generator must be one of {GENERATORS}, got {generator!r}")
+        reg = self.registry
+        if finetune_generator and generator == "adversarial":
+            self._finetune_generator()
+        g = self.generator_ if generator == "adversarial" else self.generator_alg1_
+        feats, labels = generate_features(g, reg.novel_attributes, self.samples_per_class,
+                                          self.noise_std, seed=self.seed + len(reg.novel_names))
+        if synthesis == "neighbf":
+            feats = nearest_real_features(feats, self.real_features_)
+        shot_f, shot_y = self._one_shot_features()
+        if len(shot_f):
+            osl_f, osl_y = one_shot_training_set(shot_f, shot_y, self.real_features_, self.one_shot_k)
+            feats, labels = np.concatenate([feats, osl_f]), np.concatenate([labels, osl_y])
+        torch.manual_seed(self.seed)
+        self.fc_z_ = FullyConnectedClassifier(feats.shape[1], len(reg.novel_names))
+        fit_classifier(self.fc_z_, feats, labels, self.fc_z_epochs, lr=self.lr * 10,
+                       weight_decay=self.weight_decay, batch_size=self.batch_size, seed=self.seed)
+
+    def _one_shot_features(self) -> tuple[np.ndarray, np.ndarray]:
+        reg = self.registry
+        feats, labels = [], []
+        for name, samples in reg.novel_samples.items():
+            feats.append(self._features(self.scaler_.transform(samples)))
+            labels.append(np.full(len(samples), reg.novel_names.index(name)))
+        if not feats:
+            return np.zeros((0, self.encoder_.feature_dim), np.float32), np.zeros(0, np.int64)
+        return np.concatenate(feats), np.concatenate(labels)
+
+    def _finetune_generator(self) -> None:
+        """Pull G(a_z + ns) towards the real features of newly arrived samples, while the
+        Algorithm 1 loss on known classes keeps G from forgetting them."""
+        reg = self.registry
+        fresh = {n: s for n, s in reg.novel_samples.items() if len(s) > self.finetuned_on_.get(n, 0)}
+        if not fresh or self.finetune_steps <= 0:
+            return
+        gen = torch.Generator().manual_seed(self.seed + sum(len(s) for s in fresh.values()))
+        targets, attrs = [], []
+        for name, samples in fresh.items():
+            targets.append(torch.as_tensor(self._features(self.scaler_.transform(samples))))
+            attrs.append(torch.as_tensor(reg.novel_attributes[reg.novel_names.index(name)]).expand(len(samples), -1))
+        f_t, a_t = torch.cat(targets), torch.cat(attrs)
+        a_known = torch.as_tensor(reg.known_attributes)
+        y_known = torch.arange(len(a_known))
+        opt = torch.optim.Adam(self.generator_.parameters(), lr=self.lr * 0.2)
+        ce = nn.CrossEntropyLoss()
+        for p in self.fc_y_.parameters():
+            p.requires_grad_(False)
+        self.generator_.train()
+        for _ in range(self.finetune_steps):
+            opt.zero_grad()
+            loss = nn.functional.l1_loss(self.generator_(noisy(a_t, self.noise_std, gen)), f_t)
+            loss = loss + ce(self.fc_y_(self.generator_(noisy(a_known, self.noise_std, gen))), y_known)
+            loss.backward()
+            opt.step()
+        self.generator_.eval()
+        self.finetuned_on_.update({n: len(s) for n, s in fresh.items()})
+
+    # ------------------------------------------------------------ persistence
+    _MODULES = ("encoder_", "fc_y_", "fc_z_", "generator_", "generator_alg1_", "discriminator_")
+
+    def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        arrays: dict[str, np.ndarray] = {
+            "real_features": self.real_features_, "real_labels": self.real_labels_,
+        }
+        for key, value in self.scaler_.get_state().items():
+            arrays[f"scaler/{key}"] = value
+        for key, value in self.novelty_.get_state().items():
+            arrays[f"novelty/{key}"] = value
+        for name in self._MODULES:
+            module = getattr(self, name)
+            if module is not None:
+                for key, value in module.state_dict().items():
+                    arrays[f"{name.rstrip('_')}/{key}"] = value.numpy()
+        meta = {
+            "params": self.get_params(),
+            "feature_shape": list(self.feature_shape_),
+            "has_fc_z": self.fc_z_ is not None,
+            "finetuned_on": self.finetuned_on_,
+        }
+        return meta, arrays
+
+    def set_state(self, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        for key, value in meta["params"].items():
+            setattr(self, key, value)
+        self._check_params()
+        reg = self.registry
+        self._build(len(reg.known_names), len(reg.attribute_names))
+        self.generator_alg1_ = build_generator(len(reg.attribute_names), self.encoder_.feature_shape)
+        if meta["has_fc_z"]:
+            self.fc_z_ = FullyConnectedClassifier(self.encoder_.feature_dim, len(reg.novel_names))
+        for name in self._MODULES:
+            module = getattr(self, name)
+            if module is None:
+                continue
+            prefix = name.rstrip("_") + "/"
+            state = {k[len(prefix):]: torch.as_tensor(v) for k, v in arrays.items() if k.startswith(prefix)}
+            module.load_state_dict(state)
+            module.eval()
+        self.scaler_.set_state({k[7:]: v for k, v in arrays.items() if k.startswith("scaler/")})
+        self.novelty_.set_state({k[8:]: v for k, v in arrays.items() if k.startswith("novelty/")})
+        self.real_features_ = arrays["real_features"].astype(np.float32)
+        self.real_labels_ = arrays["real_labels"].astype(np.int64)
+        self.feature_shape_ = tuple(meta["feature_shape"])
+        self.finetuned_on_ = {k: int(v) for k, v in meta.get("finetuned_on", {}).items()}
