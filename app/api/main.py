@@ -1,0 +1,126 @@
+"""The FastAPI application: ``create_app(settings)`` wires store, model, worker and routes."""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+import swagger_ui_bundle
+from fastapi import FastAPI
+from fastapi.concurrency import run_in_threadpool
+from fastapi.openapi.docs import get_swagger_ui_html
+from fastapi.responses import HTMLResponse
+from fastapi.staticfiles import StaticFiles
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from app.api import problems
+from app.api.routes import attributes, classes, health, jobs, models, recognize, samples
+from app.config import Settings
+from app.service.bootstrap import Trainer, ensure_ready
+from app.service.holder import ModelHolder
+from app.service.metrics import Metrics
+from app.store.db import make_engine, make_sessionmaker
+
+log = logging.getLogger(__name__)
+
+DESCRIPTION = """Recognise objects from tactile samples: objects the model was trained on,
+and novel objects an operator registered by their attributes (zero-shot), refined by
+real samples (one-shot). Every error is an RFC 9457 `application/problem+json` body."""
+
+
+def create_app(settings: Settings | None = None, trainer: Trainer | None = None) -> FastAPI:
+    """``trainer`` replaces the bootstrap training (tests hand in a trained model)."""
+    settings = settings or Settings()
+    engine = make_engine(settings.sqlalchemy_url)
+    sessions = make_sessionmaker(engine)
+    metrics = Metrics()
+    holder = ModelHolder(sessions, settings.model_poll_seconds, metrics)
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        await run_in_threadpool(ensure_ready, settings, engine, sessions, trainer)
+        await run_in_threadpool(holder.refresh)
+        holder.start()
+        embedded = None
+        if settings.embedded_worker:
+            from worker import Worker, start_in_thread
+
+            worker = Worker(settings, sessions, on_activate=lambda _v: holder.refresh(), metrics=metrics)
+            embedded = start_in_thread(worker)
+        try:
+            yield
+        finally:
+            if embedded is not None:
+                thread, stop = embedded
+                stop.set()
+                thread.join(timeout=30)
+            holder.stop()
+            engine.dispose()
+
+    app = FastAPI(
+        title="Tactile recognition service",
+        version="1",
+        description=DESCRIPTION,
+        lifespan=lifespan,
+        docs_url=None,  # served below from the package: no CDN
+        redoc_url=None,
+        max_body_size=settings.max_body_bytes,
+    )
+    app.state.settings = settings
+    app.state.sessions = sessions
+    app.state.holder = holder
+    app.state.metrics = metrics
+    problems.install(app)
+    for module in (health, attributes, classes, samples, recognize, jobs, models):
+        app.include_router(module.router)
+    _mount_docs(app)
+    app.add_middleware(RequestMetrics, metrics=metrics)
+    return app
+
+
+def _mount_docs(app: FastAPI) -> None:
+    app.mount(
+        "/static/swagger-ui", StaticFiles(directory=swagger_ui_bundle.swagger_ui_path), name="swagger-ui"
+    )
+
+    @app.get("/docs", include_in_schema=False)
+    async def docs() -> HTMLResponse:
+        return get_swagger_ui_html(
+            openapi_url=app.openapi_url,
+            title=f"{app.title} – API docs",
+            swagger_js_url="/static/swagger-ui/swagger-ui-bundle.js",
+            swagger_css_url="/static/swagger-ui/swagger-ui.css",
+            swagger_favicon_url="/static/swagger-ui/favicon-32x32.png",
+        )
+
+
+class RequestMetrics:
+    """Counts and times every request by route template (pure ASGI: cheap on the hot path)."""
+
+    def __init__(self, app: ASGIApp, metrics: Metrics) -> None:
+        self.app = app
+        self.metrics = metrics
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        start = time.perf_counter()
+        status = 500
+
+        async def send_status(message: Message) -> None:
+            nonlocal status
+            if message["type"] == "http.response.start":
+                status = message["status"]
+            await send(message)
+
+        try:
+            await self.app(scope, receive, send_status)
+        finally:
+            route = scope.get("route")
+            path = getattr(route, "path", None) or "unmatched"
+            method = scope["method"]
+            self.metrics.requests.labels(method, path, str(status)).inc()
+            self.metrics.latency.labels(method, path).observe(time.perf_counter() - start)

@@ -1,0 +1,95 @@
+from collections.abc import Sequence
+
+import numpy as np
+from fastapi import APIRouter, Response
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
+
+from app.api import problems
+from app.api.deps import MetricsDep, ModelDep, SessionDep, WriteAccess
+from app.api.problems import Problem, blame, not_found
+from app.api.schemas import ClassCreate, ClassCreated, ClassList, ClassOut, JobOut
+from app.service.holder import LoadedModel
+from app.store import repo
+from app.store.models import ObjectClass
+
+router = APIRouter(prefix="/v1/classes", tags=["classes"], responses=problems.responses(422))
+
+
+def class_out(
+    cls: ObjectClass, vocabulary: Sequence[str], n_samples: int, model: LoadedModel | None
+) -> ClassOut:
+    served = model is not None and cls.name in model.recognizer.registry.all_names
+    return ClassOut(
+        id=cls.id, name=cls.name, kind=cls.kind,
+        attributes=repo.attribute_labels(cls.attribute_key, vocabulary),
+        n_samples=n_samples, created_at=cls.created_at, in_active_model=served,
+    )
+
+
+@router.get("", response_model=ClassList)
+def list_classes(session: SessionDep, model: ModelDep) -> ClassList:
+    """Known and novel classes, and whether the model now serving covers each."""
+    vocab = repo.attribute_names(session)
+    counts = repo.sample_counts(session)
+    return ClassList(classes=[
+        class_out(c, vocab, counts.get(c.id, 0), model) for c in repo.list_classes(session)
+    ])
+
+
+@router.get("/{class_id}", response_model=ClassOut, responses=problems.responses(404))
+def get_class(class_id: int, session: SessionDep, model: ModelDep) -> ClassOut:
+    cls = repo.get_class(session, class_id)
+    if cls is None:
+        raise not_found("class", "class_id", class_id)
+    n = repo.sample_counts(session, [class_id]).get(class_id, 0)
+    return class_out(cls, repo.attribute_names(session), n, model)
+
+
+@router.post(
+    "", status_code=202, response_model=ClassCreated, dependencies=[WriteAccess],
+    responses=problems.responses(401, 409),
+)
+def register_class(
+    body: ClassCreate, session: SessionDep, model: ModelDep, metrics: MetricsDep, response: Response
+) -> ClassCreated:
+    """Register a novel class by its attributes (zero-shot). The class and its job are
+    committed before the 202; poll the job until the class is in the active model."""
+    vector = _attribute_vector(body, model)
+    key = repo.vector_key(vector)
+    field = "attributes" if body.attributes is not None else "attribute_vector"
+    _check_unique(session, body.name, key, field)
+    try:
+        cls = repo.add_class(session, body.name, key)
+        job = repo.add_job(session, "register_class", cls.id)
+        session.commit()
+    except IntegrityError:  # a concurrent registration won the race
+        session.rollback()
+        _check_unique(session, body.name, key, field)
+        raise
+    metrics.enrollments.labels("class").inc()
+    response.headers["Location"] = f"/v1/jobs/{job.id}"
+    vocab = repo.attribute_names(session)
+    return ClassCreated(class_=class_out(cls, vocab, 0, model), job=JobOut.model_validate(job))
+
+
+def _attribute_vector(body: ClassCreate, model: LoadedModel) -> np.ndarray:
+    rec = model.recognizer
+    if body.attributes is not None:
+        with blame("attributes"):
+            return rec.validate_attribute_vectors(rec.attribute_vector(body.attributes))[0]
+    with blame("attribute_vector"):
+        return rec.validate_attribute_vectors(body.attribute_vector)[0]
+
+
+def _check_unique(session: Session, name: str, key: str, field: str) -> None:
+    if repo.class_by_name(session, name) is not None:
+        raise Problem(409, f"a class named '{name}' already exists", "name")
+    other = repo.class_by_key(session, key)
+    if other is not None:
+        raise Problem(
+            409,
+            f"class '{other.name}' has the same attribute vector; the model could never tell "
+            "them apart",
+            field,
+        )

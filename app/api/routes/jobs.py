@@ -1,0 +1,19 @@
+from fastapi import APIRouter
+
+from app.api import problems
+from app.api.deps import SessionDep
+from app.api.problems import not_found
+from app.api.schemas import JobOut
+from app.store import repo
+
+router = APIRouter(prefix="/v1/jobs", tags=["jobs"], responses=problems.responses(404, 422))
+
+
+@router.get("/{job_id}", response_model=JobOut)
+def get_job(job_id: int, session: SessionDep) -> JobOut:
+    """An enrollment's progress: queued, running, succeeded (with the model version
+    that includes it) or failed (with the error)."""
+    job = repo.get_job(session, job_id)
+    if job is None:
+        raise not_found("job", "job_id", job_id)
+    return JobOut.model_validate(job)

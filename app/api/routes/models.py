@@ -1,0 +1,45 @@
+from fastapi import APIRouter
+
+from app.api import problems
+from app.api.deps import HolderDep, SessionDep, WriteAccess
+from app.api.problems import Problem, not_found
+from app.api.schemas import ModelList, ModelOut
+from app.framework import bundle
+from app.store import repo
+
+router = APIRouter(prefix="/v1/models", tags=["models"], responses=problems.responses(422))
+
+
+@router.get("", response_model=ModelList)
+def list_models(session: SessionDep) -> ModelList:
+    """Every model version, oldest first."""
+    return ModelList(models=[ModelOut.model_validate(v) for v in repo.list_versions(session)])
+
+
+@router.get("/active", response_model=ModelOut, responses=problems.responses(404))
+def active_model(session: SessionDep) -> ModelOut:
+    row = repo.active_version(session)
+    if row is None:
+        raise Problem(404, "no model version is active yet", "version")
+    return ModelOut.model_validate(row)
+
+
+@router.post(
+    "/{version}/activate", response_model=ModelOut, dependencies=[WriteAccess],
+    responses=problems.responses(401, 404, 409),
+)
+def activate_model(version: int, session: SessionDep, holder: HolderDep) -> ModelOut:
+    """Make ``version`` the active model in every API process (activating an earlier
+    version is the rollback). Later enrollments are folded in again by the next retrain."""
+    row = repo.get_version(session, version)
+    if row is None:
+        raise not_found("model version", "version", version)
+    try:  # never activate a bundle that cannot be loaded
+        bundle.from_bytes(repo.bundle_data(session, row.bundle_sha256))
+    except bundle.BundleError as exc:
+        raise Problem(409, f"version {version} cannot be loaded: {exc}", "version") from None
+    repo.activate(session, version)
+    session.commit()
+    session.refresh(row)
+    holder.refresh()  # this process answers with it at once; others poll
+    return ModelOut.model_validate(row)

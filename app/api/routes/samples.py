@@ -1,0 +1,40 @@
+from fastapi import APIRouter, Response
+
+from app.api import problems
+from app.api.deps import MetricsDep, ModelDep, SessionDep, WriteAccess
+from app.api.problems import Problem, blame, not_found
+from app.api.schemas import JobOut, SampleCreate, SampleCreated
+from app.store import repo
+
+router = APIRouter(prefix="/v1/classes", tags=["samples"], responses=problems.responses(422))
+
+
+@router.post(
+    "/{class_id}/samples", status_code=202, response_model=SampleCreated,
+    dependencies=[WriteAccess], responses=problems.responses(401, 404, 409),
+)
+def add_sample(
+    class_id: int, body: SampleCreate, session: SessionDep, model: ModelDep,
+    metrics: MetricsDep, response: Response,
+) -> SampleCreated:
+    """Add one real sample of a novel class (one-shot learning). Stored and queued
+    before the 202; the job says when a model including it is live."""
+    cls = repo.get_class(session, class_id)
+    if cls is None:
+        raise not_found("class", "class_id", class_id)
+    if cls.kind != "novel":
+        raise Problem(
+            409, f"class '{cls.name}' is a known class; samples can be added to novel classes only",
+            "class_id",
+        )
+    rec = model.recognizer
+    with blame("sample"):
+        x = rec.validate_samples(body.sample)  # ragged lists become a named 422 too
+    if x.shape[1:] != rec.input_shape or len(x) != 1:
+        raise Problem(422, f"expected one sample of shape {list(rec.input_shape)}", "sample")
+    row = repo.add_sample(session, class_id, x[0])
+    job = repo.add_job(session, "add_sample", class_id, row.id)
+    session.commit()
+    metrics.enrollments.labels("sample").inc()
+    response.headers["Location"] = f"/v1/jobs/{job.id}"
+    return SampleCreated(sample_id=row.id, job=JobOut.model_validate(job))

@@ -1,0 +1,145 @@
+"""Request and response bodies (pydantic): the OpenAPI schema is generated from these."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, StringConstraints, model_validator
+
+# One tactile sample: a [C, T] tactile image or a flat [D] feature vector.
+SampleData = list[list[float]] | list[float]
+
+ClassName = Annotated[str, StringConstraints(strip_whitespace=True, min_length=1, max_length=200)]
+Bit = Annotated[int, Field(ge=0, le=1)]
+
+
+class Strict(BaseModel):
+    """Request bodies reject unknown fields, so a misspelt field is named, not ignored."""
+
+    model_config = ConfigDict(extra="forbid")
+
+
+# ------------------------------------------------------------------ attributes
+class AttributeList(BaseModel):
+    attributes: list[str] = Field(description="The vocabulary, in attribute-vector order.")
+
+
+# --------------------------------------------------------------------- classes
+class ClassCreate(Strict):
+    name: ClassName
+    attributes: list[str] | None = Field(
+        None, description="Attribute names that describe the object.", examples=[["hard", "smooth"]]
+    )
+    attribute_vector: list[Bit] | None = Field(
+        None, description="0/1 per attribute, in GET /v1/attributes order."
+    )
+
+    @model_validator(mode="after")
+    def _one_description(self) -> ClassCreate:
+        if (self.attributes is None) == (self.attribute_vector is None):
+            raise ValueError("give exactly one of 'attributes' or 'attribute_vector'")
+        return self
+
+
+class ClassOut(BaseModel):
+    id: int
+    name: str
+    kind: Literal["known", "novel"]
+    attributes: list[str]
+    n_samples: int = Field(description="Real tactile samples stored for the class.")
+    created_at: datetime
+    in_active_model: bool = Field(description="Whether the model now serving covers the class.")
+
+
+class ClassList(BaseModel):
+    classes: list[ClassOut]
+
+
+# ------------------------------------------------------------------------ jobs
+class JobOut(BaseModel):
+    model_config = ConfigDict(from_attributes=True)
+
+    id: int
+    kind: Literal["register_class", "add_sample"]
+    status: Literal["queued", "running", "succeeded", "failed"]
+    class_id: int
+    sample_id: int | None
+    model_version: int | None = Field(description="The version that includes the enrollment.")
+    created_at: datetime
+    started_at: datetime | None
+    finished_at: datetime | None
+    error: str | None
+
+
+class ClassCreated(BaseModel):
+    model_config = ConfigDict(populate_by_name=True)
+
+    class_: ClassOut = Field(alias="class")
+    job: JobOut
+
+
+# --------------------------------------------------------------------- samples
+class SampleCreate(Strict):
+    sample: SampleData = Field(description="One sample in the active model's input shape.")
+
+
+class SampleCreated(BaseModel):
+    sample_id: int
+    job: JobOut
+
+
+# ------------------------------------------------------------------- recognize
+class RecognizeRequest(Strict):
+    samples: list[SampleData] = Field(min_length=1, description="1 … batch_limit samples.")
+
+
+class ScoreOut(BaseModel):
+    class_id: int | None
+    class_name: str
+    probability: float
+
+
+class RecognitionOut(BaseModel):
+    class_id: int | None
+    class_name: str
+    kind: Literal["known", "novel"]
+    is_novel: bool
+    novelty_score: float
+    top_k: list[ScoreOut]
+
+
+class RecognizeResponse(BaseModel):
+    model_version: int
+    results: list[RecognitionOut]
+
+
+# ---------------------------------------------------------------------- models
+class ModelClass(BaseModel):
+    name: str
+    kind: Literal["known", "novel"]
+
+
+class ModelOut(BaseModel):
+    model_config = ConfigDict(from_attributes=True, protected_namespaces=())
+
+    version: int
+    created_at: datetime
+    active: bool
+    method: str
+    reason: Literal["bootstrap", "update", "promotion"]
+    base_version: int | None
+    sha256: str = Field(validation_alias="bundle_sha256")
+    input_shape: list[int]
+    metrics: dict[str, Any]
+    classes: list[ModelClass]
+
+
+class ModelList(BaseModel):
+    models: list[ModelOut]
+
+
+# ---------------------------------------------------------------------- health
+class Health(BaseModel):
+    status: Literal["ok", "ready"]
+    model_version: int | None = None

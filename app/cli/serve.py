@@ -1,0 +1,42 @@
+"""``tactile-zsl serve``: the HTTP API (and, by default, the retraining worker)."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "serve",
+        help="run the recognition service",
+        description="Serve the REST API. On first start (empty store) trains the base model from "
+        "the dataset and stores it as model version 1. Settings come from TACTILE_* environment "
+        "variables; these options override them.",
+    )
+    p.add_argument("--host", help="interface to listen on (TACTILE_HOST, default 127.0.0.1)")
+    p.add_argument("--port", type=int, help="port to listen on (TACTILE_PORT, default 8000)")
+    p.add_argument("--dataset", help="bootstrap data: simulated, simulated:N or phac2:PATH "
+                   "(TACTILE_DATASET, default simulated)")
+    p.add_argument("--data-dir", help="folder for the SQLite store (TACTILE_DATA_DIR)")
+    p.add_argument("--no-worker", action="store_true",
+                   help="do not run the retraining worker in this process (run 'tactile-zsl worker')")
+    p.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import logging
+
+    import uvicorn
+
+    from app.api.main import create_app
+    from app.config import Settings
+
+    overrides = {
+        "host": args.host, "port": args.port, "dataset": args.dataset, "data_dir": args.data_dir,
+    }
+    settings = Settings(**{k: v for k, v in overrides.items() if v is not None})
+    if args.no_worker:
+        settings = settings.model_copy(update={"embedded_worker": False})
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level="info")
+    return 0

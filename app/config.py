@@ -1,0 +1,72 @@
+"""Service settings: one class, read from ``TACTILE_*`` environment variables."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any
+
+from pydantic import Field, field_validator
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
+
+from app.framework.registry import DEFAULT_METHOD
+
+
+class Settings(BaseSettings):
+    """Every setting is documented in the README; defaults give the embedded service."""
+
+    model_config = SettingsConfigDict(env_prefix="TACTILE_", extra="ignore")
+
+    data_dir: Path = Field(Path("./tactile-data"), description="Folder for the SQLite database.")
+    database_url: str = Field(
+        "", description="Any SQLAlchemy URL; empty means sqlite:///<data_dir>/tactile.db."
+    )
+    host: str = "127.0.0.1"
+    port: int = Field(8000, ge=0, le=65535)
+    # NoDecode: a plain comma-separated list in the environment, not JSON.
+    api_keys: Annotated[list[str], NoDecode] = Field(
+        default_factory=list, description="Keys accepted in X-API-Key on POST; empty = open."
+    )
+    top_k: int = Field(3, ge=1, description="Scores returned per recognised sample.")
+    batch_limit: int = Field(1024, ge=1, description="Most samples in one recognize request.")
+    max_body_bytes: int = Field(
+        64 * 1024 * 1024, ge=1024, description="Largest request body accepted (413 beyond)."
+    )
+    promotion_threshold: int = Field(
+        10, ge=1, description="Real samples after which a novel class becomes a known class."
+    )
+    dataset: str = Field(
+        "simulated", description="Bootstrap data: simulated, simulated:N or phac2:PATH."
+    )
+    method: str = Field(DEFAULT_METHOD, description="Recognition method used for training.")
+    method_params: dict[str, Any] = Field(
+        default_factory=dict, description="JSON keyword arguments for the method (epochs, seed)."
+    )
+    embedded_worker: bool = Field(True, description="Run the retraining worker inside serve.")
+    model_poll_seconds: float = Field(
+        0.5, gt=0, description="How often an API process checks for a new active model."
+    )
+    worker_poll_seconds: float = Field(0.2, gt=0, description="How often a worker looks for jobs.")
+    lease_seconds: float = Field(
+        30.0, gt=0, description="A worker or bootstrap lock not renewed for this long is taken over."
+    )
+
+    @field_validator("api_keys", mode="before")
+    @classmethod
+    def _split_keys(cls, value: Any) -> Any:
+        if isinstance(value, str):
+            return [k.strip() for k in value.split(",") if k.strip()]
+        return value
+
+    @field_validator("method_params", mode="before")
+    @classmethod
+    def _parse_params(cls, value: Any) -> Any:
+        if isinstance(value, str):
+            return json.loads(value) if value.strip() else {}
+        return value
+
+    @property
+    def sqlalchemy_url(self) -> str:
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{(self.data_dir / 'tactile.db').resolve()}"

@@ -1,0 +1,110 @@
+"""First start: migrate the store and, when it holds no model, train the base model.
+
+The base model's classes and *all* its training samples go into the store, so a
+later full retrain (promotion) can be made from the store alone. A lease keeps
+two processes starting at once from both training.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+
+import numpy as np
+from sqlalchemy import Engine
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.config import Settings
+from app.data.dataset import TactileDataset
+from app.framework import bundle
+from app.framework.recognizer import TactileRecognizer
+from app.framework.registry import make_method
+from app.store import leases, migrate, repo
+
+LEASE = "bootstrap"
+Trainer = Callable[[], tuple[TactileRecognizer, TactileDataset]]
+
+
+def say(msg: str) -> None:
+    print(f"tactile-zsl: {msg}", file=sys.stderr, flush=True)
+
+
+def train_base(settings: Settings, progress: bool = True) -> tuple[TactileRecognizer, TactileDataset]:
+    from app.data.sources import load_dataset  # heavy; only a bootstrap needs it
+
+    dataset = load_dataset(settings.dataset)
+    say(
+        f"training the base model ({settings.method}) on '{settings.dataset}': "
+        f"{len(dataset)} samples of {dataset.n_classes} objects; this runs once"
+    )
+    model = make_method(settings.method, **settings.method_params).fit(dataset, progress=progress)
+    return model, dataset
+
+
+def ensure_ready(
+    settings: Settings, engine: Engine, sessions: sessionmaker[Session],
+    trainer: Trainer | None = None, progress: bool = True,
+) -> int:
+    """Migrate, bootstrap if needed; returns the active model version."""
+    migrate.upgrade(engine)
+    holder = leases.new_holder_id()
+    waited = False
+    while True:
+        with sessions() as s:
+            version = repo.active_version_number(s)
+            if version is not None:
+                return version
+            if leases.try_acquire(s, LEASE, holder, settings.lease_seconds):
+                break
+        if not waited:
+            say("another process is training the base model; waiting for it")
+            waited = True
+        time.sleep(0.5)
+    try:
+        with leases.Renewer(sessions, LEASE, holder, settings.lease_seconds):
+            with sessions() as s:  # it may have finished between our check and the lease
+                version = repo.active_version_number(s)
+            if version is None:
+                model, dataset = (trainer or (lambda: train_base(settings, progress)))()
+                with sessions.begin() as s:
+                    version = store_base_model(s, model, dataset)
+                say(f"base model stored as version {version}")
+            return version
+    finally:
+        with sessions() as s:
+            leases.release(s, LEASE, holder)
+
+
+def store_base_model(s: Session, model: TactileRecognizer, dataset: TactileDataset) -> int:
+    repo.add_attributes(s, dataset.attribute_names)
+    ids = []
+    for name, vector in zip(dataset.class_names, dataset.class_attributes, strict=True):
+        ids.append(repo.add_class(s, name, repo.vector_key(vector), "known", "dataset").id)
+    data = bundle.to_bytes(model)
+    row = repo.add_version(
+        s, method=model.method, reason="bootstrap", base_version=None,
+        bundle_sha256=repo.store_bundle(s, data), input_shape=list(model.input_shape),
+        metrics=repo.jsonable(model.metrics), classes=model_classes(model), sample_ids=[],
+    )
+    repo.activate(s, row.version)
+    repo.add_dataset_samples(
+        s, np.asarray(ids)[dataset.labels], dataset.samples, dataset.trials,
+        features=extract_features(model, dataset.samples), version=row.version,
+    )
+    return row.version
+
+
+def extract_features(model: TactileRecognizer, samples: np.ndarray) -> np.ndarray | None:
+    """CONV_XF features when the method has an encoder (the paper's does)."""
+    extract = getattr(model, "extract_features", None)
+    if extract is None or len(samples) == 0:
+        return None
+    return np.concatenate([extract(samples[i : i + 512]) for i in range(0, len(samples), 512)])
+
+
+def model_classes(model: TactileRecognizer) -> list[dict[str, str]]:
+    reg = model.registry
+    return [{"name": n, "kind": "known"} for n in reg.known_names] + [
+        {"name": n, "kind": "novel"} for n in reg.novel_names
+    ]

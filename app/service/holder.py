@@ -1,0 +1,83 @@
+"""The model an API process serves, swapped atomically when a new version goes live.
+
+Requests read ``holder.current`` once and use that snapshot to the end, so a swap
+in the middle of a request changes nothing for it; the swap itself is a single
+attribute assignment, which is atomic in Python. A background thread polls the
+active version number (one indexed row) and loads a new bundle off the request
+path.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from dataclasses import dataclass
+
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.framework import bundle
+from app.framework.recognizer import TactileRecognizer
+from app.service.metrics import Metrics
+from app.store import repo
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class LoadedModel:
+    version: int
+    recognizer: TactileRecognizer
+    class_ids: dict[str, int]  # class name -> store id, for API responses
+
+
+class ModelHolder:
+    def __init__(
+        self, sessions: sessionmaker[Session], poll_seconds: float = 0.5,
+        metrics: Metrics | None = None,
+    ) -> None:
+        self._sessions = sessions
+        self._poll = poll_seconds
+        self._metrics = metrics
+        self._current: LoadedModel | None = None
+        self._load_lock = threading.Lock()  # one load at a time; readers never take it
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def current(self) -> LoadedModel | None:
+        return self._current
+
+    def refresh(self) -> bool:
+        """Load the active version if it is not the one served; True when swapped."""
+        with self._load_lock:
+            with self._sessions() as s:
+                version = repo.active_version_number(s)
+                current = self._current
+                if version is None or (current is not None and current.version == version):
+                    return False
+                row = repo.get_version(s, version)
+                data = repo.bundle_data(s, row.bundle_sha256)
+                class_ids = repo.class_ids_by_name(s)
+            recognizer = bundle.from_bytes(data)
+            self._current = LoadedModel(version, recognizer, class_ids)
+        if self._metrics:
+            self._metrics.active_version.set(version)
+        log.info("serving model version %s", version)
+        return True
+
+    def start(self) -> None:
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="model-poll", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+
+    def _run(self) -> None:
+        while not self._stop.wait(self._poll):
+            try:
+                self.refresh()
+            except Exception:  # keep serving the old model; try again next tick
+                log.exception("could not load the active model version")

@@ -1,0 +1,185 @@
+"""SQLAlchemy 2 models: the store every API process and worker shares.
+
+Portable between SQLite and PostgreSQL: no dialect-specific column types; the
+two partial unique indexes are supported by both.
+"""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import Any
+
+from sqlalchemy import (
+    JSON,
+    Boolean,
+    DateTime,
+    ForeignKey,
+    Index,
+    Integer,
+    LargeBinary,
+    MetaData,
+    String,
+    Text,
+    TypeDecorator,
+    text,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+# Stable constraint names so Alembic migrations (and SQLite batch mode) can refer to them.
+NAMING = {
+    "ix": "ix_%(column_0_label)s",
+    "uq": "uq_%(table_name)s_%(column_0_name)s",
+    "ck": "ck_%(table_name)s_%(constraint_name)s",
+    "fk": "fk_%(table_name)s_%(column_0_name)s_%(referred_table_name)s",
+    "pk": "pk_%(table_name)s",
+}
+
+
+def utcnow() -> datetime:
+    return datetime.now(UTC)
+
+
+class UTCDateTime(TypeDecorator):
+    """Timezone-aware UTC datetimes on every backend (SQLite returns naive ones)."""
+
+    impl = DateTime(timezone=True)
+    cache_ok = True
+
+    def process_bind_param(self, value: datetime | None, dialect: Any) -> datetime | None:
+        if value is not None and value.tzinfo is None:
+            value = value.replace(tzinfo=UTC)
+        return value.astimezone(UTC) if value is not None else None
+
+    def process_result_value(self, value: datetime | None, dialect: Any) -> datetime | None:
+        if value is not None and value.tzinfo is None:
+            value = value.replace(tzinfo=UTC)
+        return value
+
+
+class Base(DeclarativeBase):
+    metadata = MetaData(naming_convention=NAMING)
+
+
+class Attribute(Base):
+    """The attribute vocabulary; ``position`` is the column in attribute vectors."""
+
+    __tablename__ = "attributes"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    position: Mapped[int] = mapped_column(Integer, unique=True)
+    name: Mapped[str] = mapped_column(String(200), unique=True)
+
+
+class ObjectClass(Base):
+    __tablename__ = "classes"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(200), unique=True)
+    kind: Mapped[str] = mapped_column(String(10))  # known | novel
+    origin: Mapped[str] = mapped_column(String(10))  # dataset | enrolled
+    # the 0/1 attribute vector as a string of digits, e.g. "0110..."
+    attribute_key: Mapped[str] = mapped_column(String(1000), index=True)
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+    promoted_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
+
+    __table_args__ = (
+        # Two concurrent registrations of one vector cannot both commit; dataset
+        # classes are exempt because real datasets may repeat a vector.
+        Index(
+            "uq_classes_enrolled_attribute_key",
+            "attribute_key",
+            unique=True,
+            sqlite_where=text("origin = 'enrolled'"),
+            postgresql_where=text("origin = 'enrolled'"),
+        ),
+    )
+
+
+class Sample(Base):
+    """A real tactile sample: float32 bytes in C order with their shape."""
+
+    __tablename__ = "samples"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    class_id: Mapped[int] = mapped_column(ForeignKey("classes.id"), index=True)
+    origin: Mapped[str] = mapped_column(String(10))  # dataset | enrolled
+    trial: Mapped[int | None] = mapped_column(Integer)  # dataset trial id, for grouped splits
+    shape: Mapped[list[int]] = mapped_column(JSON)
+    data: Mapped[bytes] = mapped_column(LargeBinary)
+    # CONV_XF features of the sample under ``features_version`` (filled by the worker)
+    features: Mapped[bytes | None] = mapped_column(LargeBinary)
+    features_version: Mapped[int | None] = mapped_column(Integer)
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+
+
+class Bundle(Base):
+    """Model bundle bytes, content-addressed so any process on any host can load them."""
+
+    __tablename__ = "bundles"
+
+    sha256: Mapped[str] = mapped_column(String(64), primary_key=True)
+    size: Mapped[int] = mapped_column(Integer)
+    data: Mapped[bytes] = mapped_column(LargeBinary)
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+
+
+class ModelVersion(Base):
+    __tablename__ = "model_versions"
+
+    version: Mapped[int] = mapped_column(primary_key=True)
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+    method: Mapped[str] = mapped_column(String(100))
+    reason: Mapped[str] = mapped_column(String(20))  # bootstrap | update | promotion
+    base_version: Mapped[int | None] = mapped_column(Integer)
+    bundle_sha256: Mapped[str] = mapped_column(ForeignKey("bundles.sha256"))
+    input_shape: Mapped[list[int]] = mapped_column(JSON)
+    metrics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    classes: Mapped[list[dict[str, Any]]] = mapped_column(JSON)  # [{"name", "kind"}]
+    sample_ids: Mapped[list[int]] = mapped_column(JSON, default=list)  # enrolled samples inside
+    active: Mapped[bool] = mapped_column(Boolean, default=False)
+
+    __table_args__ = (
+        # at most one active version, enforced by the database itself
+        Index(
+            "uq_model_versions_one_active",
+            "active",
+            unique=True,
+            sqlite_where=text("active"),
+            postgresql_where=text("active"),
+        ),
+    )
+
+
+class Job(Base):
+    """One enrollment waiting for (or folded into) a model version.
+
+    Workers claim queued rows (``SELECT … FOR UPDATE SKIP LOCKED`` on PostgreSQL);
+    ``claimed_by`` and ``heartbeat_at`` let a later lease scheme find dead workers.
+    """
+
+    __tablename__ = "jobs"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    kind: Mapped[str] = mapped_column(String(20))  # register_class | add_sample
+    status: Mapped[str] = mapped_column(String(10), default="queued")
+    class_id: Mapped[int] = mapped_column(ForeignKey("classes.id"), index=True)
+    sample_id: Mapped[int | None] = mapped_column(ForeignKey("samples.id"))
+    model_version: Mapped[int | None] = mapped_column(Integer)
+    error: Mapped[str | None] = mapped_column(Text)
+    claimed_by: Mapped[str | None] = mapped_column(String(200))
+    heartbeat_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+    started_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
+    finished_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
+
+    __table_args__ = (Index("ix_jobs_status_id", "status", "id"),)
+
+
+class Lease(Base):
+    """A named lock with an expiry: bootstrap, and the one retrain at a time."""
+
+    __tablename__ = "leases"
+
+    name: Mapped[str] = mapped_column(String(100), primary_key=True)
+    holder: Mapped[str] = mapped_column(String(200))
+    expires_at: Mapped[datetime] = mapped_column(UTCDateTime)

@@ -1,0 +1,265 @@
+"""Repository functions: every query the API and the worker make, in one place.
+
+Functions take a Session and leave committing to the caller unless their name
+says otherwise, so one request or one retrain is one transaction.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+from sqlalchemy import func, insert, select, update
+from sqlalchemy.orm import Session
+
+from app.store.models import Attribute, Bundle, Job, ModelVersion, ObjectClass, Sample, utcnow
+
+# ------------------------------------------------------------------ encoding
+
+
+def vector_key(vector: Iterable[float]) -> str:
+    """A 0/1 attribute vector as a string of digits: comparable and indexable."""
+    return "".join("1" if v >= 0.5 else "0" for v in vector)
+
+
+def key_vector(key: str) -> np.ndarray:
+    return np.array([c == "1" for c in key], dtype=np.float32)
+
+
+def encode_sample(sample: np.ndarray) -> tuple[bytes, list[int]]:
+    x = np.ascontiguousarray(sample, dtype=np.float32)
+    return x.tobytes(), list(x.shape)
+
+
+def decode_sample(data: bytes, shape: Sequence[int]) -> np.ndarray:
+    return np.frombuffer(data, dtype=np.float32).reshape(tuple(shape))
+
+
+# ---------------------------------------------------------------- attributes
+
+
+def attribute_names(session: Session) -> list[str]:
+    return list(session.scalars(select(Attribute.name).order_by(Attribute.position)))
+
+
+def add_attributes(session: Session, names: Sequence[str]) -> None:
+    session.add_all(Attribute(position=i, name=n) for i, n in enumerate(names))
+
+
+def attribute_labels(key: str, vocabulary: Sequence[str]) -> list[str]:
+    return [name for name, bit in zip(vocabulary, key, strict=False) if bit == "1"]
+
+
+# ------------------------------------------------------------------- classes
+
+
+def get_class(session: Session, class_id: int) -> ObjectClass | None:
+    return session.get(ObjectClass, class_id)
+
+
+def class_by_name(session: Session, name: str) -> ObjectClass | None:
+    return session.scalar(select(ObjectClass).where(ObjectClass.name == name))
+
+
+def class_by_key(session: Session, key: str) -> ObjectClass | None:
+    return session.scalar(select(ObjectClass).where(ObjectClass.attribute_key == key).limit(1))
+
+
+def list_classes(session: Session) -> list[ObjectClass]:
+    return list(session.scalars(select(ObjectClass).order_by(ObjectClass.id)))
+
+
+def sample_counts(session: Session, class_ids: Sequence[int] | None = None) -> dict[int, int]:
+    stmt = select(Sample.class_id, func.count()).group_by(Sample.class_id)
+    if class_ids is not None:
+        stmt = stmt.where(Sample.class_id.in_(class_ids))
+    return {cid: n for cid, n in session.execute(stmt)}
+
+
+def class_ids_by_name(session: Session) -> dict[str, int]:
+    return {name: cid for cid, name in session.execute(select(ObjectClass.id, ObjectClass.name))}
+
+
+def add_class(
+    session: Session, name: str, key: str, kind: str = "novel", origin: str = "enrolled"
+) -> ObjectClass:
+    obj = ObjectClass(name=name, kind=kind, origin=origin, attribute_key=key)
+    session.add(obj)
+    session.flush()
+    return obj
+
+
+# ------------------------------------------------------------------- samples
+
+
+def add_sample(
+    session: Session, class_id: int, sample: np.ndarray, origin: str = "enrolled"
+) -> Sample:
+    data, shape = encode_sample(sample)
+    row = Sample(class_id=class_id, origin=origin, shape=shape, data=data)
+    session.add(row)
+    session.flush()
+    return row
+
+
+def add_dataset_samples(
+    session: Session, class_ids: Sequence[int], samples: np.ndarray, trials: Sequence[int],
+    features: np.ndarray | None = None, version: int | None = None,
+) -> None:
+    """Bulk insert (one executemany) of a whole training set."""
+    now = utcnow()
+    rows = []
+    for i, (cid, x, trial) in enumerate(zip(class_ids, samples, trials, strict=True)):
+        data, shape = encode_sample(x)
+        feats = None if features is None else encode_sample(features[i])[0]
+        rows.append(
+            {"class_id": int(cid), "origin": "dataset", "trial": int(trial), "shape": shape,
+             "data": data, "features": feats, "features_version": version, "created_at": now}
+        )
+    if rows:
+        session.execute(insert(Sample), rows)
+
+
+def samples_of(session: Session, class_ids: Sequence[int]) -> list[Sample]:
+    stmt = select(Sample).where(Sample.class_id.in_(class_ids)).order_by(Sample.id)
+    return list(session.scalars(stmt))
+
+
+# ------------------------------------------------------------ model versions
+
+
+def active_version_number(session: Session) -> int | None:
+    """The cheap poll every API process runs: one indexed row."""
+    return session.scalar(select(ModelVersion.version).where(ModelVersion.active))
+
+
+def active_version(session: Session) -> ModelVersion | None:
+    return session.scalar(select(ModelVersion).where(ModelVersion.active))
+
+
+def get_version(session: Session, version: int) -> ModelVersion | None:
+    return session.get(ModelVersion, version)
+
+
+def list_versions(session: Session) -> list[ModelVersion]:
+    return list(session.scalars(select(ModelVersion).order_by(ModelVersion.version)))
+
+
+def bundle_data(session: Session, sha256: str) -> bytes:
+    return session.scalar(select(Bundle.data).where(Bundle.sha256 == sha256))
+
+
+def store_bundle(session: Session, data: bytes) -> str:
+    """Content-addressed: identical bundles are stored once."""
+    sha = hashlib.sha256(data).hexdigest()
+    if session.get(Bundle, sha) is None:
+        session.add(Bundle(sha256=sha, size=len(data), data=data))
+        session.flush()
+    return sha
+
+
+def add_version(session: Session, **fields) -> ModelVersion:
+    row = ModelVersion(active=False, **fields)
+    session.add(row)
+    session.flush()
+    return row
+
+
+def activate(session: Session, version: int) -> None:
+    # clear first: the partial unique index allows one active row at any instant
+    session.execute(
+        update(ModelVersion).where(ModelVersion.active, ModelVersion.version != version)
+        .values(active=False)
+    )
+    session.execute(update(ModelVersion).where(ModelVersion.version == version).values(active=True))
+
+
+# ---------------------------------------------------------------------- jobs
+
+
+def add_job(session: Session, kind: str, class_id: int, sample_id: int | None = None) -> Job:
+    job = Job(kind=kind, status="queued", class_id=class_id, sample_id=sample_id)
+    session.add(job)
+    session.flush()
+    return job
+
+
+def get_job(session: Session, job_id: int) -> Job | None:
+    return session.get(Job, job_id)
+
+
+def claim_queued_jobs(session: Session, worker_id: str) -> list[Job]:
+    """Mark every queued job running for this worker and commit; returns them.
+
+    FOR UPDATE SKIP LOCKED lets PostgreSQL workers claim side by side (SQLite
+    ignores it and serialises writers); the status guard in the UPDATE makes a
+    lost race harmless on either.
+    """
+    stmt = (
+        select(Job.id).where(Job.status == "queued").order_by(Job.id)
+        .with_for_update(skip_locked=True)
+    )
+    ids = list(session.scalars(stmt))
+    if not ids:
+        session.rollback()
+        return []
+    now = utcnow()
+    session.execute(
+        update(Job).where(Job.id.in_(ids), Job.status == "queued")
+        .values(status="running", claimed_by=worker_id, started_at=now, heartbeat_at=now)
+    )
+    session.commit()
+    mine = select(Job).where(Job.id.in_(ids), Job.claimed_by == worker_id, Job.status == "running")
+    return list(session.scalars(mine.order_by(Job.id)))
+
+
+def requeue_running(session: Session) -> int:
+    """Jobs left ``running`` by a worker that died go back to the queue."""
+    res = session.execute(
+        update(Job).where(Job.status == "running")
+        .values(status="queued", claimed_by=None, started_at=None, heartbeat_at=None)
+    )
+    return res.rowcount or 0
+
+
+def finish_jobs(
+    session: Session, job_ids: Sequence[int], status: str, version: int | None = None,
+    error: str | None = None,
+) -> None:
+    session.execute(
+        update(Job).where(Job.id.in_(job_ids))
+        .values(status=status, model_version=version, error=error, finished_at=utcnow())
+    )
+
+
+def failed_enrollments(session: Session) -> tuple[set[int], set[int]]:
+    """(class ids, sample ids) whose enrollment job failed: never folded into a model."""
+    classes, samples = set(), set()
+    for kind, cid, sid in session.execute(
+        select(Job.kind, Job.class_id, Job.sample_id).where(Job.status == "failed")
+    ):
+        if kind == "register_class":
+            classes.add(cid)
+        elif sid is not None:
+            samples.add(sid)
+    return classes, samples
+
+
+def jobs_by_status(session: Session) -> dict[str, int]:
+    return dict(session.execute(select(Job.status, func.count()).group_by(Job.status)).all())
+
+
+def jsonable(obj):
+    """Metrics as strict JSON: numpy scalars to Python, NaN and infinities to None."""
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    return obj

@@ -1,0 +1,152 @@
+"""Fixtures shared by tests/api, tests/store, tests/worker and the end-to-end test.
+
+One small model is trained once per test process (``trained_base``) and every
+test's fresh store is bootstrapped from it, so no test waits for training
+except the few that retrain on purpose.
+"""
+
+from __future__ import annotations
+
+import copy
+import functools
+import io
+import itertools
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from app.config import Settings
+from app.data.dataset import TactileDataset
+from app.framework.recognizer import TactileRecognizer
+from app.framework.registry import DEFAULT_METHOD, make_method
+
+# Small and short: seconds on 2 CPU cores. Accuracy is not what these tests check.
+QUICK_PARAMS: dict = {
+    "seed": 0, "encoder_epochs": 3, "alg1_epochs": 5, "alg2_epochs": 2, "fc_z_epochs": 5,
+    "finetune_steps": 3, "mlp_hidden": 32, "mlp_features": 16, "gmm_components": 2,
+    "novelty_pca_dims": 4,
+}
+QUICK_OBJECTS = 10
+QUICK_TRIALS = 6
+QUICK_DATASET = f"simulated:{QUICK_OBJECTS}"
+
+
+def quick_dataset() -> TactileDataset:
+    from app.data.simulator import simulate_dataset
+
+    return simulate_dataset(n_objects=QUICK_OBJECTS, trials_per_object=QUICK_TRIALS, seed=0)
+
+
+@functools.cache
+def _train_once() -> tuple[TactileRecognizer, TactileDataset]:
+    dataset = quick_dataset()
+    return make_method(DEFAULT_METHOD, **QUICK_PARAMS).fit(dataset), dataset
+
+
+def trained_base() -> tuple[TactileRecognizer, TactileDataset]:
+    """The one quick model of this test process (the store only serialises it)."""
+    return _train_once()
+
+
+def unused_vectors(dataset: TactileDataset, n: int) -> list[list[int]]:
+    """``n`` attribute vectors no dataset class has, each with two attributes set."""
+    taken = {tuple(int(v) for v in row) for row in dataset.class_attributes}
+    out = []
+    for i, j in itertools.combinations(range(dataset.n_attributes), 2):
+        v = [0] * dataset.n_attributes
+        v[i] = v[j] = 1
+        if tuple(v) not in taken:
+            out.append(v)
+        if len(out) == n:
+            return out
+    raise AssertionError("no unused attribute vectors left")
+
+
+def names_of(vector: list[int], dataset: TactileDataset) -> list[str]:
+    return [a for a, bit in zip(dataset.attribute_names, vector, strict=True) if bit]
+
+
+def npy(array: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    np.save(buf, array)
+    return buf.getvalue()
+
+
+def quick_settings(data_dir, **overrides) -> Settings:
+    values = {
+        "data_dir": data_dir, "embedded_worker": False, "dataset": QUICK_DATASET,
+        "method_params": QUICK_PARAMS, "model_poll_seconds": 0.05, "worker_poll_seconds": 0.05,
+        "lease_seconds": 10.0, "promotion_threshold": 10,
+    }
+    return Settings(**{**values, **overrides})
+
+
+def wait_for_job(client: TestClient, job_id: int, timeout: float = 60) -> dict:
+    deadline = time.monotonic() + timeout
+    while True:
+        job = client.get(f"/v1/jobs/{job_id}").json()
+        if job["status"] in ("succeeded", "failed") or time.monotonic() > deadline:
+            return job
+        time.sleep(0.05)
+
+
+# -------------------------------------------------------------------- fixtures
+
+
+@pytest.fixture(scope="session")
+def base_model() -> tuple[TactileRecognizer, TactileDataset]:
+    return trained_base()
+
+
+@pytest.fixture
+def settings(tmp_path) -> Settings:
+    return quick_settings(tmp_path / "data")
+
+
+@pytest.fixture
+def app(settings, base_model):
+    from app.api.main import create_app
+
+    return create_app(settings, trainer=lambda: base_model)
+
+
+@pytest.fixture
+def client(app) -> Iterator[TestClient]:
+    with TestClient(app) as c:  # runs the lifespan: migrate, bootstrap, load the model
+        yield c
+
+
+@pytest.fixture
+def worker(app, client):
+    """A worker on the app's store, run by hand with ``worker.run_once()``."""
+    from worker import Worker
+
+    holder = app.state.holder
+    return Worker(app.state.settings, app.state.sessions, on_activate=lambda _v: holder.refresh())
+
+
+@pytest.fixture
+def store(settings, base_model):
+    """(engine, sessions) of a migrated store holding the bootstrapped base model."""
+    from app.service.bootstrap import ensure_ready
+    from app.store.db import make_engine, make_sessionmaker
+
+    engine = make_engine(settings.sqlalchemy_url)
+    sessions = make_sessionmaker(engine)
+    ensure_ready(settings, engine, sessions, trainer=lambda: base_model, progress=False)
+    yield engine, sessions
+    engine.dispose()
+
+
+@pytest.fixture
+def dataset(base_model) -> TactileDataset:
+    return base_model[1]
+
+
+@pytest.fixture
+def sample(dataset) -> list:
+    """One valid sample as JSON-ready nested lists."""
+    return copy.deepcopy(dataset.samples[0].tolist())

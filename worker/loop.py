@@ -1,0 +1,170 @@
+"""The retraining worker: claim queued enrollments, build, activate, repeat.
+
+One round claims *every* queued job, so enrollments that arrived while the
+previous retrain ran are folded into one new version. The new version, its
+activation and the jobs' success are one transaction: API processes see either
+the old model or the complete new one. A round that fails leaves the active
+model alone; a failed batch of several jobs is retried one job at a time so one
+bad enrollment does not sink the others.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+
+import numpy as np
+from sqlalchemy import exists, select, update
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.config import Settings
+from app.framework import bundle
+from app.framework.recognizer import TactileRecognizer
+from app.service.bootstrap import extract_features, model_classes
+from app.service.metrics import Metrics
+from app.store import leases, repo
+from app.store.models import Job, ObjectClass, Sample, utcnow
+from worker.retrain import Plan, build, make_plan
+
+log = logging.getLogger(__name__)
+
+LEASE = "retrain"  # one retrain of the model lineage at a time
+
+
+class Worker:
+    def __init__(
+        self, settings: Settings, sessions: sessionmaker[Session],
+        on_activate: Callable[[int], None] | None = None, metrics: Metrics | None = None,
+    ) -> None:
+        self.settings = settings
+        self.sessions = sessions
+        self.id = leases.new_holder_id()
+        self.on_activate = on_activate
+        self.metrics = metrics
+        self._cache: tuple[int, TactileRecognizer] | None = None  # last model built or loaded
+
+    # ------------------------------------------------------------------ rounds
+    def run_once(self) -> int:
+        """One round; returns how many jobs it finished."""
+        with self.sessions() as s:
+            pending = s.scalar(select(exists().where(Job.status.in_(("queued", "running")))))
+            if not pending or not leases.try_acquire(s, LEASE, self.id, self.settings.lease_seconds):
+                return 0
+        try:
+            with leases.Renewer(self.sessions, LEASE, self.id, self.settings.lease_seconds):
+                with self.sessions.begin() as s:
+                    # we hold the lease, so nobody else is running anything: orphans
+                    if n := repo.requeue_running(s):
+                        log.warning("re-queued %d job(s) left running by a stopped worker", n)
+                with self.sessions() as s:
+                    jobs = repo.claim_queued_jobs(s, self.id)
+                if jobs:
+                    self._process([j.id for j in jobs])
+                return len(jobs)
+        finally:
+            with self.sessions() as s:
+                leases.release(s, LEASE, self.id)
+
+    def run(self, stop: threading.Event) -> None:
+        while not stop.is_set():
+            try:
+                busy = self.run_once()
+            except Exception:  # a database hiccup must not end the worker
+                log.exception("worker round failed; retrying")
+                busy = 0
+            if not busy:
+                stop.wait(self.settings.worker_poll_seconds)
+
+    # -------------------------------------------------------------------- jobs
+    def _process(self, job_ids: list[int]) -> None:
+        started = time.perf_counter()
+        try:
+            self._retrain(job_ids)
+            status = "succeeded"
+        except Exception as exc:
+            if len(job_ids) > 1:
+                log.warning("retrain of %d jobs failed (%s); retrying one by one", len(job_ids), exc)
+                for job_id in job_ids:
+                    self._process([job_id])
+                return
+            log.exception("job %s failed", job_ids[0])
+            with self.sessions.begin() as s:
+                repo.finish_jobs(s, job_ids, "failed", error=f"{type(exc).__name__}: {exc}")
+            status = "failed"
+        if self.metrics:
+            self.metrics.job_duration.labels(status).observe(time.perf_counter() - started)
+
+    def _retrain(self, job_ids: list[int]) -> None:
+        with self.sessions() as s:
+            base = repo.active_version(s)
+            model = self._load(s, base.version, base.bundle_sha256)
+            jobs = list(s.scalars(select(Job).where(Job.id.in_(job_ids))))
+            plan = make_plan(s, base, model, jobs, self.settings.promotion_threshold)
+            if plan.changes_model:
+                log.info(
+                    "retraining v%d: %d new class(es), samples for %d, %s",
+                    base.version, len(plan.new_classes), len(plan.new_samples),
+                    "full retrain" if plan.full_retrain else "incremental",
+                )
+                new = build(s, plan, model, self.settings)
+                data = bundle.to_bytes(new)
+        ok = [j for j in job_ids if j not in plan.rejected]
+        with self.sessions.begin() as s:
+            for job_id, reason in plan.rejected.items():
+                repo.finish_jobs(s, [job_id], "failed", error=reason)
+            if not plan.changes_model:  # already in the active model (e.g. a re-run)
+                repo.finish_jobs(s, ok, "succeeded", version=base.version)
+                return
+            version = self._commit(s, base.version, new, data, plan, ok)
+        self._cache = (version, new)
+        log.info("model version %d is active", version)
+        if self.on_activate:
+            self.on_activate(version)
+
+    def _commit(
+        self, s: Session, base_version: int, new: TactileRecognizer, data: bytes, plan: Plan,
+        job_ids: list[int],
+    ) -> int:
+        row = repo.add_version(
+            s, method=new.method, reason="promotion" if plan.full_retrain else "update",
+            base_version=base_version, bundle_sha256=repo.store_bundle(s, data),
+            input_shape=list(new.input_shape), metrics=repo.jsonable(new.metrics),
+            classes=model_classes(new), sample_ids=plan.sample_ids,
+        )
+        repo.activate(s, row.version)
+        repo.finish_jobs(s, job_ids, "succeeded", version=row.version)
+        if plan.promote:
+            s.execute(
+                update(ObjectClass).where(ObjectClass.id.in_([c.id for c in plan.promote]))
+                .values(kind="known", promoted_at=utcnow())
+            )
+        self._store_features(s, new, [r for rows in plan.new_samples.values() for r in rows], row.version)
+        return row.version
+
+    @staticmethod
+    def _store_features(s: Session, model: TactileRecognizer, rows: list[Sample], version: int) -> None:
+        if not rows:
+            return
+        feats = extract_features(model, np.stack([repo.decode_sample(r.data, r.shape) for r in rows]))
+        if feats is None:
+            return
+        for r, f in zip(rows, feats, strict=True):
+            s.execute(
+                update(Sample).where(Sample.id == r.id)
+                .values(features=repo.encode_sample(f)[0], features_version=version)
+            )
+
+    def _load(self, s: Session, version: int, sha256: str) -> TactileRecognizer:
+        if self._cache is None or self._cache[0] != version:
+            self._cache = (version, bundle.from_bytes(repo.bundle_data(s, sha256)))
+        return self._cache[1]
+
+
+def start_in_thread(worker: Worker) -> tuple[threading.Thread, threading.Event]:
+    """The embedded worker of ``tactile-zsl serve``."""
+    stop = threading.Event()
+    thread = threading.Thread(target=worker.run, args=(stop,), name="retrain-worker", daemon=True)
+    thread.start()
+    return thread, stop
