@@ -8,11 +8,12 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 import swagger_ui_bundle
-from fastapi import FastAPI
+from fastapi import FastAPI, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import HTMLResponse
 from fastapi.staticfiles import StaticFiles
+from starlette.datastructures import Headers
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.api import problems
@@ -66,7 +67,6 @@ def create_app(settings: Settings | None = None, trainer: Trainer | None = None)
         lifespan=lifespan,
         docs_url=None,  # served below from the package: no CDN
         redoc_url=None,
-        max_body_size=settings.max_body_bytes,
     )
     app.state.settings = settings
     app.state.sessions = sessions
@@ -76,6 +76,7 @@ def create_app(settings: Settings | None = None, trainer: Trainer | None = None)
     for module in (health, attributes, classes, samples, recognize, jobs, models):
         app.include_router(module.router)
     _mount_docs(app)
+    app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     app.add_middleware(RequestMetrics, metrics=metrics)
     return app
 
@@ -94,6 +95,41 @@ def _mount_docs(app: FastAPI) -> None:
             swagger_css_url="/static/swagger-ui/swagger-ui.css",
             swagger_favicon_url="/static/swagger-ui/favicon-32x32.png",
         )
+
+
+class BodySizeLimit:
+    """413 as problem+json for bodies over the cap. (FastAPI's own ``max_body_size``
+    answers text/plain, which would break the every-error-is-a-problem rule.)"""
+
+    def __init__(self, app: ASGIApp, max_bytes: int) -> None:
+        self.app = app
+        self.max_bytes = max_bytes
+
+    def _too_large(self) -> problems.Problem:
+        return problems.Problem(413, f"request body is larger than {self.max_bytes} bytes", "body")
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        declared = Headers(scope=scope).get("content-length", "")
+        if declared.isdigit() and int(declared) > self.max_bytes:
+            request = Request(scope)
+            exc = self._too_large()
+            response = problems.problem_response(request, 413, exc.detail, exc.errors)
+            await response(scope, receive, send)
+            return
+        seen = 0
+
+        async def counted() -> Message:  # bodies sent without a length are counted as they come
+            nonlocal seen
+            message = await receive()
+            seen += len(message.get("body", b""))
+            if seen > self.max_bytes:
+                raise self._too_large()
+            return message
+
+        await self.app(scope, counted, send)
 
 
 class RequestMetrics:

@@ -1,0 +1,103 @@
+"""Read endpoints, health, metrics and the offline docs page."""
+
+from __future__ import annotations
+
+PROBLEM = "application/problem+json"
+
+
+def test_attributes_in_vector_order(client, dataset):
+    r = client.get("/v1/attributes")
+    assert r.status_code == 200
+    assert r.json() == {"attributes": list(dataset.attribute_names)}
+
+
+def test_classes_list_the_base_model(client, dataset):
+    classes = client.get("/v1/classes").json()["classes"]
+    assert [c["name"] for c in classes] == list(dataset.class_names)
+    first = classes[0]
+    assert first["kind"] == "known" and first["in_active_model"] is True
+    assert first["n_samples"] == int((dataset.labels == 0).sum())
+    expected = [a for a, bit in zip(dataset.attribute_names, dataset.class_attributes[0], strict=True) if bit]
+    assert first["attributes"] == expected
+    assert first["created_at"].endswith("Z") or "+00:00" in first["created_at"]
+
+
+def test_get_class_by_id(client):
+    listed = client.get("/v1/classes").json()["classes"][3]
+    assert client.get(f"/v1/classes/{listed['id']}").json() == listed
+
+
+def test_unknown_class_id_is_a_named_404(client):
+    r = client.get("/v1/classes/999999")
+    assert r.status_code == 404
+    assert r.headers["content-type"] == PROBLEM
+    body = r.json()
+    assert body["status"] == 404 and body["instance"] == "/v1/classes/999999"
+    assert body["errors"][0]["field"] == "class_id"
+
+
+def test_non_integer_ids_are_named_422(client):
+    for path, field in (("/v1/classes/abc", "class_id"), ("/v1/jobs/x", "job_id"),
+                        ("/v1/models/v1/activate", "version")):
+        r = client.request("POST" if path.endswith("activate") else "GET", path)
+        assert r.status_code == 422, path
+        assert r.headers["content-type"] == PROBLEM
+        assert r.json()["errors"][0]["field"] == field
+
+
+def test_unknown_job_id_is_a_named_404(client):
+    r = client.get("/v1/jobs/424242")
+    assert r.status_code == 404 and r.headers["content-type"] == PROBLEM
+    assert r.json()["errors"] == [{"field": "job_id", "reason": "no job with job_id 424242"}]
+
+
+def test_models_and_active_model(client, dataset):
+    models = client.get("/v1/models").json()["models"]
+    assert len(models) == 1
+    v1 = models[0]
+    assert v1["version"] == 1 and v1["active"] is True and v1["reason"] == "bootstrap"
+    assert v1["input_shape"] == list(dataset.input_shape)
+    assert {c["name"] for c in v1["classes"]} == set(dataset.class_names)
+    assert len(v1["sha256"]) == 64 and isinstance(v1["metrics"], dict)
+    assert client.get("/v1/models/active").json() == v1
+
+
+def test_health_and_readiness(client):
+    assert client.get("/healthz").json() == {"status": "ok", "model_version": None}
+    assert client.get("/readyz").json() == {"status": "ready", "model_version": 1}
+
+
+def test_metrics_are_prometheus_text(client, sample):
+    client.post("/v1/recognize", json={"samples": [sample]})
+    r = client.get("/metrics")
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/plain")
+    text = r.text
+    assert 'tactile_http_requests_total{method="POST",route="/v1/recognize",status="200"} 1.0' in text
+    assert "tactile_http_request_duration_seconds_bucket" in text
+    assert "tactile_recognitions_total" in text
+    assert "tactile_active_model_version 1.0" in text
+    assert 'tactile_jobs{status="queued"} 0.0' in text
+
+
+def test_docs_page_needs_no_internet(client):
+    html = client.get("/docs").text
+    assert "/static/swagger-ui/swagger-ui-bundle.js" in html
+    assert "cdn" not in html.lower() and "https://" not in html
+    assert client.get("/static/swagger-ui/swagger-ui-bundle.js").status_code == 200
+    assert client.get("/static/swagger-ui/swagger-ui.css").status_code == 200
+
+
+def test_openapi_documents_problem_responses_and_npy(client):
+    spec = client.get("/openapi.json").json()
+    recognize = spec["paths"]["/v1/recognize"]["post"]
+    assert set(recognize["requestBody"]["content"]) == {"application/json", "application/x-npy"}
+    assert PROBLEM in recognize["responses"]["422"]["content"]
+    register = spec["paths"]["/v1/classes"]["post"]
+    assert "202" in register["responses"] and "409" in register["responses"]
+
+
+def test_unknown_route_and_method_are_problems(client):
+    r = client.get("/v1/nothing-here")
+    assert r.status_code == 404 and r.headers["content-type"] == PROBLEM
+    r = client.delete("/v1/classes")
+    assert r.status_code == 405 and r.headers["content-type"] == PROBLEM

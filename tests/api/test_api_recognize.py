@@ -1,0 +1,140 @@
+"""POST /v1/recognize: JSON and .npy bodies, and every way a batch can be wrong."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from tests.service_fixtures import npy
+
+PROBLEM = "application/problem+json"
+NPY = {"content-type": "application/x-npy"}
+
+
+def problem(r, status: int, field: str) -> dict:
+    assert r.status_code == status, r.text
+    assert r.headers["content-type"] == PROBLEM
+    body = r.json()
+    assert body["status"] == status and body["title"] and body["detail"]
+    assert field in [e["field"] for e in body["errors"]], body
+    return body
+
+
+def test_json_batch(client, dataset):
+    r = client.post("/v1/recognize", json={"samples": dataset.samples[:3].tolist()})
+    assert r.status_code == 200
+    body = r.json()
+    assert body["model_version"] == 1 and len(body["results"]) == 3
+    names = set(dataset.class_names)
+    for res in body["results"]:
+        assert res["class_name"] in names and res["kind"] in ("known", "novel")
+        assert isinstance(res["class_id"], int) and isinstance(res["is_novel"], bool)
+        assert len(res["top_k"]) == 3
+        probs = [s["probability"] for s in res["top_k"]]
+        assert probs == sorted(probs, reverse=True)
+        assert res["top_k"][0]["class_name"] == res["class_name"]
+
+
+def test_npy_batch_matches_json(client, dataset):
+    x = dataset.samples[:4]
+    by_json = client.post("/v1/recognize", json={"samples": x.tolist()}).json()
+    by_npy = client.post("/v1/recognize", content=npy(x), headers=NPY).json()
+    assert [r["class_name"] for r in by_npy["results"]] == [r["class_name"] for r in by_json["results"]]
+
+
+def test_npy_single_sample_without_batch_axis(client, dataset):
+    r = client.post("/v1/recognize", content=npy(dataset.samples[0]), headers=NPY)
+    assert r.status_code == 200 and len(r.json()["results"]) == 1
+
+
+def test_npy_float64_and_int_are_accepted(client, dataset):
+    r = client.post("/v1/recognize", content=npy(dataset.samples[:2].astype(np.float64)), headers=NPY)
+    assert r.status_code == 200
+    r = client.post("/v1/recognize", content=npy(np.ones((1, *dataset.input_shape), np.int32)), headers=NPY)
+    assert r.status_code == 200
+
+
+def test_wrong_sample_shape(client, dataset):
+    c, t = dataset.input_shape
+    body = problem(client.post("/v1/recognize", json={"samples": [np.zeros((c, t + 1)).tolist()]}), 422, "samples")
+    assert str(t + 1) in body["detail"]
+    problem(client.post("/v1/recognize", content=npy(np.zeros((2, c + 1, t), np.float32)), headers=NPY), 422, "samples")
+
+
+def test_ragged_sample(client, sample):
+    sample[1] = sample[1][:-1]
+    problem(client.post("/v1/recognize", json={"samples": [sample]}), 422, "samples")
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_values_by_npy(client, dataset, bad):
+    x = dataset.samples[:3].copy()
+    x[2, 1, 1] = bad
+    body = problem(client.post("/v1/recognize", content=npy(x), headers=NPY), 422, "samples")
+    assert "NaN or infinity" in body["detail"] and "sample 2" in body["detail"]
+
+
+@pytest.mark.parametrize("literal", ["NaN", "Infinity", "-Infinity"])
+def test_non_finite_values_by_json_literal(client, sample, literal):
+    sample[0][0] = "__BAD__"
+    raw = json.dumps({"samples": [sample]}).replace('"__BAD__"', literal)
+    r = client.post("/v1/recognize", content=raw, headers={"content-type": "application/json"})
+    assert "NaN or infinity" in problem(r, 422, "samples")["detail"]
+
+
+def test_empty_batch(client, dataset):
+    problem(client.post("/v1/recognize", json={"samples": []}), 422, "samples")
+    empty = np.zeros((0, *dataset.input_shape), np.float32)
+    problem(client.post("/v1/recognize", content=npy(empty), headers=NPY), 422, "samples")
+
+
+def test_oversized_batch(client, app, dataset):
+    app.state.settings.batch_limit = 2
+    x = dataset.samples[:3]
+    body = problem(client.post("/v1/recognize", json={"samples": x.tolist()}), 422, "samples")
+    assert "batch limit of 2" in body["detail"]
+    problem(client.post("/v1/recognize", content=npy(x), headers=NPY), 422, "samples")
+    assert client.post("/v1/recognize", json={"samples": x[:2].tolist()}).status_code == 200
+
+
+def test_body_over_the_size_cap_is_413(tmp_path, base_model):
+    from fastapi.testclient import TestClient
+
+    from app.api.main import create_app
+    from tests.service_fixtures import quick_settings
+
+    settings = quick_settings(tmp_path / "d", max_body_bytes=1024)
+    with TestClient(create_app(settings, trainer=lambda: base_model)) as c:
+        body = npy(base_model[1].samples[:2])
+        r = c.post("/v1/recognize", content=body, headers=NPY)
+        assert r.status_code == 413 and r.headers["content-type"] == PROBLEM
+        assert r.json()["errors"][0]["field"] == "body"
+        r = c.post("/v1/recognize", content=iter([body[:900], body[900:]]), headers=NPY)  # chunked
+        assert r.status_code == 413 and r.headers["content-type"] == PROBLEM
+
+
+def test_malformed_json(client):
+    for raw in (b"{", b"", b"[1, 2", b"\xff\xfe", b"[" * 100_000):
+        r = client.post("/v1/recognize", content=raw, headers={"content-type": "application/json"})
+        body = problem(r, 422, "body")
+        assert "JSON" in body["detail"] or "body" in body["detail"]
+
+
+def test_wrong_json_shapes_name_the_field(client, sample):
+    problem(client.post("/v1/recognize", json={"sample": [sample]}), 422, "samples")  # missing
+    problem(client.post("/v1/recognize", json={"samples": [sample], "extra": 1}), 422, "extra")
+    problem(client.post("/v1/recognize", json={"samples": "abc"}), 422, "samples")
+    r = client.post("/v1/recognize", json={"samples": [[["x"] * 3]]})
+    assert r.status_code == 422 and r.json()["errors"][0]["field"].startswith("samples[0]")
+    problem(client.post("/v1/recognize", json=[1, 2]), 422, "body")
+
+
+def test_bad_npy_bodies(client, dataset):
+    problem(client.post("/v1/recognize", content=b"not an npy file", headers=NPY), 422, "body")
+    problem(client.post("/v1/recognize", content=npy(dataset.samples[:1])[:-10], headers=NPY), 422, "body")
+    strings = npy(np.array([["a"] * dataset.input_shape[1]] * dataset.input_shape[0]))
+    problem(client.post("/v1/recognize", content=strings, headers=NPY), 422, "body")
+    obj = npy(np.array([{"a": 1}], dtype=object))  # pickled: never loaded
+    problem(client.post("/v1/recognize", content=obj, headers=NPY), 422, "body")
