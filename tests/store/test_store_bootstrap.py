@@ -1,0 +1,78 @@
+"""Bootstrap: the base model, its classes and all its training samples go into the store, once."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+from sqlalchemy import func, select
+
+from app.framework import bundle
+from app.service.bootstrap import ensure_ready
+from app.store import repo
+from app.store.db import make_engine, make_sessionmaker
+from app.store.models import ObjectClass, Sample
+
+
+def test_bootstrap_stores_model_classes_and_every_sample(store, base_model):
+    model, dataset = base_model
+    _, sessions = store
+    with sessions() as s:
+        assert repo.attribute_names(s) == list(dataset.attribute_names)
+        classes = repo.list_classes(s)
+        assert [c.name for c in classes] == list(dataset.class_names)
+        assert {c.kind for c in classes} == {"known"} and {c.origin for c in classes} == {"dataset"}
+        assert s.scalar(select(func.count()).select_from(Sample)) == len(dataset)
+        rows = s.scalars(select(Sample).order_by(Sample.id)).all()
+        stored = np.stack([repo.decode_sample(r.data, r.shape) for r in rows])
+        assert np.array_equal(stored, dataset.samples)
+        ids = {c.name: c.id for c in classes}
+        assert [r.class_id for r in rows] == [ids[dataset.class_names[i]] for i in dataset.labels]
+        assert [r.trial for r in rows] == dataset.trials.tolist()
+        if hasattr(model, "extract_features"):
+            assert all(r.features is not None and r.features_version == 1 for r in rows)
+        v1 = repo.active_version(s)
+        assert v1.version == 1 and v1.reason == "bootstrap"
+        loaded = bundle.from_bytes(repo.bundle_data(s, v1.bundle_sha256))
+        assert loaded.registry.known_names == list(dataset.class_names)
+
+
+def test_second_start_does_not_train(store, settings):
+    engine, sessions = store
+
+    def trainer():  # pragma: no cover - must not run
+        raise AssertionError("trained twice")
+
+    assert ensure_ready(settings, engine, sessions, trainer=trainer) == 1
+
+
+def test_two_processes_starting_at_once_bootstrap_once(settings, base_model):
+    calls = []
+    gate = threading.Event()
+
+    def trainer():
+        calls.append(1)
+        gate.wait(1.0)  # hold the lease a while so the other one has to wait
+        return base_model
+
+    versions, errors = [], []
+
+    def start():
+        engine = make_engine(settings.sqlalchemy_url)
+        try:
+            versions.append(ensure_ready(settings, engine, make_sessionmaker(engine), trainer=trainer))
+        except Exception as exc:  # pragma: no cover
+            errors.append(exc)
+        finally:
+            engine.dispose()
+
+    threads = [threading.Thread(target=start) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert errors == [] and versions == [1, 1] and len(calls) == 1
+    engine = make_engine(settings.sqlalchemy_url)
+    with make_sessionmaker(engine)() as s:
+        assert s.scalar(select(func.count()).select_from(ObjectClass)) == base_model[1].n_classes
+    engine.dispose()

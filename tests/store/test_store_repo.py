@@ -1,0 +1,138 @@
+"""Repository functions and the database's own guarantees (unique vectors, one active version)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+from sqlalchemy import func, select
+from sqlalchemy.exc import IntegrityError
+
+from app.store import leases, repo
+from app.store.models import Bundle, Job, ModelVersion
+
+
+def test_sample_round_trip_is_exact():
+    x = np.random.default_rng(0).normal(size=(32, 30)).astype(np.float32)
+    data, shape = repo.encode_sample(x)
+    assert shape == [32, 30] and len(data) == x.nbytes
+    assert np.array_equal(repo.decode_sample(data, shape), x)
+
+
+def test_vector_key_round_trip():
+    v = np.array([0, 1, 1, 0, 1], np.float32)
+    assert repo.vector_key(v) == "01101"
+    assert np.array_equal(repo.key_vector("01101"), v)
+
+
+def test_jsonable_makes_strict_json():
+    out = repo.jsonable({"a": np.float32(1.5), "b": float("nan"), "c": np.arange(2), "d": (np.inf,)})
+    assert out == {"a": 1.5, "b": None, "c": [0, 1], "d": [None]}
+
+
+def test_bundles_are_content_addressed(store):
+    _, sessions = store
+    with sessions.begin() as s:
+        a = repo.store_bundle(s, b"same bytes")
+        b = repo.store_bundle(s, b"same bytes")
+        assert a == b and len(a) == 64
+    with sessions() as s:
+        assert s.scalar(select(func.count()).select_from(Bundle).where(Bundle.sha256 == a)) == 1
+        assert repo.bundle_data(s, a) == b"same bytes"
+
+
+def test_only_one_version_is_ever_active(store):
+    _, sessions = store
+    with sessions.begin() as s:
+        v1 = repo.active_version(s)
+        v2 = repo.add_version(
+            s, method=v1.method, reason="update", base_version=1, bundle_sha256=v1.bundle_sha256,
+            input_shape=v1.input_shape, metrics={}, classes=v1.classes, sample_ids=[],
+        )
+        repo.activate(s, v2.version)
+    with sessions() as s:
+        assert repo.active_version_number(s) == v2.version
+        assert s.scalar(select(func.count()).select_from(ModelVersion).where(ModelVersion.active)) == 1
+    with sessions() as s, pytest.raises(IntegrityError):  # the database refuses a second one
+        s.get(ModelVersion, 1).active = True
+        s.commit()
+
+
+def test_enrolled_classes_cannot_share_a_vector(store):
+    """The unique index catches what a check-then-insert race would let through."""
+    _, sessions = store
+    with sessions.begin() as s:
+        repo.add_class(s, "one", "1100000000000000000")
+    with sessions() as s, pytest.raises(IntegrityError):
+        repo.add_class(s, "two", "1100000000000000000")
+        s.commit()
+
+
+def test_dataset_classes_may_share_a_vector(store):
+    _, sessions = store
+    with sessions.begin() as s:
+        repo.add_class(s, "d1", "0000000000000000011", "known", "dataset")
+        repo.add_class(s, "d2", "0000000000000000011", "known", "dataset")
+
+
+def test_claim_marks_every_queued_job_running(store):
+    _, sessions = store
+    with sessions.begin() as s:
+        ids = [repo.add_job(s, "register_class", 1).id for _ in range(3)]
+    with sessions() as s:
+        claimed = repo.claim_queued_jobs(s, "w1")
+    assert [j.id for j in claimed] == ids
+    assert all(j.status == "running" and j.claimed_by == "w1" and j.started_at for j in claimed)
+    with sessions() as s:
+        assert repo.claim_queued_jobs(s, "w2") == []
+
+
+def test_requeue_running(store):
+    _, sessions = store
+    with sessions.begin() as s:
+        job = repo.add_job(s, "register_class", 1)
+    with sessions() as s:
+        repo.claim_queued_jobs(s, "dead-worker")
+    with sessions.begin() as s:
+        assert repo.requeue_running(s) == 1
+    with sessions() as s:
+        row = s.get(Job, job.id)
+        assert row.status == "queued" and row.claimed_by is None and row.started_at is None
+
+
+def test_lease_is_exclusive_until_released_or_expired(store):
+    _, sessions = store
+    with sessions() as s:
+        assert leases.try_acquire(s, "x", "host-a:1:a", ttl=30)
+        assert leases.try_acquire(s, "x", "host-a:1:a", ttl=30)  # re-entrant for its holder
+        assert not leases.try_acquire(s, "x", "host-b:2:b", ttl=30)
+        leases.release(s, "x", "host-a:1:a")
+        assert leases.try_acquire(s, "x", "host-b:2:b", ttl=0.05)
+    time.sleep(0.1)
+    with sessions() as s:
+        assert leases.try_acquire(s, "x", "host-c:3:c", ttl=30)  # expired: taken over
+
+
+def test_lease_of_a_dead_local_process_is_taken_at_once(store):
+    import subprocess
+    import sys
+
+    _, sessions = store
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()  # its pid is now free: the holder is dead
+    dead = f"{leases.HOST}:{proc.pid}:0000"
+    with sessions() as s:
+        assert leases.try_acquire(s, "y", dead, ttl=300)
+        assert leases.try_acquire(s, "y", leases.new_holder_id(), ttl=300)
+
+
+def test_renewer_keeps_a_lease_alive(store):
+    _, sessions = store
+    me = leases.new_holder_id()
+    with sessions() as s:
+        assert leases.try_acquire(s, "z", me, ttl=0.3)
+    with leases.Renewer(sessions, "z", me, ttl=0.3):
+        time.sleep(0.6)
+        with sessions() as s:
+            assert not leases.try_acquire(s, "z", "other:1:x", ttl=1)
