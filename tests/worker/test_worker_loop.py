@@ -1,0 +1,230 @@
+"""The retraining worker: enrollments become model versions, and nothing is ever lost."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+
+from app.framework.recognizer import TactileRecognizer
+from app.store import leases, repo
+from app.store.models import Sample
+from tests.service_fixtures import names_of, unused_vectors
+from worker import loop
+
+
+def register(client, dataset, name: str, i: int = 0) -> dict:
+    vector = unused_vectors(dataset, i + 1)[i]
+    r = client.post("/v1/classes", json={"name": name, "attributes": names_of(vector, dataset)})
+    assert r.status_code == 202, r.text
+    return r.json()
+
+
+def add_sample(client, class_id: int, sample) -> dict:
+    r = client.post(f"/v1/classes/{class_id}/samples", json={"sample": np.asarray(sample).tolist()})
+    assert r.status_code == 202, r.text
+    return r.json()
+
+
+def job(client, job_id: int) -> dict:
+    return client.get(f"/v1/jobs/{job_id}").json()
+
+
+def test_enrollment_makes_a_new_active_version(client, worker, dataset):
+    created = register(client, dataset, "mug")
+    assert worker.run_once() == 1
+    done = job(client, created["job"]["id"])
+    assert done["status"] == "succeeded" and done["model_version"] == 2
+    assert done["started_at"] and done["finished_at"] and done["error"] is None
+    cls = client.get(f"/v1/classes/{created['class']['id']}").json()
+    assert cls["in_active_model"] is True and cls["kind"] == "novel"
+    active = client.get("/v1/models/active").json()
+    assert active["version"] == 2 and active["reason"] == "update" and active["base_version"] == 1
+    assert {"name": "mug", "kind": "novel"} in active["classes"]
+
+
+def test_one_shot_sample_is_folded_in(client, app, worker, dataset):
+    created = register(client, dataset, "mug")
+    worker.run_once()
+    added = add_sample(client, created["class"]["id"], dataset.samples[0])
+    assert worker.run_once() == 1
+    assert job(client, added["job"]["id"])["model_version"] == 3
+    model = app.state.holder.current.recognizer
+    assert len(model.registry.novel_samples["mug"]) == 1
+    with app.state.sessions() as s:
+        v3 = repo.get_version(s, 3)
+        assert v3.sample_ids == [added["sample_id"]]
+        row = s.get(Sample, added["sample_id"])
+        if hasattr(model, "extract_features"):
+            assert row.features is not None and row.features_version == 3
+
+
+def test_nothing_queued_means_no_work(worker, client):
+    assert worker.run_once() == 0
+
+
+def test_queued_enrollments_are_coalesced_into_one_version(client, worker, dataset):
+    a = register(client, dataset, "a", 0)
+    b = register(client, dataset, "b", 1)
+    s = add_sample(client, a["class"]["id"], dataset.samples[1])
+    assert worker.run_once() == 3
+    versions = {job(client, x["job"]["id"])["model_version"] for x in (a, b, s)}
+    assert versions == {2}
+    assert [m["version"] for m in client.get("/v1/models").json()["models"]] == [1, 2]
+
+
+def test_enrollments_during_a_retrain_go_into_the_next_one(client, worker, dataset, monkeypatch):
+    first = register(client, dataset, "first", 0)
+    late = []
+    original = loop.build
+
+    def build_and_enroll_meanwhile(*args, **kwargs):
+        if not late:  # two enrollments arrive while the first retrain runs
+            late.append(register(client, dataset, "second", 1))
+            late.append(register(client, dataset, "third", 2))
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(loop, "build", build_and_enroll_meanwhile)
+    assert worker.run_once() == 1
+    assert job(client, first["job"]["id"])["model_version"] == 2
+    assert [job(client, x["job"]["id"])["status"] for x in late] == ["queued", "queued"]
+    assert worker.run_once() == 2
+    assert {job(client, x["job"]["id"])["model_version"] for x in late} == {3}
+    names = {c["name"] for c in client.get("/v1/models/active").json()["classes"]}
+    assert {"first", "second", "third"} <= names
+
+
+def test_failed_job_keeps_the_previous_model_and_records_its_error(client, worker, dataset, monkeypatch):
+    created = register(client, dataset, "doomed")
+
+    def broken(self, *args, **kwargs):
+        raise RuntimeError("generator diverged")
+
+    monkeypatch.setattr(TactileRecognizer, "add_novel_classes", broken)
+    assert worker.run_once() == 1
+    failed = job(client, created["job"]["id"])
+    assert failed["status"] == "failed" and "generator diverged" in failed["error"]
+    assert failed["model_version"] is None
+    assert client.get("/v1/models/active").json()["version"] == 1
+    assert len(client.get("/v1/models").json()["models"]) == 1
+    assert client.get(f"/v1/classes/{created['class']['id']}").json()["in_active_model"] is False
+
+    # the failure is final for that enrollment, but later ones go through
+    monkeypatch.undo()
+    later = register(client, dataset, "fine", 1)
+    assert worker.run_once() == 1
+    assert job(client, later["job"]["id"])["status"] == "succeeded"
+    classes = {c["name"] for c in client.get("/v1/models/active").json()["classes"]}
+    assert "fine" in classes and "doomed" not in classes
+
+
+def test_one_bad_enrollment_does_not_sink_the_batch(client, worker, dataset, monkeypatch):
+    good = register(client, dataset, "good", 0)
+    bad = register(client, dataset, "bad", 1)
+    original = TactileRecognizer.add_novel_classes
+
+    def picky(self, names, vectors, **kw):
+        if "bad" in names:
+            raise ValueError("cannot synthesise features for 'bad'")
+        return original(self, names, vectors, **kw)
+
+    monkeypatch.setattr(TactileRecognizer, "add_novel_classes", picky)
+    assert worker.run_once() == 2
+    assert job(client, good["job"]["id"])["status"] == "succeeded"
+    bad_job = job(client, bad["job"]["id"])
+    assert bad_job["status"] == "failed" and "'bad'" in bad_job["error"]
+
+
+def test_sample_of_a_failed_class_fails_with_a_reason(client, worker, dataset, monkeypatch):
+    created = register(client, dataset, "doomed")
+    sample = add_sample(client, created["class"]["id"], dataset.samples[0])
+    monkeypatch.setattr(TactileRecognizer, "add_novel_classes",
+                        lambda *a, **k: (_ for _ in ()).throw(RuntimeError("boom")))
+    worker.run_once()
+    monkeypatch.undo()
+    assert job(client, created["job"]["id"])["status"] == "failed"
+    failed = job(client, sample["job"]["id"])
+    assert failed["status"] == "failed" and "registration failed" in failed["error"]
+
+
+def test_job_left_running_by_a_crashed_worker_is_requeued_and_done(client, app, worker, dataset):
+    created = register(client, dataset, "orphan")
+    with app.state.sessions() as s:  # a worker claimed it, then died
+        repo.claim_queued_jobs(s, "crashed-host:1:dead")
+    assert job(client, created["job"]["id"])["status"] == "running"
+    assert worker.run_once() == 1  # a (re)started worker takes it up again
+    done = job(client, created["job"]["id"])
+    assert done["status"] == "succeeded" and done["model_version"] == 2
+    with app.state.sessions() as s:
+        assert repo.jobs_by_status(s) == {"succeeded": 1}
+
+
+def test_a_worker_whose_lease_is_live_elsewhere_waits(client, app, worker, dataset):
+    register(client, dataset, "wait")
+    with app.state.sessions() as s:
+        assert leases.try_acquire(s, loop.LEASE, "other-host:1:live", ttl=60)
+    assert worker.run_once() == 0  # another worker is retraining
+    with app.state.sessions() as s:
+        leases.release(s, loop.LEASE, "other-host:1:live")
+    assert worker.run_once() == 1
+
+
+def test_promotion_to_known_after_threshold_real_samples(client, app, worker, dataset):
+    app.state.settings.promotion_threshold = 2
+    created = register(client, dataset, "promoted")
+    cid = created["class"]["id"]
+    worker.run_once()
+    add_sample(client, cid, dataset.samples[0] + 0.01)
+    worker.run_once()
+    assert client.get(f"/v1/classes/{cid}").json()["kind"] == "novel"
+    last = add_sample(client, cid, dataset.samples[1] + 0.01)
+    assert worker.run_once() == 1  # reaches the threshold: full retrain
+    assert job(client, last["job"]["id"])["status"] == "succeeded"
+    cls = client.get(f"/v1/classes/{cid}").json()
+    assert cls["kind"] == "known" and cls["in_active_model"] is True and cls["n_samples"] == 2
+    active = client.get("/v1/models/active").json()
+    assert active["reason"] == "promotion"
+    assert {"name": "promoted", "kind": "known"} in active["classes"]
+    assert sum(c["kind"] == "known" for c in active["classes"]) == dataset.n_classes + 1
+    assert app.state.holder.current.recognizer.registry.known_names[-1] == "promoted"
+
+
+def test_rollback_then_retrain_brings_enrollments_back(client, worker, dataset):
+    a = register(client, dataset, "a", 0)
+    worker.run_once()
+    client.post("/v1/models/1/activate")
+    b = register(client, dataset, "b", 1)
+    worker.run_once()
+    active = client.get("/v1/models/active").json()
+    assert active["base_version"] == 1
+    assert {"a", "b"} <= {c["name"] for c in active["classes"]}
+    assert client.get(f"/v1/classes/{a['class']['id']}").json()["in_active_model"] is True
+    assert job(client, b["job"]["id"])["model_version"] == active["version"]
+
+
+def test_embedded_worker_thread_processes_jobs(tmp_path, base_model):
+    from fastapi.testclient import TestClient
+
+    from app.api.main import create_app
+    from tests.service_fixtures import quick_settings, wait_for_job
+
+    settings = quick_settings(tmp_path / "e", embedded_worker=True)
+    with TestClient(create_app(settings, trainer=lambda: base_model)) as c:
+        created = register(c, base_model[1], "embedded")
+        done = wait_for_job(c, created["job"]["id"])
+        assert done["status"] == "succeeded"
+        assert c.get(f"/v1/classes/{created['class']['id']}").json()["in_active_model"] is True
+
+
+def test_run_worker_stops_on_request(settings, store):
+    from worker import run_worker
+
+    stop = threading.Event()
+    thread = threading.Thread(target=run_worker, args=(settings, stop))
+    thread.start()
+    time.sleep(0.3)
+    stop.set()
+    thread.join(10)
+    assert not thread.is_alive()
+
