@@ -66,10 +66,12 @@ class MLPFeatureExtractor(nn.Module):
         return self.net(x)
 
 
-def build_encoder(input_shape: tuple[int, ...], mlp_hidden: int = 256, mlp_features: int = 128) -> nn.Module:
+def build_encoder(
+    input_shape: tuple[int, ...], mlp_hidden: int = 256, mlp_features: int = 128, mlp_dropout: float = 0.5
+) -> nn.Module:
     """CONV_XF for (C, T) tactile images, the MLP twin for (D,) flat features."""
     if len(input_shape) == 2:
         return ConvFeatureExtractor(input_shape[0], input_shape[1])
     if len(input_shape) == 1:
-        return MLPFeatureExtractor(input_shape[0], mlp_hidden, mlp_features)
+        return MLPFeatureExtractor(input_shape[0], mlp_hidden, mlp_features, mlp_dropout)
     raise ValueError(f"input shape must be (C, T) or (D,), got {input_shape}")

@@ -47,6 +47,8 @@ class PaperRecognizer(TactileRecognizer):
         batch_size: int = 50,
         mlp_hidden: int = 256,
         mlp_features: int = 128,
+        mlp_dropout: float = 0.5,
+        input_clip: float = 4.0,
         alg1_epochs: int = 200,
         alg2_epochs: int = 60,
         sigma_d: float = 0.45,
@@ -72,6 +74,8 @@ class PaperRecognizer(TactileRecognizer):
         self.batch_size = batch_size
         self.mlp_hidden = mlp_hidden
         self.mlp_features = mlp_features
+        self.mlp_dropout = mlp_dropout
+        self.input_clip = input_clip
         self.alg1_epochs = alg1_epochs
         self.alg2_epochs = alg2_epochs
         self.sigma_d = sigma_d
@@ -92,7 +96,7 @@ class PaperRecognizer(TactileRecognizer):
 
     _PARAMS = (
         "seed", "encoder_epochs", "lr", "weight_decay", "batch_size", "mlp_hidden", "mlp_features",
-        "alg1_epochs", "alg2_epochs", "sigma_d", "sigma_g", "max_phase_steps", "noise_std",
+        "mlp_dropout", "input_clip",        "alg1_epochs", "alg2_epochs", "sigma_d", "sigma_g", "max_phase_steps", "noise_std",
         "samples_per_class", "fc_z_epochs", "synthesis", "one_shot_k", "finetune_steps",
         "gmm_components", "gmm_covariance", "novelty_pca_dims", "novelty_space", "novelty_val_fraction",
     )
@@ -112,8 +116,8 @@ class PaperRecognizer(TactileRecognizer):
     # ---------------------------------------------------------------- building
     def _build(self, n_known: int, n_attributes: int) -> None:
         torch.manual_seed(self.seed)
-        self.scaler_ = RobustInputScaler()
-        self.encoder_ = build_encoder(self.input_shape, self.mlp_hidden, self.mlp_features)
+        self.scaler_ = RobustInputScaler(clip=self.input_clip)
+        self.encoder_ = build_encoder(self.input_shape, self.mlp_hidden, self.mlp_features, self.mlp_dropout)
         feature_shape = self.encoder_.feature_shape
         self.feature_shape_ = tuple(feature_shape)
         self.fc_y_ = FullyConnectedClassifier(self.encoder_.feature_dim, n_known)
@@ -130,7 +134,7 @@ class PaperRecognizer(TactileRecognizer):
     def _epochs(self) -> int:
         if self.encoder_epochs is not None:
             return int(self.encoder_epochs)
-        return 60 if len(self.input_shape) == 2 else 150
+        return 60 if len(self.input_shape) == 2 else 200
 
     # ----------------------------------------------------------------- fitting
     def _fit(self, dataset: TactileDataset, progress: bool) -> None:

@@ -200,9 +200,21 @@ class TactileRecognizer(ABC):
 
     # --------------------------------------------------------------- enrolment
     def add_novel_classes(
-        self, names: Sequence[str], attribute_vectors: np.ndarray | Sequence[Sequence[float]], **options: Any
+        self,
+        names: Sequence[str],
+        attribute_vectors: np.ndarray | Sequence[Sequence[float]],
+        *,
+        allow_known_vectors: bool = False,
+        **options: Any,
     ) -> Self:
-        """Zero-shot enrolment: a new recognizer that also recognises these classes."""
+        """Zero-shot enrolment: a new recognizer that also recognises these classes.
+
+        A novel class whose attribute vector equals an existing class's is refused:
+        FC_Z could never tell them apart from attributes. ``allow_known_vectors``
+        relaxes that for *known* classes only, as the paper's evaluation splits do
+        (routing by novelty detection still separates them); novel classes must
+        always differ from each other.
+        """
         self._require_fitted()
         names = [str(n) for n in names]
         vectors = self.validate_attribute_vectors(attribute_vectors)
@@ -210,7 +222,10 @@ class TactileRecognizer(ABC):
             raise AttributeVectorError(f"{len(names)} names but {len(vectors)} attribute vectors")
         reg = self.registry
         existing = set(reg.all_names)
-        all_vectors = np.concatenate([reg.known_attributes, reg.novel_attributes])
+        all_vectors = reg.novel_attributes if allow_known_vectors else np.concatenate(
+            [reg.known_attributes, reg.novel_attributes]
+        )
+        existing_names = reg.novel_names if allow_known_vectors else reg.all_names
         for i, name in enumerate(names):
             if not name.strip():
                 raise DuplicateClassError("a class name must not be empty")
@@ -218,7 +233,7 @@ class TactileRecognizer(ABC):
                 raise DuplicateClassError(f"class '{name}' already exists")
             same = np.flatnonzero((all_vectors == vectors[i]).all(axis=1))
             if len(same):
-                other = reg.all_names[same[0]]
+                other = existing_names[same[0]]
                 raise DuplicateClassError(
                     f"class '{name}' has the same attribute vector as existing class '{other}'"
                 )

@@ -112,3 +112,11 @@ def test_bad_hyper_parameter():
 def test_empty_dataset_is_rejected():
     with pytest.raises(DatasetError, match="no samples"):
         TactileDataset(np.zeros((0, 4)), np.zeros(0), np.zeros(0), np.zeros((1, 2)), ("a", "b"), ("c",))
+
+
+def test_evaluation_may_allow_a_novel_vector_equal_to_a_known_one(fitted, sim_split):
+    existing = fitted.registry.known_attributes[4]
+    model = fitted.add_novel_classes(["twin"], [existing], allow_known_vectors=True)
+    assert model.registry.novel_names == ["twin"]
+    with pytest.raises(DuplicateClassError, match="same attribute vector as existing class 'twin'"):
+        model.add_novel_classes(["twin2"], [existing], allow_known_vectors=True)
