@@ -6,7 +6,7 @@ import hmac
 from collections.abc import Iterator
 from typing import Annotated
 
-from fastapi import Depends, Request, Security
+from fastapi import Depends, Path, Request, Security
 from fastapi.security import APIKeyHeader
 from sqlalchemy.orm import Session
 
@@ -58,6 +58,9 @@ async def require_api_key(
             401, "a valid X-API-Key header is required", "X-API-Key", {"WWW-Authenticate": "APIKey"}
         )
 
+
+# ids fit a 32-bit INTEGER column on every backend; beyond that is a 422, not a database error
+RowId = Annotated[int, Path(ge=1, le=2_147_483_647)]
 
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 SessionDep = Annotated[Session, Depends(get_session)]

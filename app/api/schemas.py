@@ -10,7 +10,11 @@ from pydantic import BaseModel, ConfigDict, Field, StringConstraints, model_vali
 # One tactile sample: a [C, T] tactile image or a flat [D] feature vector.
 SampleData = list[list[float]] | list[float]
 
-ClassName = Annotated[str, StringConstraints(strip_whitespace=True, min_length=1, max_length=200)]
+# no control characters: PostgreSQL text cannot hold NUL, and no one names an object with a tab
+ClassName = Annotated[
+    str,
+    StringConstraints(strip_whitespace=True, min_length=1, max_length=200, pattern=r"^[^\x00-\x1f\x7f]+$"),
+]
 Bit = Annotated[int, Field(ge=0, le=1)]
 
 

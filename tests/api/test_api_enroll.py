@@ -90,6 +90,10 @@ def test_missing_or_empty_name(client, new_vector):
     problem(client.post("/v1/classes", json={"name": "   ", "attribute_vector": new_vector}), 422, "name")
 
 
+def test_control_characters_in_a_name(client, new_vector):
+    problem(client.post("/v1/classes", json={"name": "a\x00b", "attribute_vector": new_vector}), 422, "name")
+
+
 def test_unknown_field_is_named(client, new_vector):
     problem(client.post("/v1/classes", json={"name": "x", "attribute_vector": new_vector, "colour": "red"}),
             422, "colour")

@@ -38,7 +38,8 @@ def test_unknown_class_id_is_a_named_404(client):
 
 def test_non_integer_ids_are_named_422(client):
     for path, field in (("/v1/classes/abc", "class_id"), ("/v1/jobs/x", "job_id"),
-                        ("/v1/models/v1/activate", "version")):
+                        ("/v1/models/v1/activate", "version"), ("/v1/classes/0", "class_id"),
+                        ("/v1/jobs/99999999999999999999999", "job_id"), ("/v1/classes/-3", "class_id")):
         r = client.request("POST" if path.endswith("activate") else "GET", path)
         assert r.status_code == 422, path
         assert r.headers["content-type"] == PROBLEM

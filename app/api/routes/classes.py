@@ -6,7 +6,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.api import problems
-from app.api.deps import MetricsDep, ModelDep, SessionDep, WriteAccess
+from app.api.deps import MetricsDep, ModelDep, RowId, SessionDep, WriteAccess
 from app.api.problems import Problem, blame, not_found
 from app.api.schemas import ClassCreate, ClassCreated, ClassList, ClassOut, JobOut
 from app.service.holder import LoadedModel
@@ -38,7 +38,7 @@ def list_classes(session: SessionDep, model: ModelDep) -> ClassList:
 
 
 @router.get("/{class_id}", response_model=ClassOut, responses=problems.responses(404))
-def get_class(class_id: int, session: SessionDep, model: ModelDep) -> ClassOut:
+def get_class(class_id: RowId, session: SessionDep, model: ModelDep) -> ClassOut:
     cls = repo.get_class(session, class_id)
     if cls is None:
         raise not_found("class", "class_id", class_id)

@@ -1,7 +1,7 @@
 from fastapi import APIRouter
 
 from app.api import problems
-from app.api.deps import HolderDep, SessionDep
+from app.api.deps import HolderDep, RowId, SessionDep
 from app.api.problems import not_found
 from app.api.schemas import JobOut
 from app.store import repo
@@ -10,7 +10,7 @@ router = APIRouter(prefix="/v1/jobs", tags=["jobs"], responses=problems.response
 
 
 @router.get("/{job_id}", response_model=JobOut)
-def get_job(job_id: int, session: SessionDep, holder: HolderDep) -> JobOut:
+def get_job(job_id: RowId, session: SessionDep, holder: HolderDep) -> JobOut:
     """An enrollment's progress: queued, running, succeeded (with the model version
     that includes it) or failed (with the error)."""
     job = repo.get_job(session, job_id)

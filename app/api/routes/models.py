@@ -1,7 +1,7 @@
 from fastapi import APIRouter
 
 from app.api import problems
-from app.api.deps import HolderDep, SessionDep, WriteAccess
+from app.api.deps import HolderDep, RowId, SessionDep, WriteAccess
 from app.api.problems import Problem, not_found
 from app.api.schemas import ModelList, ModelOut
 from app.framework import bundle
@@ -28,7 +28,7 @@ def active_model(session: SessionDep) -> ModelOut:
     "/{version}/activate", response_model=ModelOut, dependencies=[WriteAccess],
     responses=problems.responses(401, 404, 409),
 )
-def activate_model(version: int, session: SessionDep, holder: HolderDep) -> ModelOut:
+def activate_model(version: RowId, session: SessionDep, holder: HolderDep) -> ModelOut:
     """Make ``version`` the active model in every API process (activating an earlier
     version is the rollback). Later enrollments are folded in again by the next retrain."""
     row = repo.get_version(session, version)

@@ -1,7 +1,7 @@
 from fastapi import APIRouter, Response
 
 from app.api import problems
-from app.api.deps import MetricsDep, ModelDep, SessionDep, WriteAccess
+from app.api.deps import MetricsDep, ModelDep, RowId, SessionDep, WriteAccess
 from app.api.problems import Problem, blame, not_found
 from app.api.schemas import JobOut, SampleCreate, SampleCreated
 from app.store import repo
@@ -14,7 +14,7 @@ router = APIRouter(prefix="/v1/classes", tags=["samples"], responses=problems.re
     dependencies=[WriteAccess], responses=problems.responses(401, 404, 409),
 )
 def add_sample(
-    class_id: int, body: SampleCreate, session: SessionDep, model: ModelDep,
+    class_id: RowId, body: SampleCreate, session: SessionDep, model: ModelDep,
     metrics: MetricsDep, response: Response,
 ) -> SampleCreated:
     """Add one real sample of a novel class (one-shot learning). Stored and queued

@@ -1,0 +1,165 @@
+"""End to end: real ``tactile-zsl serve --no-worker`` and ``tactile-zsl worker`` processes
+on a free port walk a robot's session, are restarted, and have lost nothing."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+from service_fixtures import QUICK_DATASET, QUICK_PARAMS, quick_dataset
+
+pytestmark = pytest.mark.slow
+
+STARTUP_TIMEOUT = 420  # the first start trains the (small) base model
+JOB_TIMEOUT = 180
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def tactile_zsl() -> list[str]:
+    script = Path(sys.executable).with_name("tactile-zsl")
+    return [str(script)] if script.exists() else [sys.executable, "-m", "app.cli"]
+
+
+class Service:
+    """The two processes, their logs in the data folder."""
+
+    def __init__(self, data_dir: Path, port: int) -> None:
+        self.data_dir, self.port = data_dir, port
+        self.env = {
+            **os.environ,
+            "TACTILE_DATA_DIR": str(data_dir),
+            "TACTILE_DATASET": QUICK_DATASET,
+            "TACTILE_METHOD_PARAMS": json.dumps(QUICK_PARAMS),
+            "TACTILE_MODEL_POLL_SECONDS": "0.2",
+            "TACTILE_WORKER_POLL_SECONDS": "0.1",
+        }
+        self.procs: list[subprocess.Popen] = []
+        self.starts = itertools.count()
+
+    def start(self) -> None:
+        n = next(self.starts)
+        self.data_dir.mkdir(parents=True, exist_ok=True)
+        for name, args in (("serve", ["serve", "--no-worker", "--port", str(self.port)]),
+                           ("worker", ["worker"])):
+            log = open(self.data_dir / f"{name}-{n}.log", "wb")  # noqa: SIM115 - closed with the process
+            self.procs.append(subprocess.Popen(
+                [*tactile_zsl(), *args], env=self.env, cwd=self.data_dir, stdout=log,
+                stderr=subprocess.STDOUT,
+            ))
+
+    def stop(self) -> None:
+        for p in self.procs:
+            p.send_signal(signal.SIGTERM)
+        for p in self.procs:
+            try:
+                p.wait(60)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+        self.procs = []
+
+    def wait_ready(self, client: httpx.Client) -> None:
+        deadline = time.monotonic() + STARTUP_TIMEOUT
+        while time.monotonic() < deadline:
+            for p in self.procs:
+                assert p.poll() is None, f"a process exited with {p.returncode}:\n{self.logs()}"
+            try:
+                if client.get("/readyz").status_code == 200:
+                    return
+            except httpx.TransportError:
+                pass
+            time.sleep(0.5)
+        raise AssertionError(f"service not ready after {STARTUP_TIMEOUT}s:\n{self.logs()}")
+
+    def logs(self) -> str:
+        return "\n".join(
+            f"--- {f.name}\n{f.read_text(errors='replace')[-3000:]}"
+            for f in sorted(self.data_dir.glob("*.log"))
+        )
+
+
+def wait_job(client: httpx.Client, job_id: int, service: Service) -> dict:
+    deadline = time.monotonic() + JOB_TIMEOUT
+    while time.monotonic() < deadline:
+        job = client.get(f"/v1/jobs/{job_id}").json()
+        if job["status"] in ("succeeded", "failed"):
+            return job
+        time.sleep(0.2)
+    raise AssertionError(f"job {job_id} not done after {JOB_TIMEOUT}s:\n{service.logs()}")
+
+
+def snapshot(client: httpx.Client) -> dict:
+    return {
+        "classes": client.get("/v1/classes").json()["classes"],
+        "models": client.get("/v1/models").json()["models"],
+        "attributes": client.get("/v1/attributes").json()["attributes"],
+    }
+
+
+def test_robot_session_survives_a_restart(tmp_path):
+    samples = quick_dataset().samples
+    rng = np.random.default_rng(1)
+    service = Service(tmp_path / "data", free_port())
+    service.start()  # both at once: only one of them may bootstrap
+    try:
+        with httpx.Client(base_url=f"http://127.0.0.1:{service.port}", timeout=30) as client:
+            service.wait_ready(client)
+
+            # a robot recognises what it touches
+            r = client.post("/v1/recognize", json={"samples": samples[:2].tolist()})
+            assert r.status_code == 200, r.text
+            assert r.json()["model_version"] == 1
+
+            # an operator registers a never-touched object by its attributes
+            attributes = client.get("/v1/attributes").json()["attributes"]
+            taken = {tuple(c["attributes"]) for c in client.get("/v1/classes").json()["classes"]}
+            names = next(
+                [a, b] for a, b in itertools.combinations(attributes, 2) if (a, b) not in taken
+            )
+            r = client.post("/v1/classes", json={"name": "teapot", "attributes": names})
+            assert r.status_code == 202, r.text
+            teapot = r.json()["class"]["id"]
+            job = wait_job(client, r.json()["job"]["id"], service)
+            assert job["status"] == "succeeded", job
+            assert client.get(f"/v1/classes/{teapot}").json()["in_active_model"] is True
+
+            # the robot touches it: recognised by the model that includes it
+            touch = samples[0] + rng.normal(0, 0.05, samples[0].shape).astype(np.float32)
+            r = client.post("/v1/recognize", json={"samples": [touch.tolist()]})
+            assert r.status_code == 200 and r.json()["model_version"] >= job["model_version"]
+
+            # and adds the real sample (one-shot)
+            r = client.post(f"/v1/classes/{teapot}/samples", json={"sample": touch.tolist()})
+            assert r.status_code == 202, r.text
+            job = wait_job(client, r.json()["job"]["id"], service)
+            assert job["status"] == "succeeded", job
+            before = snapshot(client)
+            assert before["models"][-1]["active"] and len(before["models"]) == 3
+            assert [c for c in before["classes"] if c["id"] == teapot][0]["n_samples"] == 1
+
+        service.stop()
+        service.start()
+        with httpx.Client(base_url=f"http://127.0.0.1:{service.port}", timeout=30) as client:
+            service.wait_ready(client)
+            after = snapshot(client)
+            assert after == before  # every class, sample count and model version still there
+            r = client.post("/v1/recognize", json={"samples": [touch.tolist()]})
+            assert r.json()["model_version"] == before["models"][-1]["version"]
+            assert "base model stored" not in (service.data_dir / "serve-1.log").read_text()
+    finally:
+        service.stop()
