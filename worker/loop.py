@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
 from collections.abc import Callable
 
 import numpy as np
@@ -23,10 +22,9 @@ from app.config import Settings
 from app.framework import bundle
 from app.framework.recognizer import TactileRecognizer
 from app.service.bootstrap import extract_features, model_classes
-from app.service.metrics import Metrics
 from app.store import leases, repo
 from app.store.models import Job, ObjectClass, Sample, utcnow
-from worker.retrain import Plan, build, make_plan
+from worker.retrain import Plan, build, known_dataset, make_plan
 
 log = logging.getLogger(__name__)
 
@@ -36,13 +34,12 @@ LEASE = "retrain"  # one retrain of the model lineage at a time
 class Worker:
     def __init__(
         self, settings: Settings, sessions: sessionmaker[Session],
-        on_activate: Callable[[int], None] | None = None, metrics: Metrics | None = None,
+        on_activate: Callable[[int], None] | None = None,
     ) -> None:
         self.settings = settings
         self.sessions = sessions
         self.id = leases.new_holder_id()
         self.on_activate = on_activate
-        self.metrics = metrics
         self._cache: tuple[int, TactileRecognizer] | None = None  # last model built or loaded
 
     # ------------------------------------------------------------------ rounds
@@ -79,10 +76,8 @@ class Worker:
 
     # -------------------------------------------------------------------- jobs
     def _process(self, job_ids: list[int]) -> None:
-        started = time.perf_counter()
         try:
             self._retrain(job_ids)
-            status = "succeeded"
         except Exception as exc:
             if len(job_ids) > 1:
                 log.warning("retrain of %d jobs failed (%s); retrying one by one", len(job_ids), exc)
@@ -92,9 +87,6 @@ class Worker:
             log.exception("job %s failed", job_ids[0])
             with self.sessions.begin() as s:
                 repo.finish_jobs(s, job_ids, "failed", error=f"{type(exc).__name__}: {exc}")
-            status = "failed"
-        if self.metrics:
-            self.metrics.job_duration.labels(status).observe(time.perf_counter() - started)
 
     def _retrain(self, job_ids: list[int]) -> None:
         with self.sessions() as s:
@@ -102,14 +94,16 @@ class Worker:
             model = self._load(s, base.version, base.bundle_sha256)
             jobs = list(s.scalars(select(Job).where(Job.id.in_(job_ids))))
             plan = make_plan(s, base, model, jobs, self.settings.promotion_threshold)
-            if plan.changes_model:
-                log.info(
-                    "retraining v%d: %d new class(es), samples for %d, %s",
-                    base.version, len(plan.new_classes), len(plan.new_samples),
-                    "full retrain" if plan.full_retrain else "incremental",
-                )
-                new = build(s, plan, model, self.settings)
-                data = bundle.to_bytes(new)
+            known = known_dataset(s, plan) if plan.full_retrain else None
+        # the session is closed: no transaction stays open while training runs
+        if plan.changes_model:
+            log.info(
+                "retraining v%d: %d new class(es), samples for %d, %s",
+                base.version, len(plan.new_classes), len(plan.new_samples),
+                "full retrain" if plan.full_retrain else "incremental",
+            )
+            new = build(plan, model, self.settings, known)
+            data = bundle.to_bytes(new)
         ok = [j for j in job_ids if j not in plan.rejected]
         with self.sessions.begin() as s:
             for job_id, reason in plan.rejected.items():

@@ -98,11 +98,12 @@ def make_plan(
 
 
 def build(
-    s: Session, plan: Plan, model: TactileRecognizer, settings: Settings
+    plan: Plan, model: TactileRecognizer, settings: Settings, known: TactileDataset | None = None
 ) -> TactileRecognizer:
-    """The new recognizer; the base model is never modified."""
+    """The new recognizer; the base model is never modified. A full retrain fits a
+    fresh model on ``known`` (from ``known_dataset``) first."""
     if plan.full_retrain:
-        model = _fit_known(s, plan, settings)
+        model = make_method(settings.method, **settings.method_params).fit(known)
         new_classes = plan.novel
         new_samples = {c.name: plan.samples[c.id] for c in plan.novel if plan.samples.get(c.id)}
     else:
@@ -117,14 +118,14 @@ def build(
     return model
 
 
-def _fit_known(s: Session, plan: Plan, settings: Settings) -> TactileRecognizer:
-    """Full retrain: every known class (promoted ones included) from its stored samples."""
+def known_dataset(s: Session, plan: Plan) -> TactileDataset:
+    """Every known class (promoted ones included) with its stored samples, for a full retrain."""
     promoted = {c.id for c in plan.promote}
     live = set(plan.sample_ids)
     known = [c for c in repo.list_classes(s) if c.kind == "known" or c.id in promoted]
     index = {c.id: i for i, c in enumerate(known)}
     rows = [r for r in repo.samples_of(s, list(index)) if r.origin == "dataset" or r.id in live]
-    dataset = TactileDataset(
+    return TactileDataset(
         samples=_stack(rows),
         labels=np.array([index[r.class_id] for r in rows]),
         trials=np.array(
@@ -136,7 +137,6 @@ def _fit_known(s: Session, plan: Plan, settings: Settings) -> TactileRecognizer:
         object_ids=[c.id for c in known],
         name="store",
     )
-    return make_method(settings.method, **settings.method_params).fit(dataset)
 
 
 def _stack(rows: list[Sample]) -> np.ndarray:

@@ -48,7 +48,7 @@ def create_app(settings: Settings | None = None, trainer: Trainer | None = None)
         if settings.embedded_worker:
             from worker import Worker, start_in_thread
 
-            worker = Worker(settings, sessions, on_activate=lambda _v: holder.refresh(), metrics=metrics)
+            worker = Worker(settings, sessions, on_activate=lambda _v: holder.refresh())
             embedded = start_in_thread(worker)
         try:
             yield

@@ -246,6 +246,14 @@ def failed_enrollments(session: Session) -> tuple[set[int], set[int]]:
     return classes, samples
 
 
+def jobs_finished_since(session: Session, since) -> list[tuple]:
+    stmt = (
+        select(Job.id, Job.status, Job.created_at, Job.started_at, Job.finished_at)
+        .where(Job.finished_at >= since).order_by(Job.finished_at)
+    )
+    return [tuple(row) for row in session.execute(stmt)]
+
+
 def jobs_by_status(session: Session) -> dict[str, int]:
     return dict(session.execute(select(Job.status, func.count()).group_by(Job.status)).all())
 

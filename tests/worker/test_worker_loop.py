@@ -228,3 +228,14 @@ def test_run_worker_stops_on_request(settings, store):
     thread.join(10)
     assert not thread.is_alive()
 
+
+
+def test_job_timings_reach_the_metrics_of_every_api_process(client, worker, dataset):
+    register(client, dataset, "timed")
+    worker.run_once()
+    text = client.get("/metrics").text
+    assert 'tactile_enrollment_to_live_seconds_count{status="succeeded"} 1.0' in text
+    assert 'tactile_job_duration_seconds_count{status="succeeded"} 1.0' in text
+    assert 'tactile_enrollments_total{kind="class"} 1.0' in text
+    text = client.get("/metrics").text  # a second scrape does not count the job again
+    assert 'tactile_enrollment_to_live_seconds_count{status="succeeded"} 1.0' in text

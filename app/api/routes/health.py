@@ -39,4 +39,5 @@ def metrics(session: SessionDep, metrics: MetricsDep) -> Response:
     counts = repo.jobs_by_status(session)
     for status in ("queued", "running", "succeeded", "failed"):
         metrics.jobs.labels(status).set(counts.get(status, 0))
+    metrics.observe_finished_jobs(repo.jobs_finished_since(session, metrics.jobs_seen_since))
     return Response(generate_latest(metrics.registry), media_type=CONTENT_TYPE_LATEST)
