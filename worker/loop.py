@@ -134,21 +134,28 @@ class Worker:
                 update(ObjectClass).where(ObjectClass.id.in_([c.id for c in plan.promote]))
                 .values(kind="known", promoted_at=utcnow())
             )
-        self._store_features(s, new, [r for rows in plan.new_samples.values() for r in rows], row.version)
+        # a full retrain has a new encoder: every stored sample's features change
+        new_rows = [r for rows in plan.new_samples.values() for r in rows]
+        ids = None if plan.full_retrain else [r.id for r in new_rows]
+        self._store_features(s, new, ids, row.version)
         return row.version
 
     @staticmethod
-    def _store_features(s: Session, model: TactileRecognizer, rows: list[Sample], version: int) -> None:
+    def _store_features(
+        s: Session, model: TactileRecognizer, ids: list[int] | None, version: int
+    ) -> None:
+        """CONV_XF features of the samples ``ids`` (all samples when None) under ``version``."""
+        if ids == [] or not hasattr(model, "extract_features"):
+            return
+        stmt = select(Sample.id, Sample.data, Sample.shape)
+        rows = s.execute(stmt if ids is None else stmt.where(Sample.id.in_(ids))).all()
         if not rows:
             return
-        feats = extract_features(model, np.stack([repo.decode_sample(r.data, r.shape) for r in rows]))
-        if feats is None:
-            return
-        for r, f in zip(rows, feats, strict=True):
-            s.execute(
-                update(Sample).where(Sample.id == r.id)
-                .values(features=repo.encode_sample(f)[0], features_version=version)
-            )
+        feats = extract_features(model, np.stack([repo.decode_sample(d, sh) for _, d, sh in rows]))
+        s.execute(update(Sample), [  # ORM bulk UPDATE by primary key: one executemany
+            {"id": i, "features": repo.encode_sample(f)[0], "features_version": version}
+            for (i, _, _), f in zip(rows, feats, strict=True)
+        ])
 
     def _load(self, s: Session, version: int, sha256: str) -> TactileRecognizer:
         if self._cache is None or self._cache[0] != version:

@@ -6,6 +6,7 @@ import threading
 import time
 
 import numpy as np
+from sqlalchemy import select
 
 from app.framework.recognizer import TactileRecognizer
 from app.store import leases, repo
@@ -188,6 +189,10 @@ def test_promotion_to_known_after_threshold_real_samples(client, app, worker, da
     assert {"name": "promoted", "kind": "known"} in active["classes"]
     assert sum(c["kind"] == "known" for c in active["classes"]) == dataset.n_classes + 1
     assert app.state.holder.current.recognizer.registry.known_names[-1] == "promoted"
+    if hasattr(app.state.holder.current.recognizer, "extract_features"):
+        with app.state.sessions() as s:  # the new encoder's features for every stored sample
+            versions = {v for (v,) in s.execute(select(Sample.features_version))}
+        assert versions == {active["version"]}
 
 
 def test_rollback_then_retrain_brings_enrollments_back(client, worker, dataset):
