@@ -1,0 +1,111 @@
+"""The figures of Sect. VI as plain functions of arrays; every result is a fraction in [0, 1]."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from sklearn.metrics import roc_auc_score
+
+
+def accuracy(y_true: Sequence, y_pred: Sequence) -> float:
+    """Fraction of equal entries (labels may be ints or class names)."""
+    t = np.asarray(y_true)
+    p = np.asarray(y_pred)
+    if t.shape != p.shape:
+        raise ValueError(f"y_true {t.shape} and y_pred {p.shape} differ in shape")
+    if t.size == 0:
+        raise ValueError("accuracy of an empty set is undefined")
+    return float(np.mean(t == p))
+
+
+def argmax_accuracy(proba: np.ndarray, y_true: Sequence[int]) -> float:
+    """Accuracy of the most probable column of ``proba`` (N, K) against integer labels."""
+    proba = np.asarray(proba)
+    if proba.ndim != 2 or len(proba) != len(y_true):
+        raise ValueError(f"proba must be (N, K) with N={len(y_true)}, got {proba.shape}")
+    return accuracy(np.asarray(y_true), proba.argmax(axis=1))
+
+
+def detection_rate(scores: Sequence[float], threshold: float) -> float:
+    """Fraction of samples called novel: novelty score strictly above the threshold."""
+    s = np.asarray(scores, dtype=np.float64)
+    if s.size == 0:
+        raise ValueError("detection rate of an empty set is undefined")
+    return float(np.mean(s > threshold))
+
+
+def novelty_auroc(known_scores: Sequence[float], novel_scores: Sequence[float]) -> float:
+    """AUROC of separating novel (positive) from known samples by score (higher = more novel)."""
+    k = np.asarray(known_scores, dtype=np.float64)
+    n = np.asarray(novel_scores, dtype=np.float64)
+    if k.size == 0 or n.size == 0:
+        raise ValueError("AUROC needs at least one known and one novel score")
+    y = np.concatenate([np.zeros(k.size), np.ones(n.size)])
+    return float(roc_auc_score(y, np.concatenate([k, n])))
+
+
+def harmonic_mean(a: float, b: float) -> float:
+    """2ab / (a + b); 0 when both are 0 (the GZSL 'H' figure)."""
+    if a < 0 or b < 0:
+        raise ValueError(f"harmonic mean of negative values {a}, {b}")
+    return 0.0 if a + b == 0 else float(2 * a * b / (a + b))
+
+
+def confusion_matrix(y_true: Sequence[int], y_pred: Sequence[int], n_classes: int) -> np.ndarray:
+    """Counts: row = true class, column = predicted class."""
+    t = np.asarray(y_true, dtype=np.int64)
+    p = np.asarray(y_pred, dtype=np.int64)
+    if t.shape != p.shape:
+        raise ValueError("y_true and y_pred differ in shape")
+    if t.size and (min(t.min(), p.min()) < 0 or max(t.max(), p.max()) >= n_classes):
+        raise ValueError(f"labels must lie in [0, {n_classes})")
+    cm = np.zeros((n_classes, n_classes), dtype=np.int64)
+    np.add.at(cm, (t, p), 1)
+    return cm
+
+
+def row_normalize(cm: np.ndarray) -> np.ndarray:
+    """Each row divided by its sum (rows that sum to 0 stay 0)."""
+    cm = np.asarray(cm, dtype=np.float64)
+    sums = cm.sum(axis=1, keepdims=True)
+    return np.divide(cm, sums, out=np.zeros_like(cm), where=sums > 0)
+
+
+def jaccard_similarity(vectors: np.ndarray) -> np.ndarray:
+    """Pairwise Jaccard similarity |a ∧ b| / |a ∨ b| of 0/1 attribute vectors (Fig. 8d).
+
+    Two empty vectors are defined as identical (similarity 1).
+    """
+    v = np.asarray(vectors) > 0.5
+    if v.ndim != 2:
+        raise ValueError(f"expected a (L, M) matrix of attribute vectors, got shape {v.shape}")
+    vi = v.astype(np.int64)
+    inter = vi @ vi.T
+    union = v.sum(axis=1)[:, None] + v.sum(axis=1)[None, :] - inter
+    return np.divide(inter, union, out=np.ones(inter.shape, np.float64), where=union > 0)
+
+
+def gzsl_figures(
+    true_names: Sequence[str], pred_names: Sequence[str], is_known: Sequence[bool]
+) -> dict[str, float]:
+    """Mixed known/novel test set: accuracy on the known part, the novel part, and their H."""
+    t = np.asarray(true_names, dtype=object)
+    p = np.asarray(pred_names, dtype=object)
+    k = np.asarray(is_known, dtype=bool)
+    if not (len(t) == len(p) == len(k)):
+        raise ValueError("true names, predictions and kinds must have the same length")
+    if k.all() or not k.any():
+        raise ValueError("the mixed test set needs both known and novel samples")
+    seen = accuracy(t[k], p[k])
+    unseen = accuracy(t[~k], p[~k])
+    return {"gzsl_seen": seen, "gzsl_unseen": unseen, "gzsl_h": harmonic_mean(seen, unseen)}
+
+
+def summarize(values: Sequence[float]) -> tuple[float, float]:
+    """(mean, standard deviation) ignoring NaN; (nan, nan) when nothing is finite."""
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return float("nan"), float("nan")
+    return float(v.mean()), float(v.std())

@@ -1,0 +1,291 @@
+"""``evaluate --report DIR``: report.md beside the paper's Tables II-IX, and Figs. 7-8 as PNGs.
+
+Works from the results dict alone (``protocol.evaluate`` or a saved results.json),
+so a report can be rebuilt without re-running anything:
+
+- ``report.md``: mean (± std over splits) of every figure per method beside the
+  paper's averages; per-split tables; wall times; what each figure means;
+- ``fig7_novelty_<method>.png``: the novelty-threshold tuning curve of split 1
+  (accuracy of keeping held-out known trials known and of calling
+  validation-novel objects novel, against the threshold; chosen threshold marked);
+- ``fig8_confusion_<method>.png``: split 1's ZSL (for ``paper``: GEN-F and
+  NEIGHB-F) and OSL confusion matrices, rows normalised;
+- ``fig8d_jaccard.png``: Jaccard similarity of split 1's novel objects' attribute vectors.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from app.evaluation.metrics import jaccard_similarity, row_normalize
+
+# Paper averages (fractions). 6 novel objects: Tables II, III, V, VI, VIII;
+# 12 novel objects: means of Table IX's rows (the paper gives no other figure there).
+PAPER_6: dict[str, float] = {
+    "known_acc": 0.952,
+    "nd_known_kept": 0.903,
+    "nd_val_novel": 0.953,
+    "nd_novel_detected": 0.895,
+    "zsl": 0.36,
+    "zsl_genf": 0.31,
+    "zsl_neighbf": 0.36,
+    "zsl_nogan": 0.23,
+    "osl": 0.44,
+}
+PAPER_12: dict[str, float] = {
+    "zsl": float(np.mean([24, 19, 18, 13, 14, 13, 15]) / 100),
+    "zsl_genf": float(np.mean([17, 19, 10, 17, 14, 14, 13]) / 100),
+    "zsl_neighbf": float(np.mean([24, 19, 18, 13, 14, 13, 15]) / 100),
+    "osl": float(np.mean([31, 30, 24, 27, 31, 27, 34]) / 100),
+}
+PAPER_SOURCE: dict[str, str] = {
+    "known_acc": "Table III",
+    "nd_known_kept": "Table II, X_te",
+    "nd_val_novel": "Table II, X_val",
+    "nd_novel_detected": "Table II, X_Z",
+    "zsl": "Table V NEIGHB-F (12: Table IX)",
+    "zsl_genf": "Table V GEN-F (12: Table IX)",
+    "zsl_neighbf": "Table V NEIGHB-F (12: Table IX)",
+    "zsl_nogan": "Table VI No-GAN",
+    "osl": "Table VIII (12: Table IX)",
+}
+DESCRIPTIONS: dict[str, str] = {
+    "known_acc": "accuracy on held-out trials of known objects (argmax of the known-class classifier)",
+    "nd_known_kept": "novelty tuning: held-out known trials called known, at the tuned threshold",
+    "nd_val_novel": "novelty tuning: validation-novel objects called novel, at the tuned threshold",
+    "nd_novel_detected": "test novel objects' samples called novel",
+    "nd_auroc": "AUROC of the novelty score, held-out known trials vs novel test samples",
+    "zsl": "zero-shot accuracy among the novel objects",
+    "zsl_genf": "paper pipeline, FC_Z trained on generated features (GEN-F)",
+    "zsl_neighbf": "paper pipeline, FC_Z trained on nearest real features (NEIGHB-F; = zsl)",
+    "zsl_nogan": "paper pipeline, NEIGHB-F with G from Algorithm 1 only (no GAN)",
+    "osl": "accuracy among the novel objects after one real sample per novel object",
+    "gzsl_seen": "full pipeline on mixed known+novel test set: accuracy on known samples",
+    "gzsl_unseen": "full pipeline on mixed known+novel test set: accuracy on novel samples",
+    "gzsl_h": "harmonic mean of gzsl_seen and gzsl_unseen",
+}
+ORDER: tuple[str, ...] = (
+    "known_acc", "nd_known_kept", "nd_val_novel", "nd_novel_detected", "nd_auroc",
+    "zsl", "zsl_genf", "zsl_neighbf", "zsl_nogan", "osl", "gzsl_seen", "gzsl_unseen", "gzsl_h",
+)  # fmt: skip
+
+
+def paper_figures(n_novel: int) -> dict[str, float]:
+    return PAPER_6 if n_novel == 6 else PAPER_12 if n_novel == 12 else {}
+
+
+def _fmt(v: Any, std: Any = None) -> str:
+    if v is None or (isinstance(v, float) and not np.isfinite(v)):
+        return "—"
+    return f"{v:.3f}" if std is None else f"{v:.3f} ± {std:.3f}"
+
+
+def _figures_present(results: dict[str, Any]) -> list[str]:
+    present = set()
+    for entry in results["methods"].values():
+        present |= set(entry.get("mean", {}))
+    return [f for f in ORDER if f in present] + sorted(present - set(ORDER))
+
+
+def markdown(results: dict[str, Any], images: dict[str, list[str]] | None = None) -> str:
+    methods = list(results["methods"])
+    n_novel = int(results["novel"])
+    paper = paper_figures(n_novel)
+    figures = _figures_present(results)
+    lines = [
+        f"# Evaluation on {results['dataset']}: {n_novel} novel objects, "
+        f"{results['splits']} splits, seed {results['seed']}",
+        "",
+        f"Known objects' test data: {results.get('test_trials', '?')} held-out trials per object; "
+        "novel objects: one trial gives the one-shot sample, the others are the test set "
+        "(shared by ZSL, OSL and the mixed known/novel test). Means over splits ± standard deviation.",
+        "",
+        "## Mean figures beside the paper",
+        "",
+        "| figure | paper | " + " | ".join(methods) + " |",
+        "| --- | --- | " + " | ".join("---" for _ in methods) + " |",
+    ]
+    for f in figures:
+        cells = [_fmt(results["methods"][m].get("mean", {}).get(f), results["methods"][m].get("std", {}).get(f))
+                 for m in methods]
+        lines.append(f"| `{f}` | {_fmt(paper.get(f))} | " + " | ".join(cells) + " |")
+    lines += [
+        "",
+        "Paper figures: " + "; ".join(f"`{f}` {PAPER_SOURCE[f]}" for f in PAPER_SOURCE if f in paper)
+        + ". The paper's reference [38] (attribute-based haptic ZSL) averages 0.36 (Table VII)."
+        if paper else "The paper reports no figures for this number of novel objects.",
+        "",
+        "## Wall time",
+        "",
+        "| method | total s | mean fit s per split |",
+        "| --- | --- | --- |",
+    ]
+    for m in methods:
+        entry = results["methods"][m]
+        fits = [d.get("timings", {}).get("fit_s") for d in entry.get("details", [])]
+        fits = [f for f in fits if f is not None]
+        lines.append(f"| {m} | {entry.get('elapsed_s', float('nan')):.1f} | "
+                     f"{_fmt(float(np.mean(fits)) if fits else None)} |")
+    lines += ["", "## Figures", ""]
+    for f in figures:
+        lines.append(f"- `{f}`: {DESCRIPTIONS.get(f, '')}")
+    lines += ["", "## Per split", ""]
+    for m in methods:
+        splits = results["methods"][m]["splits"]
+        method_figs = [f for f in figures if f in results["methods"][m].get("mean", {})]
+        lines += [f"### {m}", "", "| split | novel objects | " + " | ".join(f"`{f}`" for f in method_figs) + " |",
+                  "| --- | --- | " + " | ".join("---" for _ in method_figs) + " |"]
+        for i, s in enumerate(splits):
+            objs = ", ".join(f"{o} {n}" for o, n in zip(s["novel_objects"], s["novel_names"], strict=True))
+            lines.append(f"| {s.get('split', i + 1)} | {objs} | "
+                         + " | ".join(_fmt(s.get(f)) for f in method_figs) + " |")
+        lines.append("")
+    if images:
+        lines += ["## Split 1", ""]
+        for title, files in images.items():
+            lines.append(f"### {title}")
+            lines.append("")
+            lines += [f"![{title}]({name})" for name in files]
+            lines.append("")
+    return "\n".join(lines) + "\n"
+
+
+# ---------------------------------------------------------------------- plots
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_tuning_curve(curve: dict[str, Any], path: Path, title: str) -> None:
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=120)
+    t = np.asarray(curve["thresholds"], dtype=float)
+    ax.plot(t, curve["known_kept"], color="tab:blue", label="held-out known trials called known")
+    ax.plot(t, curve["val_novel"], color="tab:red", label="validation-novel objects called novel")
+    ax.plot(t, (np.asarray(curve["known_kept"]) + np.asarray(curve["val_novel"])) / 2,
+            color="0.5", linestyle=":", label="mean (maximised)")
+    ax.axvline(curve["threshold"], color="k", linestyle="--",
+               label=f"chosen threshold {curve['threshold']:.3g}")
+    ax.set_xlabel("novelty threshold (score above = novel)")
+    ax.set_ylabel("accuracy")
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_title(title)
+    ax.legend(loc="center right", fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _matrix_panel(ax, matrix: np.ndarray, labels: list[str], title: str, vmax: float = 1.0,
+                  xlabel: str = "predicted", ylabel: str = "true", ylabels: bool = True) -> Any:
+    im = ax.imshow(matrix, cmap="Blues", vmin=0, vmax=vmax)
+    n = len(labels)
+    ax.set_xticks(range(n), labels, rotation=45, ha="right", fontsize=7)
+    ax.set_yticks(range(n), labels if ylabels else [""] * n, fontsize=7)
+    fontsize = 8 if n <= 8 else 6
+    for i in range(n):
+        for j in range(n):
+            v = matrix[i, j]
+            ax.text(j, i, f"{v:.2f}", ha="center", va="center", fontsize=fontsize,
+                    color="white" if v > 0.6 * vmax else "black")
+    ax.set_title(title, fontsize=9)
+    ax.set_xlabel(xlabel, fontsize=8)
+    ax.set_ylabel(ylabel, fontsize=8)
+    return im
+
+
+def plot_confusions(panels: list[tuple[str, np.ndarray]], labels: list[str], path: Path, title: str) -> None:
+    plt = _plt()
+    n = len(labels)
+    size = max(3.6, 0.45 * n + 1.6)
+    fig, axes = plt.subplots(1, len(panels), figsize=(size * len(panels) + 1.5, size + 1.4), dpi=120,
+                             squeeze=False, layout="constrained")
+    im = None
+    for i, (ax, (name, cm)) in enumerate(zip(axes[0], panels, strict=True)):
+        im = _matrix_panel(ax, row_normalize(np.asarray(cm)), labels, name,
+                           ylabel="true" if i == 0 else "", ylabels=i == 0)
+    fig.colorbar(im, ax=axes[0].tolist(), shrink=0.8, label="fraction of the true class")
+    fig.suptitle(title, fontsize=10)
+    fig.savefig(path, bbox_inches="tight")
+    plt.close(fig)
+
+
+def plot_jaccard(vectors: np.ndarray, labels: list[str], path: Path, title: str) -> None:
+    plt = _plt()
+    n = len(labels)
+    size = max(3.6, 0.45 * n + 1.6)
+    fig, ax = plt.subplots(figsize=(size + 0.8, size + 0.4), dpi=120)
+    im = _matrix_panel(ax, jaccard_similarity(vectors), labels, title, xlabel="", ylabel="")
+    fig.colorbar(im, ax=ax, shrink=0.8, label="Jaccard similarity of attribute vectors")
+    fig.savefig(path, bbox_inches="tight")
+    plt.close(fig)
+
+
+def _short(labels: list[str]) -> list[str]:
+    return [f"z{i + 1} {n}" if len(n) <= 24 else f"z{i + 1} {n[:22]}…" for i, n in enumerate(labels)]
+
+
+def write_report(results: dict[str, Any], out_dir: str | Path,
+                 novel_attributes: np.ndarray | None = None) -> list[Path]:
+    """Write report.md and the PNGs into ``out_dir``; returns the files written.
+
+    ``novel_attributes``: split 1's novel objects' attribute vectors for Fig. 8d;
+    when omitted they are read from the results (``split_definitions``), if present.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written: list[Path] = []
+    images: dict[str, list[str]] = {}
+    first_split = None
+    for m, entry in results["methods"].items():
+        if not entry.get("splits"):
+            continue
+        first_split = first_split or entry["splits"][0]
+        labels = _short(list(entry["splits"][0]["novel_names"]))
+        details = (entry.get("details") or [{}])[0]
+        curve = details.get("novelty_tuning")
+        if curve:
+            path = out / f"fig7_novelty_{m}.png"
+            plot_tuning_curve(curve, path, f"Fig. 7: novelty threshold tuning, split 1, {m}")
+            images.setdefault("Fig. 7: novelty threshold tuning", []).append(path.name)
+            written.append(path)
+        panels = []
+        if "confusion_zsl_genf" in details:
+            panels.append(("ZSL GEN-F", details["confusion_zsl_genf"]))
+            panels.append(("ZSL NEIGHB-F", details.get("confusion_zsl_neighbf", details.get("confusion_zsl"))))
+        elif "confusion_zsl" in details:
+            panels.append(("ZSL", details["confusion_zsl"]))
+        if "confusion_osl" in details:
+            panels.append(("OSL", details["confusion_osl"]))
+        if panels:
+            path = out / f"fig8_confusion_{m}.png"
+            plot_confusions(panels, labels, path, f"Fig. 8a-c: split 1 confusion matrices, {m}")
+            images.setdefault("Fig. 8a-c: confusion matrices", []).append(path.name)
+            written.append(path)
+    if novel_attributes is None:
+        defs = results.get("split_definitions") or []
+        if defs and "novel_attributes" in defs[0]:
+            novel_attributes = np.asarray(defs[0]["novel_attributes"])
+    if novel_attributes is not None and first_split is not None:
+        path = out / "fig8d_jaccard.png"
+        plot_jaccard(np.asarray(novel_attributes), _short(list(first_split["novel_names"])), path,
+                     "Fig. 8d: attribute similarity of split 1's novel objects")
+        images["Fig. 8d: attribute similarity of the novel objects"] = [path.name]
+        written.append(path)
+    md = out / "report.md"
+    md.write_text(markdown(results, images))
+    written.insert(0, md)
+    return written
+
+
+def write_report_from_file(results_json: str | Path, out_dir: str | Path) -> list[Path]:
+    return write_report(json.loads(Path(results_json).read_text()), out_dir)
