@@ -42,6 +42,9 @@ class Settings(BaseSettings):
     method_params: dict[str, Any] = Field(
         default_factory=dict, description="JSON keyword arguments for the method (epochs, seed)."
     )
+    torch_threads: int = Field(
+        1, ge=1, description="Torch intra-op threads; the networks are tiny, more mostly contend."
+    )
     embedded_worker: bool = Field(True, description="Run the retraining worker inside serve.")
     model_poll_seconds: float = Field(
         0.5, gt=0, description="How often an API process checks for a new active model."
