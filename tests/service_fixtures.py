@@ -7,11 +7,14 @@ except the few that retrain on purpose.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import functools
 import io
 import itertools
+import os
 import time
+import uuid
 from collections.abc import Iterator
 
 import numpy as np
@@ -101,9 +104,35 @@ def base_model() -> tuple[TactileRecognizer, TactileDataset]:
     return trained_base()
 
 
+@contextlib.contextmanager
+def fresh_postgres_database(admin_url: str) -> Iterator[str]:
+    """A new empty database on the server of ``admin_url``, dropped afterwards."""
+    from sqlalchemy import text
+    from sqlalchemy.engine import make_url
+
+    from app.store.db import make_engine
+
+    name = f"tactile_test_{uuid.uuid4().hex[:12]}"
+    admin = make_engine(admin_url).execution_options(isolation_level="AUTOCOMMIT")
+    with admin.connect() as conn:
+        conn.execute(text(f'CREATE DATABASE "{name}"'))
+    try:
+        yield make_url(admin_url).set(database=name).render_as_string(hide_password=False)
+    finally:
+        with admin.connect() as conn:
+            conn.execute(text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
+        admin.engine.dispose()
+
+
 @pytest.fixture
-def settings(tmp_path) -> Settings:
-    return quick_settings(tmp_path / "data")
+def settings(tmp_path) -> Iterator[Settings]:
+    """SQLite under tmp_path; a fresh PostgreSQL database when TACTILE_TEST_POSTGRES_URL is set."""
+    url = os.environ.get("TACTILE_TEST_POSTGRES_URL")
+    if not url:
+        yield quick_settings(tmp_path / "data")
+        return
+    with fresh_postgres_database(url) as db_url:
+        yield quick_settings(tmp_path / "data", database_url=db_url)
 
 
 @pytest.fixture
