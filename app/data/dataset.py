@@ -71,6 +71,9 @@ class TactileDataset:
                 f"class_attributes must be ({k}, {len(self.attribute_names)}), "
                 f"got {self.class_attributes.shape}"
             )
+        if len(set(self.class_names)) != k:
+            dup = sorted({n for n in self.class_names if self.class_names.count(n) > 1})
+            raise DatasetError(f"class names must be unique; repeated: {', '.join(dup)}")
         if len(self.object_ids) != k:
             raise DatasetError(f"object_ids must have {k} entries, got {len(self.object_ids)}")
         if self.labels.min() < 0 or self.labels.max() >= k:

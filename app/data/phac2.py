@@ -104,7 +104,7 @@ def load_phac2(path: str | Path, min_objects_per_attribute: int = 3) -> TactileD
         trials=trials,
         class_attributes=matrix[:, keep].astype(np.float32),
         attribute_names=tuple(a for a, k in zip(adjectives, keep, strict=True) if k),
-        class_names=tuple(names),
+        class_names=_unique_names(names, ids),
         object_ids=tuple(ids),
         name="phac2",
     )
@@ -116,3 +116,10 @@ def feature_names(path: str | Path) -> tuple[str, ...]:
     return tuple(
         f"{p}/{f}" for p in arrays["phases"].tolist() for f in arrays["feature_names"].tolist()
     )
+
+
+def _unique_names(names: list[str], ids: list[int]) -> tuple[str, ...]:
+    """PHAC-2 has two objects each named car_sponge, chalkboard_eraser and
+    tooth_paste_box; a class is addressed by name, so those get their id appended."""
+    counts = {n: names.count(n) for n in names}
+    return tuple(f"{n}_{i}" if counts[n] > 1 else n for n, i in zip(names, ids, strict=True))

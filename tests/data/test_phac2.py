@@ -133,7 +133,7 @@ def test_real_data_shape(phac2):
     assert phac2.n_classes == 60
     np.testing.assert_array_equal(np.bincount(phac2.labels), np.full(60, 10))
     assert list(phac2.object_ids) == sorted(phac2.object_ids) and phac2.object_ids[0] == 101
-    assert phac2.class_names[0] == "car_sponge"
+    assert phac2.class_names[0] == "car_sponge_101"  # PHAC-2 has two car sponges
 
 
 @pytest.mark.phac2
@@ -168,3 +168,10 @@ def test_real_data_feature_names(phac2_path):
     assert len(names) == 188
     assert names[0] == "SQUEEZE_SET_PRESSURE_SLOW/pdc_rise_count_f0"
     assert names[-1].startswith("MOVE_DOWN_5CM/electrode_pc3")
+
+
+@pytest.mark.phac2
+def test_class_names_are_unique_even_where_phac2_repeats_a_name(phac2_path):
+    ds = load_phac2(phac2_path)
+    assert len(set(ds.class_names)) == 60
+    assert {"chalkboard_eraser_406", "chalkboard_eraser_408"} <= set(ds.class_names)

@@ -120,3 +120,8 @@ def test_evaluation_may_allow_a_novel_vector_equal_to_a_known_one(fitted, sim_sp
     assert model.registry.novel_names == ["twin"]
     with pytest.raises(DuplicateClassError, match="same attribute vector as existing class 'twin'"):
         model.add_novel_classes(["twin2"], [existing], allow_known_vectors=True)
+
+
+def test_repeated_class_names_are_rejected():
+    with pytest.raises(DatasetError, match="repeated: a"):
+        TactileDataset(np.zeros((2, 4)), [0, 1], [0, 1], np.eye(2), ("x", "y"), ("a", "a"))
