@@ -30,6 +30,8 @@ def run(args: argparse.Namespace) -> int:
 
     from app.api.main import create_app
     from app.config import Settings
+    from app.service.bootstrap import ensure_ready
+    from app.store.db import make_engine, make_sessionmaker
 
     overrides = {
         "host": args.host, "port": args.port, "dataset": args.dataset, "data_dir": args.data_dir,
@@ -38,5 +40,12 @@ def run(args: argparse.Namespace) -> int:
     if args.no_worker:
         settings = settings.model_copy(update={"embedded_worker": False})
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    # migrate and bootstrap before the server starts, so a bad dataset or an unreachable
+    # database is a one-line error here rather than a failed ASGI startup
+    engine = make_engine(settings.sqlalchemy_url)
+    try:
+        ensure_ready(settings, engine, make_sessionmaker(engine))
+    finally:
+        engine.dispose()
     uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level="info")
     return 0

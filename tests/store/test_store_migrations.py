@@ -74,3 +74,9 @@ def test_concurrent_upgrades_do_not_collide(tmp_path):
     engine = make_engine(url)
     assert migrate.current_revision(engine) == "0001"
     engine.dispose()
+
+
+def test_a_bare_postgresql_url_uses_the_installed_driver():
+    engine = make_engine("postgresql://user@db.invalid:5432/tactile")  # no connection is made
+    assert engine.url.drivername == "postgresql+psycopg2"
+    engine.dispose()
