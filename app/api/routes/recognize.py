@@ -22,8 +22,10 @@ REQUEST_BODY = {
         "content": {
             "application/json": {"schema": RecognizeRequest.model_json_schema()},
             NPY: {
-                "schema": {"type": "string", "format": "binary"},
-                "description": "A float array (N, *input_shape) saved with numpy.save.",
+                "schema": {
+                    "type": "string", "format": "binary",
+                    "description": "A float array (N, *input_shape) saved with numpy.save.",
+                },
             },
         },
     }
