@@ -102,3 +102,24 @@ def test_unknown_route_and_method_are_problems(client):
     assert r.status_code == 404 and r.headers["content-type"] == PROBLEM
     r = client.delete("/v1/classes")
     assert r.status_code == 405 and r.headers["content-type"] == PROBLEM
+
+
+def test_readiness_fails_without_a_store_or_a_model(client, app, monkeypatch):
+    from sqlalchemy import create_engine
+
+    from app.store.db import make_sessionmaker
+
+    working = app.state.sessions
+    app.state.sessions = make_sessionmaker(create_engine("sqlite:////nonexistent-dir/tactile.db"))
+    try:
+        r = client.get("/readyz")
+        assert r.status_code == 503 and r.json()["errors"][0]["field"] == "database"
+        assert client.get("/healthz").status_code == 200  # alive all the same
+        assert client.get("/metrics").status_code == 200  # process metrics still served
+    finally:
+        app.state.sessions = working
+    monkeypatch.setattr(app.state.holder, "_current", None)
+    r = client.get("/readyz")
+    assert r.status_code == 503 and r.headers["retry-after"] == "5"
+    r = client.post("/v1/recognize", json={"samples": [[0.0]]})
+    assert r.status_code == 503 and r.json()["errors"][0]["field"] == "model"
