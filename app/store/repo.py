@@ -233,17 +233,13 @@ def finish_jobs(
     )
 
 
-def failed_enrollments(session: Session) -> tuple[set[int], set[int]]:
-    """(class ids, sample ids) whose enrollment job failed: never folded into a model."""
-    classes, samples = set(), set()
-    for kind, cid, sid in session.execute(
-        select(Job.kind, Job.class_id, Job.sample_id).where(Job.status == "failed")
-    ):
-        if kind == "register_class":
-            classes.add(cid)
-        elif sid is not None:
-            samples.add(sid)
-    return classes, samples
+def registration_failed(session: Session, class_id: int) -> bool:
+    """Whether the class's latest registration job failed (so it may be registered again)."""
+    status = session.scalar(
+        select(Job.status).where(Job.class_id == class_id, Job.kind == "register_class")
+        .order_by(Job.id.desc()).limit(1)
+    )
+    return status == "failed"
 
 
 def jobs_finished_since(session: Session, since) -> list[tuple]:

@@ -120,6 +120,22 @@ def test_failed_job_keeps_the_previous_model_and_records_its_error(client, worke
     assert "fine" in classes and "doomed" not in classes
 
 
+def test_a_failed_registration_can_be_retried(client, worker, dataset, monkeypatch):
+    created = register(client, dataset, "flaky")
+    monkeypatch.setattr(TactileRecognizer, "add_novel_classes",
+                        lambda *a, **k: (_ for _ in ()).throw(RuntimeError("out of memory")))
+    worker.run_once()
+    monkeypatch.undo()
+    assert job(client, created["job"]["id"])["status"] == "failed"
+    again = register(client, dataset, "flaky")  # same name and attributes: a new attempt
+    assert again["class"]["id"] == created["class"]["id"] and again["job"]["id"] != created["job"]["id"]
+    assert worker.run_once() == 1
+    assert job(client, again["job"]["id"])["status"] == "succeeded"
+    assert client.get(f"/v1/classes/{created['class']['id']}").json()["in_active_model"] is True
+    r = client.post("/v1/classes", json={"name": "flaky", "attributes": again["class"]["attributes"]})
+    assert r.status_code == 409  # now it exists for real
+
+
 def test_one_bad_enrollment_does_not_sink_the_batch(client, worker, dataset, monkeypatch):
     good = register(client, dataset, "good", 0)
     bad = register(client, dataset, "bad", 1)

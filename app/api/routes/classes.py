@@ -54,13 +54,17 @@ def register_class(
     body: ClassCreate, session: SessionDep, model: ModelDep, metrics: MetricsDep, response: Response
 ) -> ClassCreated:
     """Register a novel class by its attributes (zero-shot). The class and its job are
-    committed before the 202; poll the job until the class is in the active model."""
+    committed before the 202; poll the job until the class is in the active model.
+    Registering a class whose registration failed again, with the same attributes,
+    queues a new attempt."""
     vector = _attribute_vector(body, model)
     key = repo.vector_key(vector)
     field = "attributes" if body.attributes is not None else "attribute_vector"
-    _check_unique(session, body.name, key, field)
+    cls = _failed_registration(session, body.name, key)
+    if cls is None:
+        _check_unique(session, body.name, key, field)
     try:
-        cls = repo.add_class(session, body.name, key)
+        cls = cls or repo.add_class(session, body.name, key)
         job = repo.add_job(session, "register_class", cls.id)
         session.commit()
     except IntegrityError:  # a concurrent registration won the race
@@ -70,7 +74,8 @@ def register_class(
     metrics.enrollments.labels("class").inc()
     response.headers["Location"] = f"/v1/jobs/{job.id}"
     vocab = repo.attribute_names(session)
-    return ClassCreated(class_=class_out(cls, vocab, 0, model), job=JobOut.model_validate(job))
+    n = repo.sample_counts(session, [cls.id]).get(cls.id, 0)
+    return ClassCreated(class_=class_out(cls, vocab, n, model), job=JobOut.model_validate(job))
 
 
 def _attribute_vector(body: ClassCreate, model: LoadedModel) -> np.ndarray:
@@ -80,6 +85,13 @@ def _attribute_vector(body: ClassCreate, model: LoadedModel) -> np.ndarray:
             return rec.validate_attribute_vectors(rec.attribute_vector(body.attributes))[0]
     with blame("attribute_vector"):
         return rec.validate_attribute_vectors(body.attribute_vector)[0]
+
+
+def _failed_registration(session: Session, name: str, key: str) -> ObjectClass | None:
+    cls = repo.class_by_name(session, name)
+    if cls is None or cls.origin != "enrolled" or cls.attribute_key != key:
+        return None
+    return cls if repo.registration_failed(session, cls.id) else None
 
 
 def _check_unique(session: Session, name: str, key: str, field: str) -> None:
