@@ -12,6 +12,7 @@ from sqlalchemy.orm import Session
 
 from app.api.problems import Problem
 from app.config import Settings
+from app.service.batcher import RecognitionBatcher
 from app.service.holder import LoadedModel, ModelHolder
 from app.service.metrics import Metrics
 
@@ -24,6 +25,10 @@ async def get_settings(request: Request) -> Settings:
 
 async def get_holder(request: Request) -> ModelHolder:
     return request.app.state.holder
+
+
+async def get_batcher(request: Request) -> RecognitionBatcher:
+    return request.app.state.batcher
 
 
 async def get_metrics(request: Request) -> Metrics:
@@ -66,5 +71,6 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 SessionDep = Annotated[Session, Depends(get_session)]
 HolderDep = Annotated[ModelHolder, Depends(get_holder)]
 MetricsDep = Annotated[Metrics, Depends(get_metrics)]
+BatcherDep = Annotated[RecognitionBatcher, Depends(get_batcher)]
 ModelDep = Annotated[LoadedModel, Depends(get_model)]
 WriteAccess = Depends(require_api_key)

@@ -19,6 +19,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from app.api import problems
 from app.api.routes import attributes, classes, health, jobs, models, recognize, samples
 from app.config import Settings
+from app.service.batcher import RecognitionBatcher
 from app.service.bootstrap import Trainer, ensure_ready
 from app.service.holder import ModelHolder
 from app.service.metrics import Metrics
@@ -72,6 +73,7 @@ def create_app(settings: Settings | None = None, trainer: Trainer | None = None)
     app.state.sessions = sessions
     app.state.holder = holder
     app.state.metrics = metrics
+    app.state.batcher = RecognitionBatcher()
     problems.install(app)
     for module in (health, attributes, classes, samples, recognize, jobs, models):
         app.include_router(module.router)

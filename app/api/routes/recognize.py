@@ -7,13 +7,17 @@ from fastapi.exceptions import RequestValidationError
 from pydantic import ValidationError
 
 from app.api import problems
-from app.api.deps import MetricsDep, ModelDep, SettingsDep
+from app.api.deps import BatcherDep, MetricsDep, ModelDep, SettingsDep
 from app.api.problems import Problem, blame
 from app.api.schemas import RecognitionOut, RecognizeRequest, RecognizeResponse, ScoreOut
 
 router = APIRouter(prefix="/v1", tags=["recognize"])
 
 NPY = "application/x-npy"
+# Bodies above this are parsed in the thread pool, so one big JSON batch cannot stall
+# the event loop; batches up to COALESCE samples share forward passes (see batcher).
+PARSE_INLINE_BYTES = 64 * 1024
+COALESCE = 64
 
 # The body is read by hand to accept JSON or .npy; this documents both.
 REQUEST_BODY = {
@@ -37,7 +41,8 @@ REQUEST_BODY = {
     responses=problems.responses(413, 422, 503),
 )
 async def recognize(
-    request: Request, model: ModelDep, settings: SettingsDep, metrics: MetricsDep
+    request: Request, model: ModelDep, settings: SettingsDep, metrics: MetricsDep,
+    batcher: BatcherDep,
 ) -> RecognizeResponse:
     """Recognise a batch of samples as known or novel objects.
 
@@ -46,7 +51,12 @@ async def recognize(
     """
     body = await request.body()
     content_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
-    samples = _from_npy(body) if content_type == NPY else _from_json(body)
+    if content_type == NPY:
+        samples = _from_npy(body)
+    elif len(body) > PARSE_INLINE_BYTES:
+        samples = await run_in_threadpool(_from_json, body)
+    else:
+        samples = _from_json(body)
     rec = model.recognizer
     one = isinstance(samples, np.ndarray) and samples.ndim <= len(rec.input_shape)
     n = 1 if one else len(samples)
@@ -54,9 +64,13 @@ async def recognize(
         raise Problem(
             422, f"{n} samples is more than the batch limit of {settings.batch_limit}", "samples"
         )
+    # inference runs off the event loop; `model` stays this request's snapshot
     with blame("samples"):
-        # inference runs off the event loop; `model` stays this request's snapshot
-        results = await run_in_threadpool(rec.recognize, samples, settings.top_k)
+        if n <= COALESCE:
+            x = rec.validate_samples(samples)  # each request's own errors, before sharing a pass
+            results = await batcher.recognize(model, x, settings.top_k)
+        else:
+            results = await run_in_threadpool(rec.recognize, samples, settings.top_k)
     ids = model.class_ids
     for r in results:
         metrics.recognitions.labels(r.kind).inc()
