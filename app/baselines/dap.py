@@ -42,7 +42,8 @@ class AttributePredictor:
         self.seed = seed
         self.n_jobs = n_jobs
 
-    def fit(self, z: np.ndarray, targets: np.ndarray) -> AttributePredictor:
+    def fit(self, z: np.ndarray, targets: np.ndarray, warm: AttributePredictor | None = None) -> AttributePredictor:
+        """``warm``: a logistic predictor fitted on the same data with another C, to start from."""
         targets = (np.asarray(targets) > 0.5).astype(np.int64)
         m = targets.shape[1]
         self.constant_ = np.full(m, np.nan)
@@ -63,7 +64,10 @@ class AttributePredictor:
             )
             self.models_ = [forest.fit(z, targets[:, self.varying_])]
         else:
-            self.models_ = [fit_logistic(z, targets[:, self.varying_], self.C)]
+            init = None
+            if warm is not None and warm.models_ and np.array_equal(warm.varying_, self.varying_):
+                init = warm.models_[0]
+            self.models_ = [fit_logistic(z, targets[:, self.varying_], self.C, init=init)]
         return self
 
     def predict_proba(self, z: np.ndarray) -> np.ndarray:
@@ -84,10 +88,14 @@ class AttributePredictor:
         return out
 
 
-def fit_logistic(x: np.ndarray, targets: np.ndarray, C: float, max_iter: int = 500) -> tuple[np.ndarray, np.ndarray]:
+def fit_logistic(
+    x: np.ndarray, targets: np.ndarray, C: float, max_iter: int = 500,
+    init: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Independent L2-regularised logistic regressions, one per target column, fitted
     jointly by L-BFGS: minimises C · Σ log-loss + ½‖w_m‖² per column (scikit-learn's
-    objective; intercepts unpenalised). Returns weights (d × M) and intercepts (M,)."""
+    objective; intercepts unpenalised). Returns weights (d × M) and intercepts (M,);
+    ``init`` (weights, intercepts) warm-starts the solver."""
     x = np.asarray(x, np.float64)
     t = np.asarray(targets, np.float64)
     n, d = x.shape
@@ -101,7 +109,7 @@ def fit_logistic(x: np.ndarray, targets: np.ndarray, C: float, max_iter: int = 5
         r = C * (expit(logits) - t)
         return loss, np.concatenate([(x.T @ r + w).ravel(), r.sum(axis=0)])
 
-    theta0 = np.zeros(d * m + m)
+    theta0 = np.zeros(d * m + m) if init is None else np.concatenate([np.ravel(init[0]), init[1]])
     res = minimize(loss_grad, theta0, jac=True, method="L-BFGS-B", options={"maxiter": max_iter})
     return res.x[: d * m].reshape(d, m), res.x[d * m :]
 
@@ -157,16 +165,17 @@ class DAPRecognizer(ForestBaseline):
         if not folds:
             return 0.1, {}
         attrs, y = dataset.class_attributes, dataset.labels
-        scores = {}
-        for C in C_GRID:
-            accs = []
-            for fit_c, val_c in folds:
-                fit, val = np.isin(y, fit_c), np.isin(y, val_c)
-                pred = self._predictor(C).fit(z[fit], attrs[y[fit]]).predict_proba(z[val])
-                s = dap_log_scores(pred, attrs[val_c], attrs[fit_c].mean(axis=0), self.clip)
-                remap = {c: i for i, c in enumerate(val_c)}
-                accs.append(np.mean(s.argmax(axis=1) == np.array([remap[c] for c in y[val]])))
-            scores[C] = float(np.mean(accs))
+        accs: dict[float, list[float]] = {C: [] for C in C_GRID}
+        for fit_c, val_c in folds:
+            fit, val = np.isin(y, fit_c), np.isin(y, val_c)
+            truth = np.searchsorted(val_c, y[val])  # val_c is sorted
+            previous = None
+            for C in sorted(C_GRID):  # along the regularisation path, warm-started
+                previous = self._predictor(C).fit(z[fit], attrs[y[fit]], warm=previous)
+                s = dap_log_scores(previous.predict_proba(z[val]), attrs[val_c],
+                                   attrs[fit_c].mean(axis=0), self.clip)
+                accs[C].append(float(np.mean(s.argmax(axis=1) == truth)))
+        scores = {C: float(np.mean(a)) for C, a in accs.items()}
         best = max(scores, key=lambda c: (scores[c], -abs(np.log10(c) + 1)))
         return best, scores
 

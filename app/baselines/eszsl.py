@@ -8,10 +8,11 @@ closed form (X: n × d samples, Y: n × K in {−1, 1}, S: M × K known signatur
 
 A novel class z scores x^T V a^z; ``novel_proba`` is the softmax of those scores
 divided by the spread (standard deviation) of the known-class scores on the
-training data. γ and λ are picked from a grid by mean zero-shot accuracy on
-validation objects carved from the known set (``validation_folds``: the split
-rules, several folds), never on test data, then V is refitted on every known
-class. Known classes, novelty and one-shot: extra-trees and nearest class mean, as
+training data. The signature normalisation (raw 0/1 vectors, centred on the
+known classes' mean vector, unit length, or both; a common ZSL preprocessing),
+γ and λ are picked from a grid by mean zero-shot accuracy on validation objects
+carved from the known set (``validation_folds``: the split rules, several
+folds), never on test data, then V is refitted on every known class. Known classes, novelty and one-shot: extra-trees and nearest class mean, as
 in ``common``.
 """
 
@@ -26,6 +27,7 @@ from app.data.dataset import TactileDataset
 
 GAMMA_GRID = (1e-1, 1.0, 1e1, 1e2, 1e3, 1e4)
 LAMBDA_GRID = (1e-2, 1e-1, 1.0, 1e1, 1e2, 1e3)
+SIGNATURE_MODES = ("raw", "centered", "l2", "centered_l2")
 
 
 def eszsl_fit(x: np.ndarray, labels: np.ndarray, signatures: np.ndarray, gamma: float, lam: float) -> np.ndarray:
@@ -63,6 +65,17 @@ def eszsl_path(
     return out
 
 
+def signatures(attributes: np.ndarray, mode: str, known_mean: np.ndarray) -> np.ndarray:
+    """Class signatures from 0/1 attribute vectors: ``raw``, ``centered`` (minus the known
+    classes' mean vector), ``l2`` (unit length) or ``centered_l2``."""
+    s = np.asarray(attributes, np.float64)
+    if mode in ("centered", "centered_l2"):
+        s = s - known_mean
+    if mode in ("l2", "centered_l2"):
+        s = s / np.maximum(np.linalg.norm(s, axis=1, keepdims=True), 1e-12)
+    return s
+
+
 class ESZSLRecognizer(ForestBaseline):
     """ESZSL zero-shot on robust-scaled inputs; known classes and novelty by extra-trees."""
 
@@ -72,8 +85,10 @@ class ESZSLRecognizer(ForestBaseline):
         self,
         gamma: float | None = None,
         lam: float | None = None,
+        signature: str | None = None,
         gammas: Sequence[float] = GAMMA_GRID,
         lambdas: Sequence[float] = LAMBDA_GRID,
+        signature_modes: Sequence[str] = SIGNATURE_MODES,
         val_folds: int = 5,
         val_fraction: float = 0.1,
         **base,
@@ -83,54 +98,63 @@ class ESZSLRecognizer(ForestBaseline):
             _check(value is None or value > 0, f"{name} must be positive or None (chosen on validation), got {value}")
         _check(len(gammas) > 0 and min(gammas) > 0, "gammas must be positive values")
         _check(len(lambdas) > 0 and min(lambdas) > 0, "lambdas must be positive values")
+        modes = (signature,) if signature is not None else tuple(signature_modes)
+        _check(len(modes) > 0 and all(m in SIGNATURE_MODES for m in modes),
+               f"signature modes must be among {SIGNATURE_MODES}, got {modes}")
         _check(int(val_folds) >= 1, f"val_folds must be at least 1, got {val_folds}")
         _check(0 < val_fraction < 1, f"val_fraction must lie in (0, 1), got {val_fraction}")
         self.gamma = gamma
         self.lam = lam
+        self.signature = signature
         self.gammas = tuple(float(g) for g in gammas)
         self.lambdas = tuple(float(v) for v in lambdas)
+        self.signature_modes = modes
         self.val_folds = int(val_folds)
         self.val_fraction = float(val_fraction)
 
-    def _choose(self, z: np.ndarray, dataset: TactileDataset) -> tuple[float, float, dict]:
+    def _choose(self, z: np.ndarray, dataset: TactileDataset) -> tuple[str, float, float, dict]:
         gammas = (self.gamma,) if self.gamma is not None else self.gammas
         lambdas = (self.lam,) if self.lam is not None else self.lambdas
-        if len(gammas) == 1 and len(lambdas) == 1:
-            return gammas[0], lambdas[0], {}
+        modes = self.signature_modes
+        if len(gammas) == 1 and len(lambdas) == 1 and len(modes) == 1:
+            return modes[0], gammas[0], lambdas[0], {}
         folds = validation_folds(dataset, self.val_folds, self.val_fraction, self.seed)
         if not folds:  # too few known objects to carve validation objects: middle of the grid
-            return gammas[len(gammas) // 2], lambdas[len(lambdas) // 2], {}
+            return modes[0], gammas[len(gammas) // 2], lambdas[len(lambdas) // 2], {}
         attrs, y = dataset.class_attributes, dataset.labels
-        acc = np.zeros((len(gammas), len(lambdas)))
+        acc = np.zeros((len(modes), len(gammas), len(lambdas)))
         for fit_c, val_c in folds:
             fit, val = np.isin(y, fit_c), np.isin(y, val_c)
             remap = np.full(dataset.n_classes, -1)
             remap[fit_c] = np.arange(len(fit_c))
             truth = np.searchsorted(val_c, y[val])
-            path = eszsl_path(z[fit], remap[y[fit]], attrs[fit_c], gammas, lambdas)
-            for i, g in enumerate(gammas):
-                for j, lam in enumerate(lambdas):
-                    v = path[(g, lam)]
-                    pred = (z[val] @ v @ attrs[val_c].T).argmax(axis=1)
-                    acc[i, j] += np.mean(pred == truth) / len(folds)
-        # ties go to the strongest regularisation (the later grid entries)
-        flat = np.flatnonzero(acc == acc.max())[-1]
-        i, j = np.unravel_index(flat, acc.shape)
-        grid = {f"gamma={g:g},lambda={lam:g}": float(acc[a, b])
-                for a, g in enumerate(gammas) for b, lam in enumerate(lambdas)}
-        return gammas[i], lambdas[j], grid
+            for k, mode in enumerate(modes):
+                sig = signatures(attrs, mode, attrs[fit_c].mean(axis=0))
+                path = eszsl_path(z[fit], remap[y[fit]], sig[fit_c], gammas, lambdas)
+                for i, g in enumerate(gammas):
+                    for j, lam in enumerate(lambdas):
+                        pred = (z[val] @ path[(g, lam)] @ sig[val_c].T).argmax(axis=1)
+                        acc[k, i, j] += np.mean(pred == truth) / len(folds)
+        # ties go to the later grid entries (the strongest regularisation)
+        k, i, j = np.unravel_index(np.flatnonzero(acc == acc.max())[-1], acc.shape)
+        grid = {f"signature={mode},gamma={g:g},lambda={lam:g}": float(acc[c, a, b])
+                for c, mode in enumerate(modes) for a, g in enumerate(gammas)
+                for b, lam in enumerate(lambdas)}
+        return modes[k], gammas[i], lambdas[j], grid
 
     def _fit_zsl(self, z: np.ndarray, dataset: TactileDataset) -> None:
-        gamma, lam, grid = self._choose(z, dataset)
-        self.gamma_, self.lambda_ = float(gamma), float(lam)
-        self.V_ = eszsl_fit(z, dataset.labels, dataset.class_attributes, gamma, lam)
-        scores = z @ self.V_ @ dataset.class_attributes.T
+        mode, gamma, lam, grid = self._choose(z, dataset)
+        self.signature_, self.gamma_, self.lambda_ = mode, float(gamma), float(lam)
+        self.known_mean_ = dataset.class_attributes.mean(axis=0).astype(np.float64)
+        sig = signatures(dataset.class_attributes, mode, self.known_mean_)
+        self.V_ = eszsl_fit(z, dataset.labels, sig, gamma, lam)
+        scores = z @ self.V_ @ sig.T
         self.score_scale_ = float(scores.std()) or 1.0
         self.zsl_validation_ = grid
 
     def _prepare_novel(self, attributes: np.ndarray) -> None:
-        self.novel_vectors_ = np.asarray(attributes, np.float64)
+        self.novel_signatures_ = signatures(attributes, self.signature_, self.known_mean_)
 
     def _zsl_proba(self, z: np.ndarray) -> np.ndarray:
-        scores = z.astype(np.float64) @ self.V_ @ self.novel_vectors_.T
+        scores = z.astype(np.float64) @ self.V_ @ self.novel_signatures_.T
         return softmax(scores / self.score_scale_)

@@ -33,7 +33,6 @@ import math
 import platform
 import time
 from collections.abc import Sequence
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -208,7 +207,6 @@ def evaluate(
     for m in methods:
         method_class(m)  # fail before any work on an unknown name
     method_params = method_params or {}
-    dataset = with_unique_names(dataset)
     splits = make_zsl_splits(
         dataset, n_novel, n_splits, seed, test_trials=test_trials, distinct_from_known=distinct_from_known
     )
@@ -254,22 +252,6 @@ def evaluate(
             entry["mean"][f], entry["std"][f] = mean, std
     results["elapsed_s"] = time.perf_counter() - started
     return _jsonable(results)
-
-
-def with_unique_names(dataset: TactileDataset) -> TactileDataset:
-    """The dataset with every repeated class name suffixed by its object id.
-
-    Recognizers identify classes by name (PHAC-2 has two objects called
-    car_sponge, chalkboard_eraser and tooth_paste_box), so names must be unique.
-    """
-    names = list(dataset.class_names)
-    if len(set(names)) == len(names):
-        return dataset
-    counts = {n: names.count(n) for n in names}
-    unique = [f"{n}_{oid}" if counts[n] > 1 else n for n, oid in zip(names, dataset.object_ids, strict=True)]
-    if len(set(unique)) != len(unique):
-        unique = [f"{n}_{i}" for i, n in enumerate(names)]
-    return replace(dataset, class_names=tuple(unique))
 
 
 def _jsonable(obj: Any) -> Any:

@@ -8,7 +8,7 @@ import pytest
 from sklearn.linear_model import LogisticRegression
 
 from app.baselines.dap import DAPRecognizer, dap_log_scores, fit_logistic
-from app.baselines.eszsl import ESZSLRecognizer, eszsl_fit
+from app.baselines.eszsl import ESZSLRecognizer, eszsl_fit, signatures
 from app.baselines.extra_trees import ExtraTreesRecognizer
 from app.data.simulator import simulate_dataset
 from app.evaluation.protocol import FIGURES, evaluate
@@ -105,6 +105,8 @@ def test_bad_hyper_parameters():
         DAPRecognizer(C=-1.0)
     with pytest.raises(FrameworkError, match="gamma"):
         ESZSLRecognizer(gamma=0.0)
+    with pytest.raises(FrameworkError, match="signature modes"):
+        ESZSLRecognizer(signature="cosine")
     with pytest.raises(FrameworkError, match="novelty_val_fraction"):
         ESZSLRecognizer(novelty_val_fraction=1.5)
 
@@ -146,9 +148,21 @@ def test_eszsl_closed_form(n, d):
 
 
 def test_eszsl_hyper_parameters_come_from_the_grid_on_validation_objects(small):
-    model = ESZSLRecognizer(n_estimators=20, gammas=(1.0, 100.0), lambdas=(0.1, 10.0), val_folds=2)
+    model = ESZSLRecognizer(n_estimators=20, gammas=(1.0, 100.0), lambdas=(0.1, 10.0),
+                            signature_modes=("raw", "centered"), val_folds=2)
     model.fit(small)
     assert model.gamma_ in (1.0, 100.0) and model.lambda_ in (0.1, 10.0)
-    assert len(model.zsl_validation_) == 4  # every grid point was scored on validation objects
-    fixed = ESZSLRecognizer(n_estimators=20, gamma=3.0, lam=0.3).fit(small)
-    assert (fixed.gamma_, fixed.lambda_) == (3.0, 0.3) and fixed.zsl_validation_ == {}
+    assert model.signature_ in ("raw", "centered")
+    assert len(model.zsl_validation_) == 8  # every grid point was scored on validation objects
+    fixed = ESZSLRecognizer(n_estimators=20, gamma=3.0, lam=0.3, signature="l2").fit(small)
+    assert (fixed.signature_, fixed.gamma_, fixed.lambda_) == ("l2", 3.0, 0.3)
+    assert fixed.zsl_validation_ == {}
+
+
+def test_signature_normalisations():
+    a = np.array([[1.0, 0.0, 1.0], [0.0, 1.0, 1.0]])
+    mean = a.mean(axis=0)
+    assert np.array_equal(signatures(a, "raw", mean), a)
+    assert np.allclose(signatures(a, "centered", mean), [[0.5, -0.5, 0], [-0.5, 0.5, 0]])
+    assert np.allclose(np.linalg.norm(signatures(a, "l2", mean), axis=1), 1)
+    assert np.allclose(signatures(a, "centered_l2", mean), [[2**-0.5, -(2**-0.5), 0], [-(2**-0.5), 2**-0.5, 0]])

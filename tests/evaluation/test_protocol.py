@@ -4,13 +4,11 @@ results.json layout; also checks that no test data reaches training or enrolment
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from app.data.simulator import simulate_dataset
-from app.evaluation.protocol import FIGURES, evaluate, with_unique_names
+from app.evaluation.protocol import FIGURES, evaluate
 
 from .conftest import OracleRecognizer, _key
 
@@ -77,10 +75,3 @@ def test_results_layout_and_json(oracle, tmp_path):
 def test_unknown_method_fails_before_any_work(oracle):
     with pytest.raises(ValueError, match="unknown method"):
         evaluate(oracle, ["oracle", "no-such-method"], n_novel=2, n_splits=1, progress=False)
-
-
-def test_repeated_class_names_are_made_unique():
-    ds = simulate_dataset(n_objects=4, trials_per_object=2, seed=0)
-    dup = replace(ds, class_names=("a", "b", "a", "c"), object_ids=(11, 12, 13, 14))
-    assert with_unique_names(dup).class_names == ("a_11", "b", "a_13", "c")
-    assert with_unique_names(ds) is ds

@@ -29,7 +29,7 @@ def test_report_files(results, tmp_path):
             img = mpimg.imread(p)
             assert img.shape[0] > 200 and img.shape[1] > 200
     md = (tmp_path / "rep" / "report.md").read_text()
-    assert "| figure | paper | oracle |" in md
+    assert "| figure | published paper | oracle |" in md
     assert "| `known_acc` | 0.952 | 1.000 ± 0.000 |" in md
     assert "| `zsl_wrong` | — |" in md  # the method's extra ZSL variant is reported too
     assert "| `osl` | 0.440 |" in md and "| `nd_novel_detected` | 0.895 |" in md
