@@ -79,7 +79,12 @@ def make_recognizer(method: str, params: dict[str, Any] | None, seed: int) -> Ta
     """The method's recognizer with ``params``; ``seed`` is passed when the class takes one."""
     cls = method_class(method)
     params = dict(params or {})
-    if "seed" not in params and "seed" in inspect.signature(cls.__init__).parameters:
+    takes_seed = any(
+        "seed" in inspect.signature(c.__init__).parameters
+        for c in cls.__mro__
+        if "__init__" in vars(c)
+    )
+    if "seed" not in params and takes_seed:
         params["seed"] = seed
     return cls(**params)
 

@@ -75,3 +75,11 @@ def test_results_layout_and_json(oracle, tmp_path):
 def test_unknown_method_fails_before_any_work(oracle):
     with pytest.raises(ValueError, match="unknown method"):
         evaluate(oracle, ["oracle", "no-such-method"], n_novel=2, n_splits=1, progress=False)
+
+
+@pytest.mark.parametrize("method", ["dap", "eszsl", "extratrees"])
+def test_seed_reaches_methods_that_take_one(method):
+    from app.evaluation.protocol import make_recognizer
+
+    assert make_recognizer(method, None, 7).seed == 7
+    assert make_recognizer(method, {"seed": 3}, 7).seed == 3  # explicit parameters win
