@@ -179,24 +179,30 @@ class TactileRecognizer(ABC):
         scores, known_p, novel_p = self._all_scores(x)
         novel = scores > self.novelty_threshold
         reg = self.registry
+        k = max(1, top_k)
+        # Route, then rank top-k for the whole batch at once (the service's hot path).
+        # Without novel classes a novel sample can only be answered from the known ones.
+        use_novel = novel & (novel_p is not None)
         results = []
-        for i in range(len(x)):
-            # Without novel classes a novel sample can only be answered from the known ones.
-            if novel[i] and novel_p is not None:
-                probs, names, kind = novel_p[i], reg.novel_names, "novel"
-            else:
-                probs, names, kind = known_p[i], reg.known_names, "known"
-            order = np.argsort(-probs)[: max(1, top_k)]
-            results.append(
-                Recognition(
-                    class_name=names[order[0]],
+        for probs, names, kind, rows in (
+            (known_p, reg.known_names, "known", np.flatnonzero(~use_novel)),
+            (novel_p, reg.novel_names, "novel", np.flatnonzero(use_novel)),
+        ):
+            if len(rows) == 0:
+                continue
+            p = probs[rows]
+            order = np.argsort(-p, axis=1)[:, :k]
+            top_p = np.take_along_axis(p, order, axis=1).tolist()
+            for row, idx, tp in zip(rows.tolist(), order.tolist(), top_p, strict=True):
+                results.append((row, Recognition(
+                    class_name=names[idx[0]],
                     kind=kind,
-                    is_novel=bool(novel[i]),
-                    novelty_score=float(scores[i]),
-                    top_k=tuple(ClassScore(names[j], float(probs[j])) for j in order),
-                )
-            )
-        return results
+                    is_novel=bool(novel[row]),
+                    novelty_score=float(scores[row]),
+                    top_k=tuple(ClassScore(names[j], q) for j, q in zip(idx, tp, strict=True)),
+                )))
+        results.sort(key=lambda r: r[0])
+        return [r for _, r in results]
 
     # --------------------------------------------------------------- enrolment
     def add_novel_classes(

@@ -54,3 +54,15 @@ def test_generator_uses_the_papers_deconvolutions_for_256x6():
     g = build_generator(19, (256, 6))
     deconvs = [m for m in g.modules() if isinstance(m, torch.nn.ConvTranspose1d)]
     assert [(d.out_channels, d.kernel_size[0], d.stride[0]) for d in deconvs] == [(96, 4, 2), (256, 3, 1)]
+
+
+def test_grouped_conv_by_matmul_equals_torchs_convolution():
+    from app.framework.encoder import grouped_conv1d
+
+    torch.manual_seed(0)
+    x = torch.randn(7, 32, 30)
+    conv = torch.nn.Conv1d(32, 96, 3, stride=2, groups=32)
+    torch.testing.assert_close(grouped_conv1d(x, conv), conv(x), rtol=1e-5, atol=1e-5)
+    conv2 = torch.nn.Conv1d(96, 256, 3, stride=2, groups=32)
+    h = torch.relu(conv(x))
+    torch.testing.assert_close(grouped_conv1d(h, conv2), conv2(h), rtol=1e-5, atol=1e-5)

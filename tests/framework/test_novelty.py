@@ -48,3 +48,12 @@ def test_validation_split_follows_sect_vi_b(sim_split):
     assert not np.isin(ds.labels[fit], val_classes).any()
     assert not np.isin(ds.trials[fit], ds.trials[known]).any()  # held out by whole trials
     assert len(known) == 27  # one trial of each fitting object
+
+
+@pytest.mark.parametrize("cov", ["full", "diag"])
+def test_direct_log_likelihood_equals_scikit_learns(cov):
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=(200, 12)) * rng.uniform(0.5, 3, size=12)
+    det = GMMNoveltyDetector(n_components=3, covariance_type=cov, pca_dims=6).fit(x)
+    probe = np.concatenate([x[:20], x[:20] * 4])
+    np.testing.assert_allclose(det.log_likelihood(probe), det.sklearn_log_likelihood(probe), rtol=1e-9)
