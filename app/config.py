@@ -25,7 +25,27 @@ class Settings(BaseSettings):
     port: int = Field(8000, ge=0, le=65535)
     # NoDecode: a plain comma-separated list in the environment, not JSON.
     api_keys: Annotated[list[str], NoDecode] = Field(
-        default_factory=list, description="Keys accepted in X-API-Key on POST; empty = open."
+        default_factory=list,
+        description="Admin keys accepted in X-API-Key besides those made by 'apikey create'.",
+    )
+    api_key_refresh_seconds: float = Field(
+        1.0, gt=0, description="How often an API process re-reads the stored API keys."
+    )
+    rate_limit: float = Field(
+        1000.0, ge=0, description="Requests per second per API key (per client address when "
+        "no keys exist) in each API process; 0 = no limit."
+    )
+    rate_burst: int = Field(
+        2000, ge=1, description="Requests a key may send at once before the rate limit applies."
+    )
+    db_timeout_seconds: float = Field(
+        30.0, gt=0, description="Longest any database statement (or wait for a lock) may take."
+    )
+    cors_origins: Annotated[list[str], NoDecode] = Field(
+        default_factory=list, description="Origins allowed by CORS (comma-separated); empty = none."
+    )
+    idempotency_ttl_hours: float = Field(
+        24.0, gt=0, description="How long an Idempotency-Key is remembered."
     )
     top_k: int = Field(3, ge=1, description="Scores returned per recognised sample.")
     batch_limit: int = Field(1024, ge=1, description="Most samples in one recognize request.")
@@ -54,7 +74,7 @@ class Settings(BaseSettings):
         30.0, gt=0, description="A worker or bootstrap lock not renewed for this long is taken over."
     )
 
-    @field_validator("api_keys", mode="before")
+    @field_validator("api_keys", "cors_origins", mode="before")
     @classmethod
     def _split_keys(cls, value: Any) -> Any:
         if isinstance(value, str):

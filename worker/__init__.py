@@ -15,7 +15,7 @@ def run_worker(settings: Settings, stop: threading.Event | None = None) -> None:
     from app.service.bootstrap import ensure_ready
     from app.store.db import make_engine, make_sessionmaker
 
-    engine = make_engine(settings.sqlalchemy_url)
+    engine = make_engine(settings.sqlalchemy_url, settings.db_timeout_seconds)
     sessions = make_sessionmaker(engine)
     try:
         ensure_ready(settings, engine, sessions)

@@ -2,19 +2,25 @@
 
 from __future__ import annotations
 
+import hashlib
 import hmac
+import json
 from collections.abc import Iterator
 from typing import Annotated
 
-from fastapi import Depends, Path, Request, Security
+from fastapi import Depends, Header, Path, Request, Security
+from fastapi.responses import JSONResponse
 from fastapi.security import APIKeyHeader
+from pydantic import BaseModel
 from sqlalchemy.orm import Session
 
 from app.api.problems import Problem
 from app.config import Settings
 from app.service.batcher import RecognitionBatcher
 from app.service.holder import LoadedModel, ModelHolder
+from app.service.keys import Principal, retry_after
 from app.service.metrics import Metrics
+from app.store import repo
 
 # async: trivial dependencies then run on the event loop, not in the thread pool
 
@@ -48,20 +54,112 @@ async def get_model(request: Request) -> LoadedModel:
     return model
 
 
-api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False, description="Needed on POST when keys are configured.")
+api_key_header = APIKeyHeader(
+    name="X-API-Key", auto_error=False,
+    description="Needed on every /v1 request once any API key exists.",
+)
 
 
-async def require_api_key(
-    request: Request, key: Annotated[str | None, Security(api_key_header)]
-) -> None:
-    keys = request.app.state.settings.api_keys
-    if not keys:
-        return
-    # compare against every key in constant time: timing reveals nothing about the keys
-    if key is None or not any(hmac.compare_digest(key.encode(), k.encode()) for k in keys):
-        raise Problem(
-            401, "a valid X-API-Key header is required", "X-API-Key", {"WWW-Authenticate": "APIKey"}
-        )
+def _access(scope: str):
+    async def check(
+        request: Request, key: Annotated[str | None, Security(api_key_header)]
+    ) -> Principal:
+        """401 without a valid key (once keys exist), 403 without ``scope``, 429 over the rate."""
+        state = request.app.state
+        if not state.keys.required:
+            client = request.client.host if request.client else "unknown"
+            principal = Principal(f"addr:{client}", "admin")
+        else:
+            principal = state.keys.authenticate(key) if key else None
+            if principal is None:
+                raise Problem(
+                    401, "a valid X-API-Key header is required", "X-API-Key",
+                    {"WWW-Authenticate": "APIKey"},
+                )
+            if not principal.allows(scope):
+                raise Problem(
+                    403, f"this API key has scope '{principal.scope}'; this request needs "
+                    f"'{scope}'", "X-API-Key",
+                )
+        wait = state.limiter.acquire(principal.id)
+        if wait:
+            raise Problem(
+                429, "rate limit exceeded for this API key; slow down", "X-API-Key",
+                {"Retry-After": retry_after(wait)},
+            )
+        request.state.principal = principal
+        return principal
+
+    check.__name__ = f"require_{scope}"
+    return check
+
+
+# one function object per scope, so a route depending on one twice runs it once
+require_read = _access("read")
+require_enroll = _access("enroll")
+require_admin = _access("admin")
+
+
+class Idempotency:
+    """The ``Idempotency-Key`` of a write: replays a stored answer, or stores a new one
+    in the transaction that makes the enrollment."""
+
+    def __init__(self, principal: str, key: str | None, fingerprint: str) -> None:
+        self.principal, self.key, self.fingerprint = principal, key, fingerprint
+
+    def replay(self, session: Session) -> None:
+        """Raise the stored answer when this key was used before (422 if for another body)."""
+        if self.key is None:
+            return
+        row = repo.get_idempotency(session, self.principal, self.key)
+        if row is None:
+            return
+        if not hmac.compare_digest(row.fingerprint, self.fingerprint):
+            raise Problem(
+                422, "this Idempotency-Key was used for a different request; use a new key",
+                "Idempotency-Key",
+            )
+        headers = {"Idempotent-Replayed": "true"}
+        if row.location:
+            headers["Location"] = row.location
+        raise Replay(JSONResponse(row.body, status_code=row.status_code, headers=headers))
+
+    def save(
+        self, session: Session, status: int, body: BaseModel, location: str | None = None
+    ) -> None:
+        if self.key is not None:
+            data = body.model_dump(mode="json", by_alias=True)
+            repo.add_idempotency(
+                session, self.principal, self.key, self.fingerprint, status, data, location
+            )
+
+
+class Replay(Exception):  # noqa: N818 - not an error: carries the stored answer
+    def __init__(self, response: JSONResponse) -> None:
+        self.response = response
+
+
+async def replay_handler(_request: Request, exc: Replay) -> JSONResponse:
+    return exc.response
+
+
+async def get_idempotency(
+    request: Request, principal: Annotated[Principal, Depends(require_enroll)],
+    key: Annotated[str | None, Header(
+        alias="Idempotency-Key", min_length=1, max_length=200, pattern=r"^[\x21-\x7e]+$",
+        description="Any unique string (e.g. a UUID): a retry with the same key and body gets "
+        "the first answer instead of enrolling twice; the same key with another body is a 422.",
+    )] = None,
+) -> Idempotency:
+    if key is None:
+        return Idempotency(principal.id, None, "")
+    body = await request.body()
+    try:  # the same JSON however it is spaced
+        canonical = json.dumps(json.loads(body), sort_keys=True, separators=(",", ":")).encode()
+    except (ValueError, UnicodeDecodeError):
+        canonical = body
+    digest = hashlib.sha256(f"{request.method} {request.url.path}\n".encode() + canonical)
+    return Idempotency(principal.id, key, digest.hexdigest())
 
 
 # ids fit a 32-bit INTEGER column on every backend; beyond that is a 422, not a database error
@@ -73,4 +171,7 @@ HolderDep = Annotated[ModelHolder, Depends(get_holder)]
 MetricsDep = Annotated[Metrics, Depends(get_metrics)]
 BatcherDep = Annotated[RecognitionBatcher, Depends(get_batcher)]
 ModelDep = Annotated[LoadedModel, Depends(get_model)]
-WriteAccess = Depends(require_api_key)
+ReadAccess = Depends(require_read)
+EnrollAccess = Depends(require_enroll)
+AdminAccess = Depends(require_admin)
+IdempotencyDep = Annotated[Idempotency, Depends(get_idempotency)]

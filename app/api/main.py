@@ -10,6 +10,7 @@ from contextlib import asynccontextmanager
 import swagger_ui_bundle
 from fastapi import FastAPI, Request
 from fastapi.concurrency import run_in_threadpool
+from fastapi.middleware.cors import CORSMiddleware
 from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import HTMLResponse
 from fastapi.staticfiles import StaticFiles
@@ -17,11 +18,13 @@ from starlette.datastructures import Headers
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.api import problems
+from app.api.deps import Replay, replay_handler
 from app.api.routes import attributes, classes, health, jobs, models, recognize, samples
 from app.config import Settings
 from app.service.batcher import RecognitionBatcher
 from app.service.bootstrap import Trainer, ensure_ready
 from app.service.holder import ModelHolder
+from app.service.keys import KeyRing, RateLimiter
 from app.service.metrics import Metrics
 from app.store.db import make_engine, make_sessionmaker
 
@@ -35,16 +38,19 @@ real samples (one-shot). Every error is an RFC 9457 `application/problem+json` b
 def create_app(settings: Settings | None = None, trainer: Trainer | None = None) -> FastAPI:
     """``trainer`` replaces the bootstrap training (tests hand in a trained model)."""
     settings = settings or Settings()
-    engine = make_engine(settings.sqlalchemy_url)
+    engine = make_engine(settings.sqlalchemy_url, settings.db_timeout_seconds)
     sessions = make_sessionmaker(engine)
     metrics = Metrics()
     holder = ModelHolder(sessions, settings.model_poll_seconds, metrics)
+    keys = KeyRing(sessions, settings.api_keys, settings.api_key_refresh_seconds)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         await run_in_threadpool(ensure_ready, settings, engine, sessions, trainer)
         await run_in_threadpool(holder.refresh)
+        await run_in_threadpool(keys.refresh)
         holder.start()
+        keys.start()
         embedded = None
         if settings.embedded_worker:
             from worker import Worker, start_in_thread
@@ -58,6 +64,7 @@ def create_app(settings: Settings | None = None, trainer: Trainer | None = None)
                 thread, stop = embedded
                 stop.set()
                 thread.join(timeout=30)
+            keys.stop()
             holder.stop()
             engine.dispose()
 
@@ -74,11 +81,19 @@ def create_app(settings: Settings | None = None, trainer: Trainer | None = None)
     app.state.holder = holder
     app.state.metrics = metrics
     app.state.batcher = RecognitionBatcher()
+    app.state.keys = keys
+    app.state.limiter = RateLimiter(settings.rate_limit, settings.rate_burst)
     problems.install(app)
+    app.add_exception_handler(Replay, replay_handler)
     for module in (health, attributes, classes, samples, recognize, jobs, models):
         app.include_router(module.router)
     _mount_docs(app)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
+    if settings.cors_origins:  # closed by default: no CORS headers at all
+        app.add_middleware(
+            CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "POST"],
+            allow_headers=["Content-Type", "X-API-Key", "Idempotency-Key"],
+        )
     app.add_middleware(RequestMetrics, metrics=metrics)
     return app
 

@@ -16,6 +16,7 @@ from typing import Any
 from fastapi import FastAPI, HTTPException, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from sqlalchemy.exc import OperationalError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app.framework.errors import (
@@ -133,6 +134,15 @@ async def framework_exception_handler(request: Request, exc: FrameworkError) -> 
     return problem_response(request, status, str(exc), [{"field": field, "reason": str(exc)}], headers)
 
 
+async def store_unavailable_handler(request: Request, exc: OperationalError) -> ProblemResponse:
+    """A timed-out statement or an unreachable database: retryable, and no SQL leaves."""
+    log.warning("store error on %s %s: %s", request.method, request.url.path, exc.orig)
+    return problem_response(
+        request, 503, "the store is busy or unreachable; try again shortly", [],
+        {"Retry-After": "1"},
+    )
+
+
 async def unhandled_exception_handler(request: Request, exc: Exception) -> ProblemResponse:
     log.error("unhandled error on %s %s", request.method, request.url.path, exc_info=exc)
     return problem_response(request, 500, "internal error; the service log has the details")
@@ -142,6 +152,7 @@ def install(app: FastAPI) -> None:
     app.add_exception_handler(StarletteHTTPException, http_exception_handler)
     app.add_exception_handler(RequestValidationError, validation_exception_handler)
     app.add_exception_handler(FrameworkError, framework_exception_handler)
+    app.add_exception_handler(OperationalError, store_unavailable_handler)
     app.add_exception_handler(Exception, unhandled_exception_handler)
 
 

@@ -42,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     # migrate and bootstrap before the server starts, so a bad dataset or an unreachable
     # database is a one-line error here rather than a failed ASGI startup
-    engine = make_engine(settings.sqlalchemy_url)
+    engine = make_engine(settings.sqlalchemy_url, settings.db_timeout_seconds)
     try:
         ensure_ready(settings, engine, make_sessionmaker(engine))
     finally:

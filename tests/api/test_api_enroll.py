@@ -189,17 +189,21 @@ def test_rejected_writes_store_nothing(client, app, novel_class, sample):
 # ---------------------------------------------------------------- API keys
 
 
-def test_writes_need_a_key_when_keys_are_configured(client, app, new_vector, sample):
-    app.state.settings.api_keys = ["k1", "k2"]
+def test_keys_from_the_environment_are_admin_keys(client, app, new_vector, sample):
+    app.state.keys.set_env_keys(["k1", "k2"])
     body = {"name": "locked", "attribute_vector": new_vector}
     problem(client.post("/v1/classes", json=body), 401, "X-API-Key")
     problem(client.post("/v1/classes", json=body, headers={"X-API-Key": "wrong"}), 401, "X-API-Key")
     problem(client.post("/v1/models/1/activate"), 401, "X-API-Key")
     problem(client.post("/v1/classes/1/samples", json={"sample": sample}), 401, "X-API-Key")
-    assert client.post("/v1/classes", json=body, headers={"X-API-Key": "k2"}).status_code == 202
-    # reads and recognition stay open
-    assert client.get("/v1/classes").status_code == 200
-    assert client.post("/v1/recognize", json={"samples": [sample]}).status_code == 200
+    # once a key exists, reads and recognition need one too
+    problem(client.get("/v1/classes"), 401, "X-API-Key")
+    problem(client.post("/v1/recognize", json={"samples": [sample]}), 401, "X-API-Key")
+    k2 = {"X-API-Key": "k2"}
+    assert client.post("/v1/classes", json=body, headers=k2).status_code == 202
+    assert client.get("/v1/classes", headers=k2).status_code == 200
+    assert client.post("/v1/recognize", json={"samples": [sample]}, headers=k2).status_code == 200
+    assert client.post("/v1/models/1/activate", headers=k2).status_code == 200
 
 
 def test_keys_from_the_environment_are_comma_separated(monkeypatch):

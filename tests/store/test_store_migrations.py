@@ -10,13 +10,16 @@ from sqlalchemy import inspect
 from app.store import migrate
 from app.store.db import make_engine
 
-TABLES = {"attributes", "classes", "samples", "bundles", "model_versions", "jobs", "leases"}
+TABLES = {
+    "attributes", "classes", "samples", "bundles", "model_versions", "jobs", "leases", "api_keys",
+    "idempotency_keys",
+}
 
 
 def test_upgrade_downgrade_upgrade(tmp_path):
     engine = make_engine(f"sqlite:///{tmp_path / 'm.db'}")
     migrate.upgrade(engine)
-    assert migrate.current_revision(engine) == "0001"
+    assert migrate.current_revision(engine) == "0002"
     assert TABLES <= set(inspect(engine).get_table_names())
     migrate.downgrade(engine, "base")
     assert migrate.current_revision(engine) is None
@@ -72,7 +75,7 @@ def test_concurrent_upgrades_do_not_collide(tmp_path):
         t.join()
     assert errors == []
     engine = make_engine(url)
-    assert migrate.current_revision(engine) == "0001"
+    assert migrate.current_revision(engine) == "0002"
     engine.dispose()
 
 

@@ -1,10 +1,14 @@
 from fastapi import APIRouter
 
-from app.api.deps import SessionDep
+from app.api import problems
+from app.api.deps import ReadAccess, SessionDep
 from app.api.schemas import AttributeList
 from app.store import repo
 
-router = APIRouter(prefix="/v1/attributes", tags=["attributes"])
+router = APIRouter(
+    prefix="/v1/attributes", tags=["attributes"], dependencies=[ReadAccess],
+    responses=problems.responses(401, 403, 429),
+)
 
 
 @router.get("", response_model=AttributeList)

@@ -6,14 +6,24 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.api import problems
-from app.api.deps import MetricsDep, ModelDep, RowId, SessionDep, WriteAccess
+from app.api.deps import (
+    EnrollAccess,
+    IdempotencyDep,
+    MetricsDep,
+    ModelDep,
+    ReadAccess,
+    RowId,
+    SessionDep,
+)
 from app.api.problems import Problem, blame, not_found
 from app.api.schemas import ClassCreate, ClassCreated, ClassList, ClassOut, JobOut
 from app.service.holder import LoadedModel
 from app.store import repo
 from app.store.models import ObjectClass
 
-router = APIRouter(prefix="/v1/classes", tags=["classes"], responses=problems.responses(422))
+router = APIRouter(
+    prefix="/v1/classes", tags=["classes"], responses=problems.responses(401, 403, 422, 429)
+)
 
 
 def class_out(
@@ -27,7 +37,7 @@ def class_out(
     )
 
 
-@router.get("", response_model=ClassList)
+@router.get("", response_model=ClassList, dependencies=[ReadAccess])
 def list_classes(session: SessionDep, model: ModelDep) -> ClassList:
     """Known and novel classes, and whether the model now serving covers each."""
     vocab = repo.attribute_names(session)
@@ -37,7 +47,10 @@ def list_classes(session: SessionDep, model: ModelDep) -> ClassList:
     ])
 
 
-@router.get("/{class_id}", response_model=ClassOut, responses=problems.responses(404))
+@router.get(
+    "/{class_id}", response_model=ClassOut, dependencies=[ReadAccess],
+    responses=problems.responses(404),
+)
 def get_class(class_id: RowId, session: SessionDep, model: ModelDep) -> ClassOut:
     cls = repo.get_class(session, class_id)
     if cls is None:
@@ -47,16 +60,18 @@ def get_class(class_id: RowId, session: SessionDep, model: ModelDep) -> ClassOut
 
 
 @router.post(
-    "", status_code=202, response_model=ClassCreated, dependencies=[WriteAccess],
-    responses=problems.responses(401, 409),
+    "", status_code=202, response_model=ClassCreated, dependencies=[EnrollAccess],
+    responses=problems.responses(409),
 )
 def register_class(
-    body: ClassCreate, session: SessionDep, model: ModelDep, metrics: MetricsDep, response: Response
+    body: ClassCreate, session: SessionDep, model: ModelDep, metrics: MetricsDep,
+    response: Response, idempotency: IdempotencyDep,
 ) -> ClassCreated:
     """Register a novel class by its attributes (zero-shot). The class and its job are
     committed before the 202; poll the job until the class is in the active model.
     Registering a class whose registration failed again, with the same attributes,
-    queues a new attempt."""
+    queues a new attempt. With an ``Idempotency-Key``, a retry gets the first answer."""
+    idempotency.replay(session)
     vector = _attribute_vector(body, model)
     key = repo.vector_key(vector)
     field = "attributes" if body.attributes is not None else "attribute_vector"
@@ -66,16 +81,20 @@ def register_class(
     try:
         cls = cls or repo.add_class(session, body.name, key)
         job = repo.add_job(session, "register_class", cls.id)
+        vocab = repo.attribute_names(session)
+        n = repo.sample_counts(session, [cls.id]).get(cls.id, 0)
+        out = ClassCreated(class_=class_out(cls, vocab, n, model), job=JobOut.model_validate(job))
+        location = f"/v1/jobs/{job.id}"
+        idempotency.save(session, 202, out, location)
         session.commit()
-    except IntegrityError:  # a concurrent registration won the race
+    except IntegrityError:  # a concurrent registration (or retry with this key) won the race
         session.rollback()
+        idempotency.replay(session)
         _check_unique(session, body.name, key, field)
         raise
     metrics.enrollments.labels("class").inc()
-    response.headers["Location"] = f"/v1/jobs/{job.id}"
-    vocab = repo.attribute_names(session)
-    n = repo.sample_counts(session, [cls.id]).get(cls.id, 0)
-    return ClassCreated(class_=class_out(cls, vocab, n, model), job=JobOut.model_validate(job))
+    response.headers["Location"] = location
+    return out
 
 
 def _attribute_vector(body: ClassCreate, model: LoadedModel) -> np.ndarray:

@@ -1,12 +1,15 @@
 from fastapi import APIRouter
 
 from app.api import problems
-from app.api.deps import HolderDep, RowId, SessionDep
+from app.api.deps import HolderDep, ReadAccess, RowId, SessionDep
 from app.api.problems import not_found
 from app.api.schemas import JobOut
 from app.store import repo
 
-router = APIRouter(prefix="/v1/jobs", tags=["jobs"], responses=problems.responses(404, 422))
+router = APIRouter(
+    prefix="/v1/jobs", tags=["jobs"], dependencies=[ReadAccess],
+    responses=problems.responses(401, 403, 404, 422, 429),
+)
 
 
 @router.get("/{job_id}", response_model=JobOut)

@@ -1,22 +1,25 @@
 from fastapi import APIRouter
 
 from app.api import problems
-from app.api.deps import HolderDep, RowId, SessionDep, WriteAccess
+from app.api.deps import AdminAccess, HolderDep, ReadAccess, RowId, SessionDep
 from app.api.problems import Problem, not_found
 from app.api.schemas import ModelList, ModelOut
 from app.framework import bundle
 from app.store import repo
 
-router = APIRouter(prefix="/v1/models", tags=["models"], responses=problems.responses(422))
+router = APIRouter(prefix="/v1/models", tags=["models"], responses=problems.responses(401, 403, 422, 429))
 
 
-@router.get("", response_model=ModelList)
+@router.get("", response_model=ModelList, dependencies=[ReadAccess])
 def list_models(session: SessionDep) -> ModelList:
     """Every model version, oldest first."""
     return ModelList(models=[ModelOut.model_validate(v) for v in repo.list_versions(session)])
 
 
-@router.get("/active", response_model=ModelOut, responses=problems.responses(404))
+@router.get(
+    "/active", response_model=ModelOut, dependencies=[ReadAccess],
+    responses=problems.responses(404),
+)
 def active_model(session: SessionDep) -> ModelOut:
     row = repo.active_version(session)
     if row is None:
@@ -25,8 +28,8 @@ def active_model(session: SessionDep) -> ModelOut:
 
 
 @router.post(
-    "/{version}/activate", response_model=ModelOut, dependencies=[WriteAccess],
-    responses=problems.responses(401, 404, 409),
+    "/{version}/activate", response_model=ModelOut, dependencies=[AdminAccess],
+    responses=problems.responses(404, 409),
 )
 def activate_model(version: RowId, session: SessionDep, holder: HolderDep) -> ModelOut:
     """Make ``version`` the active model in every API process (activating an earlier

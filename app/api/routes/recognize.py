@@ -7,11 +7,14 @@ from fastapi.exceptions import RequestValidationError
 from pydantic import ValidationError
 
 from app.api import problems
-from app.api.deps import BatcherDep, MetricsDep, ModelDep, SettingsDep
+from app.api.deps import BatcherDep, MetricsDep, ModelDep, ReadAccess, SettingsDep
 from app.api.problems import Problem, blame
 from app.api.schemas import RecognitionOut, RecognizeRequest, RecognizeResponse, ScoreOut
 
-router = APIRouter(prefix="/v1", tags=["recognize"])
+router = APIRouter(
+    prefix="/v1", tags=["recognize"], dependencies=[ReadAccess],
+    responses=problems.responses(401, 403, 429),
+)
 
 NPY = "application/x-npy"
 # Bodies above this are parsed in the thread pool, so one big JSON batch cannot stall

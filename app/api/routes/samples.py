@@ -1,24 +1,29 @@
 from fastapi import APIRouter, Response
+from sqlalchemy.exc import IntegrityError
 
 from app.api import problems
-from app.api.deps import MetricsDep, ModelDep, RowId, SessionDep, WriteAccess
+from app.api.deps import EnrollAccess, IdempotencyDep, MetricsDep, ModelDep, RowId, SessionDep
 from app.api.problems import Problem, blame, not_found
 from app.api.schemas import JobOut, SampleCreate, SampleCreated
 from app.store import repo
 
-router = APIRouter(prefix="/v1/classes", tags=["samples"], responses=problems.responses(422))
+router = APIRouter(
+    prefix="/v1/classes", tags=["samples"], responses=problems.responses(401, 403, 422, 429)
+)
 
 
 @router.post(
     "/{class_id}/samples", status_code=202, response_model=SampleCreated,
-    dependencies=[WriteAccess], responses=problems.responses(401, 404, 409),
+    dependencies=[EnrollAccess], responses=problems.responses(404, 409),
 )
 def add_sample(
     class_id: RowId, body: SampleCreate, session: SessionDep, model: ModelDep,
-    metrics: MetricsDep, response: Response,
+    metrics: MetricsDep, response: Response, idempotency: IdempotencyDep,
 ) -> SampleCreated:
     """Add one real sample of a novel class (one-shot learning). Stored and queued
-    before the 202; the job says when a model including it is live."""
+    before the 202; the job says when a model including it is live. With an
+    ``Idempotency-Key``, a retry gets the first answer and adds nothing."""
+    idempotency.replay(session)
     cls = repo.get_class(session, class_id)
     if cls is None:
         raise not_found("class", "class_id", class_id)
@@ -32,9 +37,17 @@ def add_sample(
         x = rec.validate_samples(body.sample)  # ragged lists become a named 422 too
     if x.shape[1:] != rec.input_shape or len(x) != 1:
         raise Problem(422, f"expected one sample of shape {list(rec.input_shape)}", "sample")
-    row = repo.add_sample(session, class_id, x[0])
-    job = repo.add_job(session, "add_sample", class_id, row.id)
-    session.commit()
+    try:
+        row = repo.add_sample(session, class_id, x[0])
+        job = repo.add_job(session, "add_sample", class_id, row.id)
+        out = SampleCreated(sample_id=row.id, job=JobOut.model_validate(job))
+        location = f"/v1/jobs/{job.id}"
+        idempotency.save(session, 202, out, location)
+        session.commit()
+    except IntegrityError:  # a concurrent retry with the same Idempotency-Key won
+        session.rollback()
+        idempotency.replay(session)
+        raise
     metrics.enrollments.labels("sample").inc()
-    response.headers["Location"] = f"/v1/jobs/{job.id}"
-    return SampleCreated(sample_id=row.id, job=JobOut.model_validate(job))
+    response.headers["Location"] = location
+    return out
