@@ -9,10 +9,14 @@ from app.framework.recognizer import TactileRecognizer
 # name -> "module:Class"; imported lazily so that listing methods stays cheap.
 METHODS: dict[str, str] = {
     "paper": "app.framework.paper:PaperRecognizer",
+    # the paper's pipeline with its GMM fitted on CONV_XF features instead of raw inputs
+    "paper-fgmm": "app.framework.paper:PaperFeatureGMMRecognizer",
     # baselines of issue 5 (evaluation-only: no model bundles)
     "extratrees": "app.baselines.extra_trees:ExtraTreesRecognizer",
     "dap": "app.baselines.dap:DAPRecognizer",
     "eszsl": "app.baselines.eszsl:ESZSLRecognizer",
+    # issue 5: the method that measured best on PHAC-2 (storable in bundles)
+    "best": "app.methods.best:BestRecognizer",
 }
 
 DEFAULT_METHOD = "paper"
