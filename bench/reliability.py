@@ -1,0 +1,62 @@
+"""Reliability runs at full size against real processes (the tests run them small).
+
+    .venv/bin/python bench/reliability.py crash --kills 50 [--postgres URL]
+    .venv/bin/python bench/reliability.py concurrency --clients 100 --postgres URL
+    .venv/bin/python bench/reliability.py hotswap --versions 20 [--postgres URL]
+
+--postgres takes a server URL (e.g. postgresql://postgres@127.0.0.1:5432/test); the run
+gets a fresh database on it, dropped afterwards. Prints one JSON report.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from tests.reliability import scenarios  # noqa: E402
+from tests.reliability.harness import Cluster  # noqa: E402
+from tests.service_fixtures import fresh_postgres_database  # noqa: E402
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("scenario", choices=["crash", "concurrency", "hotswap"])
+    p.add_argument("--postgres", default="", help="PostgreSQL server URL; default SQLite")
+    p.add_argument("--kills", type=int, default=50)
+    p.add_argument("--clients", type=int, default=100)
+    p.add_argument("--versions", type=int, default=20)
+    p.add_argument("--apis", type=int, default=2)
+    p.add_argument("--workers", type=int, default=None)
+    p.add_argument("--seed", type=int, default=0)
+    args = p.parse_args()
+    workers = args.workers or (2 if args.scenario == "concurrency" else 1)
+    with tempfile.TemporaryDirectory() as tmp, contextlib.ExitStack() as stack:
+        url = stack.enter_context(fresh_postgres_database(args.postgres)) if args.postgres else ""
+        env = {"TACTILE_PROMOTION_THRESHOLD": "1000"} if args.scenario == "crash" else {}
+        cluster = Cluster(Path(tmp) / "data", url, n_api=args.apis, n_workers=workers,
+                          extra_env=env)
+        try:
+            if args.scenario == "crash":
+                report = scenarios.crash(cluster, args.kills, args.seed)
+            elif args.scenario == "concurrency":
+                report = scenarios.concurrency(cluster, args.clients)
+            else:
+                report = scenarios.hot_swap(cluster, args.versions)
+        except BaseException:
+            print(cluster.logs(), file=sys.stderr)
+            raise
+        finally:
+            cluster.stop()
+    report.update(scenario=args.scenario, store="postgresql" if args.postgres else "sqlite")
+    print(json.dumps(report, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,215 @@
+"""Real ``tactile-zsl serve --no-worker`` and ``tactile-zsl worker`` processes on one store,
+for the reliability tests and the bench/ scripts: start, SIGKILL, restart, inspect."""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import socket
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import httpx
+from sqlalchemy import text
+
+from tests.service_fixtures import QUICK_DATASET, QUICK_PARAMS
+
+STARTUP_TIMEOUT = 420  # the first start trains the (small) base model
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def tactile_zsl() -> list[str]:
+    script = Path(sys.executable).with_name("tactile-zsl")
+    return [str(script)] if script.exists() else [sys.executable, "-m", "app.cli"]
+
+
+@dataclass
+class Proc:
+    name: str  # api-0, worker-1, ...
+    args: list[str]
+    port: int | None = None
+    popen: subprocess.Popen | None = None
+    starts: int = 0
+
+    @property
+    def alive(self) -> bool:
+        return self.popen is not None and self.popen.poll() is None
+
+
+@dataclass
+class Cluster:
+    """``n_api`` API processes (each on its own port) and ``n_workers`` workers."""
+
+    data_dir: Path
+    database_url: str = ""
+    n_api: int = 1
+    n_workers: int = 1
+    extra_env: dict[str, str] = field(default_factory=dict)
+    procs: list[Proc] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.data_dir.mkdir(parents=True, exist_ok=True)
+        self.env = {
+            **os.environ,
+            "TACTILE_DATA_DIR": str(self.data_dir),
+            "TACTILE_DATABASE_URL": self.database_url,
+            "TACTILE_DATASET": QUICK_DATASET,
+            "TACTILE_METHOD_PARAMS": json.dumps(QUICK_PARAMS),
+            "TACTILE_MODEL_POLL_SECONDS": "0.2",
+            "TACTILE_WORKER_POLL_SECONDS": "0.1",
+            "TACTILE_LEASE_SECONDS": "10",
+            "TACTILE_RATE_LIMIT": "0",
+            **self.extra_env,
+        }
+        for i in range(self.n_api):
+            port = free_port()
+            self.procs.append(Proc(f"api-{i}", ["serve", "--no-worker", "--port", str(port)], port))
+        for i in range(self.n_workers):
+            self.procs.append(Proc(f"worker-{i}", ["worker"]))
+
+    @property
+    def urls(self) -> list[str]:
+        return [f"http://127.0.0.1:{p.port}" for p in self.procs if p.port]
+
+    @property
+    def apis(self) -> list[Proc]:
+        return [p for p in self.procs if p.port]
+
+    @property
+    def workers(self) -> list[Proc]:
+        return [p for p in self.procs if not p.port]
+
+    def start(self, proc: Proc | None = None) -> None:
+        for p in [proc] if proc else self.procs:
+            if p.alive:
+                continue
+            log = open(self.data_dir / f"{p.name}-{p.starts}.log", "wb")  # noqa: SIM115
+            p.starts += 1
+            p.popen = subprocess.Popen(
+                [*tactile_zsl(), *p.args], env=self.env, cwd=self.data_dir, stdout=log,
+                stderr=subprocess.STDOUT,
+            )
+
+    def kill(self, proc: Proc) -> None:
+        """SIGKILL: no cleanup, no lease release, whatever was in flight is cut."""
+        if proc.alive:
+            proc.popen.send_signal(signal.SIGKILL)
+            proc.popen.wait()
+
+    def kill_random(self, rng: random.Random) -> Proc:
+        proc = rng.choice(self.procs)
+        self.kill(proc)
+        return proc
+
+    def stop(self) -> None:
+        for p in self.procs:
+            if p.alive:
+                p.popen.send_signal(signal.SIGTERM)
+        for p in self.procs:
+            if p.popen is None:
+                continue
+            try:
+                p.popen.wait(60)
+            except subprocess.TimeoutExpired:
+                p.popen.kill()
+                p.popen.wait()
+
+    def wait_ready(self, timeout: float = STARTUP_TIMEOUT) -> None:
+        deadline = time.monotonic() + timeout
+        pending = list(self.urls)
+        while pending and time.monotonic() < deadline:
+            for url in list(pending):
+                try:
+                    if httpx.get(f"{url}/readyz", timeout=2).status_code == 200:
+                        pending.remove(url)
+                except httpx.TransportError:
+                    pass
+            for p in self.procs:
+                assert p.popen is None or p.popen.poll() is None, (
+                    f"{p.name} exited with {p.popen.returncode}:\n{self.logs()}")
+            time.sleep(0.3)
+        assert not pending, f"not ready after {timeout}s: {pending}\n{self.logs()}"
+
+    def logs(self, tail: int = 3000) -> str:
+        return "\n".join(
+            f"--- {f.name}\n{f.read_text(errors='replace')[-tail:]}"
+            for f in sorted(self.data_dir.glob("*.log"))
+        )
+
+    @property
+    def sqlalchemy_url(self) -> str:
+        return self.database_url or f"sqlite:///{(self.data_dir / 'tactile.db').resolve()}"
+
+
+def store_check(url: str) -> list[str]:
+    """Integrity of the store: SQLite's integrity_check, or PostgreSQL consistency queries
+    (one active version, no dangling references, every bundle's hash matches)."""
+    import hashlib
+
+    from app.store.db import make_engine
+
+    engine = make_engine(url)
+    problems = []
+    try:
+        with engine.connect() as conn:
+            if conn.dialect.name == "sqlite":
+                result = conn.exec_driver_sql("PRAGMA integrity_check").scalar()
+                if result != "ok":
+                    problems.append(f"integrity_check: {result}")
+                if conn.exec_driver_sql("PRAGMA foreign_key_check").first() is not None:
+                    problems.append("foreign_key_check found dangling rows")
+            checks = {
+                "active versions != 1": "SELECT COUNT(*) <> 1 FROM model_versions WHERE active",
+                "samples of missing classes":
+                    "SELECT COUNT(*) > 0 FROM samples s LEFT JOIN classes c ON c.id = s.class_id "
+                    "WHERE c.id IS NULL",
+                "jobs of missing samples":
+                    "SELECT COUNT(*) > 0 FROM jobs j LEFT JOIN samples s ON s.id = j.sample_id "
+                    "WHERE j.sample_id IS NOT NULL AND s.id IS NULL",
+                "versions without bundle":
+                    "SELECT COUNT(*) > 0 FROM model_versions v LEFT JOIN bundles b "
+                    "ON b.sha256 = v.bundle_sha256 WHERE b.sha256 IS NULL",
+                "succeeded jobs without version":
+                    "SELECT COUNT(*) > 0 FROM jobs WHERE status = 'succeeded' "
+                    "AND model_version IS NULL",
+            }
+            for name, sql in checks.items():
+                if conn.execute(text(sql)).scalar():
+                    problems.append(name)
+            for sha, data in conn.execute(text("SELECT sha256, data FROM bundles")):
+                if hashlib.sha256(bytes(data)).hexdigest() != sha:
+                    problems.append(f"bundle {sha[:12]} does not match its hash")
+    finally:
+        engine.dispose()
+    return problems
+
+
+def wait_jobs_settled(url: str, timeout: float) -> dict[str, int]:
+    """Poll the store until no job is queued or running; returns the status counts."""
+    from app.store import repo
+    from app.store.db import make_engine, make_sessionmaker
+
+    engine = make_engine(url)
+    sessions = make_sessionmaker(engine)
+    deadline = time.monotonic() + timeout
+    try:
+        while True:
+            with sessions() as s:
+                counts = repo.jobs_by_status(s)
+            if not counts.get("queued") and not counts.get("running"):
+                return counts
+            if time.monotonic() > deadline:
+                return counts
+            time.sleep(0.3)
+    finally:
+        engine.dispose()

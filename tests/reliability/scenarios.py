@@ -1,0 +1,251 @@
+"""The reliability scenarios, sized by their callers: small in tests/reliability, large in
+bench/ (crash.py, concurrency.py, hotswap.py). Each returns a report dict."""
+
+from __future__ import annotations
+
+import itertools
+import random
+import threading
+import time
+import uuid
+from concurrent.futures import ThreadPoolExecutor
+
+import httpx
+
+from tests.reliability.harness import Cluster, store_check, wait_jobs_settled
+from tests.service_fixtures import quick_dataset
+
+
+def _vectors(n: int) -> list[list[int]]:
+    """``n`` attribute vectors no dataset class has (two, then three attributes set)."""
+    dataset = quick_dataset()
+    taken = {tuple(int(v) for v in row) for row in dataset.class_attributes}
+    out = []
+    for size in (2, 3):
+        for idx in itertools.combinations(range(dataset.n_attributes), size):
+            v = [1 if i in idx else 0 for i in range(dataset.n_attributes)]
+            if tuple(v) not in taken:
+                out.append(v)
+            if len(out) == n:
+                return out
+    raise ValueError(f"fewer than {n} unused attribute vectors")
+
+
+class Enroller:
+    """A robot fleet in one thread: registers classes and adds samples, retrying a
+    timed-out or cut request with the same Idempotency-Key, round-robin over the APIs."""
+
+    def __init__(self, urls: list[str], seed: int = 0, max_classes: int = 400) -> None:
+        self.urls = itertools.cycle(urls)
+        self.rng = random.Random(seed)
+        self.vectors = _vectors(max_classes)
+        self.samples = quick_dataset().samples
+        self.classes: dict[int, str] = {}  # 202'd class id -> name
+        self.sample_ids: list[int] = []  # 202'd sample ids
+        self.per_class: dict[int, int] = {}
+        self.retries = self.replays = self.bad = 0
+        self.statuses: dict[int, int] = {}
+        self.stop = threading.Event()
+
+    def post(self, path: str, body: dict) -> httpx.Response | None:
+        key = uuid.uuid4().hex
+        for _attempt in range(200):  # a robot keeps retrying until some API answers
+            try:
+                r = httpx.post(next(self.urls) + path, json=body, timeout=10,
+                               headers={"Idempotency-Key": key})
+            except httpx.TransportError:
+                self.retries += 1
+                time.sleep(0.1)
+                continue
+            if r.status_code == 503:  # no model loaded yet, or the store is busy
+                self.retries += 1
+                time.sleep(0.2)
+                continue
+            self.statuses[r.status_code] = self.statuses.get(r.status_code, 0) + 1
+            self.replays += r.headers.get("idempotent-replayed") == "true"
+            return r
+        return None
+
+    def step(self) -> None:
+        open_classes = [c for c, n in self.per_class.items() if n < 3]
+        if not open_classes or (len(self.classes) < len(self.vectors) and self.rng.random() < 0.5):
+            i = len(self.classes)
+            name = f"crash-{i}-{uuid.uuid4().hex[:6]}"
+            r = self.post("/v1/classes", {"name": name, "attribute_vector": self.vectors[i]})
+            if r is not None and r.status_code == 202:
+                cid = r.json()["class"]["id"]
+                self.classes[cid] = name
+                self.per_class[cid] = 0
+            elif r is not None:
+                self.bad += 1
+            return
+        cid = self.rng.choice(open_classes)
+        x = self.samples[self.rng.randrange(len(self.samples))]
+        r = self.post(f"/v1/classes/{cid}/samples", {"sample": x.tolist()})
+        if r is not None and r.status_code == 202:
+            self.sample_ids.append(r.json()["sample_id"])
+            self.per_class[cid] += 1
+        elif r is not None:
+            self.bad += 1
+
+    def run(self) -> None:
+        while not self.stop.is_set():
+            self.step()
+            time.sleep(0.02)
+
+
+def verify(cluster: Cluster, classes: dict[int, str], sample_ids: list[int], timeout: float) -> dict:
+    """Every 202'd class and sample is in the store and in the active model; jobs settled."""
+    counts = wait_jobs_settled(cluster.sqlalchemy_url, timeout)
+    url = cluster.urls[0]
+    active = httpx.get(f"{url}/v1/models/active", timeout=30).json()
+    model_names = {c["name"] for c in active["classes"]}
+    stored = {c["id"]: c for c in httpx.get(f"{url}/v1/classes", timeout=30).json()["classes"]}
+    from app.store import repo
+    from app.store.db import make_engine, make_sessionmaker
+
+    engine = make_engine(cluster.sqlalchemy_url)
+    with make_sessionmaker(engine)() as s:
+        in_model = set(repo.active_version(s).sample_ids)
+        from sqlalchemy import select
+
+        from app.store.models import Sample
+
+        present = set(s.scalars(select(Sample.id).where(Sample.id.in_(sample_ids))))
+    engine.dispose()
+    return {
+        "jobs": counts,
+        "classes_202": len(classes),
+        "classes_missing": sorted(c for c in classes if stored.get(c, {}).get("name") != classes[c]),
+        "classes_not_in_model": sorted(c for c, n in classes.items() if n not in model_names),
+        "samples_202": len(sample_ids),
+        "samples_missing": sorted(set(sample_ids) - present),
+        "samples_not_in_model": sorted(set(sample_ids) - in_model),
+        "active_version": active["version"],
+        "integrity_problems": store_check(cluster.sqlalchemy_url),
+    }
+
+
+def crash(cluster: Cluster, kills: int, seed: int = 0, gap: tuple[float, float] = (0.5, 2.5),
+          settle_timeout: float = 300) -> dict:
+    """Fire enrollments and SIGKILL a random API or worker process ``kills`` times,
+    restarting it at once; then check nothing that got a 202 was lost."""
+    rng = random.Random(seed)
+    cluster.start()
+    cluster.wait_ready()
+    fleet = Enroller(cluster.urls, seed)
+    thread = threading.Thread(target=fleet.run, daemon=True)
+    thread.start()
+    killed: dict[str, int] = {"api": 0, "worker": 0}
+    started = time.monotonic()
+    try:
+        for k in range(kills):  # APIs and workers in turn, a random one of each kind
+            time.sleep(rng.uniform(*gap))
+            proc = rng.choice(cluster.workers if k % 2 else cluster.apis)
+            cluster.kill(proc)
+            killed["api" if proc.port else "worker"] += 1
+            cluster.start(proc)
+    finally:
+        fleet.stop.set()
+        thread.join(120)
+    cluster.wait_ready()
+    report = verify(cluster, fleet.classes, fleet.sample_ids, settle_timeout)
+    report.update(kills=killed, seconds=round(time.monotonic() - started, 1),
+                  retries=fleet.retries, replays=fleet.replays, statuses=fleet.statuses,
+                  non_202=fleet.bad)
+    return report
+
+
+def concurrency(cluster: Cluster, clients: int = 100, settle_timeout: float = 300) -> dict:
+    """``clients`` robots at once, each registering a class and adding a sample to it."""
+    cluster.start()
+    cluster.wait_ready()
+    vectors = _vectors(clients)
+    samples = quick_dataset().samples
+    urls = cluster.urls
+    statuses: dict[str, int] = {}
+    classes: dict[int, str] = {}
+    sample_ids: list[int] = []
+    lock = threading.Lock()
+    barrier = threading.Barrier(clients)
+
+    def robot(i: int) -> None:
+        base = urls[i % len(urls)]
+        name = f"robot-{i}"
+        with httpx.Client(base_url=base, timeout=120) as c:
+            barrier.wait()
+            try:
+                r = c.post("/v1/classes", json={"name": name, "attribute_vector": vectors[i]},
+                           headers={"Idempotency-Key": f"class-{i}"})
+                code = str(r.status_code)
+                if r.status_code == 202:
+                    cid = r.json()["class"]["id"]
+                    s = c.post(f"/v1/classes/{cid}/samples",
+                               json={"sample": samples[i % len(samples)].tolist()},
+                               headers={"Idempotency-Key": f"sample-{i}"})
+                    with lock:
+                        classes[cid] = name
+                        statuses[str(s.status_code)] = statuses.get(str(s.status_code), 0) + 1
+                        if s.status_code == 202:
+                            sample_ids.append(s.json()["sample_id"])
+            except httpx.TransportError as exc:
+                code = type(exc).__name__
+            with lock:
+                statuses[code] = statuses.get(code, 0) + 1
+
+    started = time.monotonic()
+    with ThreadPoolExecutor(clients) as pool:
+        list(pool.map(robot, range(clients)))
+    report = verify(cluster, classes, sample_ids, settle_timeout)
+    report.update(statuses=statuses, seconds=round(time.monotonic() - started, 1))
+    return report
+
+
+def hot_swap(cluster: Cluster, versions: int = 20, load_threads: int = 4) -> dict:
+    """Recognition load on every API process while ``versions`` new versions go live."""
+    cluster.start()
+    cluster.wait_ready()
+    urls = cluster.urls
+    x = quick_dataset().samples[:1].tolist()
+    stop = threading.Event()
+    ok, failed, seen = [0], [], set()
+    lock = threading.Lock()
+
+    def load(i: int) -> None:
+        with httpx.Client(base_url=urls[i % len(urls)], timeout=30) as c:
+            while not stop.is_set():
+                try:
+                    r = c.post("/v1/recognize", json={"samples": x})
+                    good = r.status_code == 200
+                    with lock:
+                        if good:
+                            ok[0] += 1
+                            seen.add(r.json()["model_version"])
+                        else:
+                            failed.append(f"{r.status_code} {r.text[:100]}")
+                except httpx.HTTPError as exc:
+                    with lock:
+                        failed.append(repr(exc))
+
+    threads = [threading.Thread(target=load, args=(i,), daemon=True) for i in range(load_threads)]
+    for t in threads:
+        t.start()
+    vectors = _vectors(versions)
+    first = httpx.get(f"{urls[0]}/v1/models/active").json()["version"]
+    started = time.monotonic()
+    with httpx.Client(base_url=urls[0], timeout=30) as c:
+        for i in range(versions):  # one enrollment at a time: one new version each
+            r = c.post("/v1/classes", json={"name": f"swap-{i}", "attribute_vector": vectors[i]})
+            job_id = r.json()["job"]["id"]
+            while c.get(f"/v1/jobs/{job_id}").json()["status"] not in ("succeeded", "failed"):
+                time.sleep(0.05)
+    time.sleep(1.0)  # every process has polled the last one
+    stop.set()
+    for t in threads:
+        t.join(60)
+    last = httpx.get(f"{urls[0]}/v1/models/active").json()["version"]
+    return {
+        "versions_activated": last - first, "recognitions_ok": ok[0], "failed": len(failed),
+        "failures": failed[:5], "versions_served": len(seen),
+        "seconds": round(time.monotonic() - started, 1),
+    }

@@ -1,0 +1,82 @@
+"""Real processes under faults and load, in CI sizes (the bench/ scripts run them big):
+SIGKILLs lose no 202'd enrollment, 100 concurrent robots on 2 APIs + 2 workers, and
+zero failed recognitions while 20 versions go live."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from tests.reliability import scenarios
+from tests.reliability.harness import Cluster
+from tests.service_fixtures import fresh_postgres_database
+
+pytestmark = pytest.mark.slow
+
+PG_URL = os.environ.get("TACTILE_TEST_POSTGRES_URL")
+needs_pg = pytest.mark.skipif(not PG_URL, reason="TACTILE_TEST_POSTGRES_URL is not set")
+
+CI_KILLS = 6
+
+
+def assert_nothing_lost(report: dict) -> None:
+    assert report["integrity_problems"] == [], report
+    assert report["classes_missing"] == [] and report["samples_missing"] == [], report
+    assert report["classes_not_in_model"] == [] and report["samples_not_in_model"] == [], report
+    assert set(report["jobs"]) <= {"succeeded"}, report
+
+
+def run_crash(tmp_path, database_url: str = "") -> None:
+    cluster = Cluster(tmp_path / "crash", database_url, n_api=2, n_workers=1,
+                      extra_env={"TACTILE_PROMOTION_THRESHOLD": "1000"})
+    try:
+        report = scenarios.crash(cluster, kills=CI_KILLS, seed=1, gap=(1.0, 3.0))
+    except BaseException:
+        print(cluster.logs())
+        raise
+    finally:
+        cluster.stop()
+    print(report)
+    assert sum(report["kills"].values()) == CI_KILLS
+    assert report["classes_202"] > 0
+    assert_nothing_lost(report)
+
+
+def test_crash_safety_sqlite(tmp_path):
+    run_crash(tmp_path)
+
+
+@needs_pg
+def test_crash_safety_postgres(tmp_path):
+    with fresh_postgres_database(PG_URL) as url:
+        run_crash(tmp_path, url)
+
+
+@needs_pg
+def test_100_concurrent_robots_on_2_apis_and_2_workers(tmp_path):
+    with fresh_postgres_database(PG_URL) as url:
+        cluster = Cluster(tmp_path / "conc", url, n_api=2, n_workers=2)
+        try:
+            report = scenarios.concurrency(cluster, clients=100)
+        finally:
+            cluster.stop()
+    print(report)
+    assert set(report["statuses"]) <= {"202", "409", "422"}, report
+    assert report["classes_202"] == 100
+    assert_nothing_lost(report)
+
+
+def test_hot_swap_drops_no_recognition(tmp_path):
+    url_ctx = fresh_postgres_database(PG_URL) if PG_URL else None
+    url = url_ctx.__enter__() if url_ctx else ""
+    cluster = Cluster(tmp_path / "swap", url, n_api=2, n_workers=1)
+    try:
+        report = scenarios.hot_swap(cluster, versions=20, load_threads=4)
+    finally:
+        cluster.stop()
+        if url_ctx:
+            url_ctx.__exit__(None, None, None)
+    print(report)
+    assert report["versions_activated"] == 20
+    assert report["failed"] == 0 and report["recognitions_ok"] > 0, report
