@@ -18,6 +18,7 @@ PG_URL = os.environ.get("TACTILE_TEST_POSTGRES_URL")
 needs_pg = pytest.mark.skipif(not PG_URL, reason="TACTILE_TEST_POSTGRES_URL is not set")
 
 CI_KILLS = 6
+CI_VERSIONS = 10  # bench/reliability.py hotswap runs 20
 
 
 def assert_nothing_lost(report: dict) -> None:
@@ -72,11 +73,11 @@ def test_hot_swap_drops_no_recognition(tmp_path):
     url = url_ctx.__enter__() if url_ctx else ""
     cluster = Cluster(tmp_path / "swap", url, n_api=2, n_workers=1)
     try:
-        report = scenarios.hot_swap(cluster, versions=20, load_threads=4)
+        report = scenarios.hot_swap(cluster, versions=CI_VERSIONS, load_threads=4)
     finally:
         cluster.stop()
         if url_ctx:
             url_ctx.__exit__(None, None, None)
     print(report)
-    assert report["versions_activated"] == 20
+    assert report["versions_activated"] == CI_VERSIONS
     assert report["failed"] == 0 and report["recognitions_ok"] > 0, report
