@@ -124,14 +124,50 @@ def fresh_postgres_database(admin_url: str) -> Iterator[str]:
         admin.engine.dispose()
 
 
-@pytest.fixture
-def settings(tmp_path) -> Iterator[Settings]:
-    """SQLite under tmp_path; a fresh PostgreSQL database when TACTILE_TEST_POSTGRES_URL is set."""
-    url = os.environ.get("TACTILE_TEST_POSTGRES_URL")
-    if not url:
+DEFAULT_POSTGRES_URL = "postgresql://postgres@127.0.0.1:5432/test"
+
+
+@functools.cache
+def postgres_url() -> str | None:
+    """The admin URL of a reachable PostgreSQL server for the tests, or None.
+
+    TACTILE_TEST_POSTGRES_URL, else the machine's local server; tests that need one
+    are skipped (with this reason shown) when it cannot be reached.
+    """
+    from sqlalchemy import text
+
+    from app.store.db import make_engine
+
+    url = os.environ.get("TACTILE_TEST_POSTGRES_URL", DEFAULT_POSTGRES_URL)
+    engine = make_engine(url, timeout=3)
+    try:
+        with engine.connect() as conn:
+            conn.execute(text("SELECT 1"))
+        return url
+    except Exception:  # noqa: BLE001 - any failure means "no server for the tests"
+        return None
+    finally:
+        engine.dispose()
+
+
+def require_postgres() -> str:
+    url = postgres_url()
+    if url is None:
+        pytest.skip(
+            "PostgreSQL not reachable at "
+            + os.environ.get("TACTILE_TEST_POSTGRES_URL", DEFAULT_POSTGRES_URL)
+        )
+    return url
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def settings(request, tmp_path) -> Iterator[Settings]:
+    """Every service test runs on both stores: SQLite under tmp_path, and a fresh
+    PostgreSQL database (skipped, with the reason, when no server is reachable)."""
+    if request.param == "sqlite":
         yield quick_settings(tmp_path / "data")
         return
-    with fresh_postgres_database(url) as db_url:
+    with fresh_postgres_database(require_postgres()) as db_url:
         yield quick_settings(tmp_path / "data", database_url=db_url)
 
 

@@ -4,18 +4,16 @@ zero failed recognitions while 20 versions go live."""
 
 from __future__ import annotations
 
-import os
-
 import pytest
 
 from tests.reliability import scenarios
 from tests.reliability.harness import Cluster
-from tests.service_fixtures import fresh_postgres_database
+from tests.service_fixtures import fresh_postgres_database, postgres_url
 
 pytestmark = pytest.mark.slow
 
-PG_URL = os.environ.get("TACTILE_TEST_POSTGRES_URL")
-needs_pg = pytest.mark.skipif(not PG_URL, reason="TACTILE_TEST_POSTGRES_URL is not set")
+PG_URL = postgres_url()
+needs_pg = pytest.mark.skipif(not PG_URL, reason="no PostgreSQL reachable (TACTILE_TEST_POSTGRES_URL or the local server)")
 
 CI_KILLS = 6
 CI_VERSIONS = 10  # bench/reliability.py hotswap runs 20

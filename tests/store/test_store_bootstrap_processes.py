@@ -1,5 +1,5 @@
 """Two real processes starting at once on an empty store: exactly one trains the base
-model (on PostgreSQL when TACTILE_TEST_POSTGRES_URL is set, else SQLite)."""
+model, on each store."""
 
 from __future__ import annotations
 

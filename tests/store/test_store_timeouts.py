@@ -3,17 +3,15 @@ API answers with a 503 problem, never a hang."""
 
 from __future__ import annotations
 
-import os
-
 import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy import text
 from sqlalchemy.exc import OperationalError
 
 from app.store.db import make_engine
-from tests.service_fixtures import unused_vectors
+from tests.service_fixtures import postgres_url, unused_vectors
 
-PG_URL = os.environ.get("TACTILE_TEST_POSTGRES_URL")
+PG_URL = postgres_url()
 
 
 def test_sqlite_busy_timeout_follows_the_setting(tmp_path):
@@ -24,7 +22,7 @@ def test_sqlite_busy_timeout_follows_the_setting(tmp_path):
 
 
 @pytest.mark.postgres
-@pytest.mark.skipif(not PG_URL, reason="TACTILE_TEST_POSTGRES_URL is not set")
+@pytest.mark.skipif(not PG_URL, reason="no PostgreSQL reachable (TACTILE_TEST_POSTGRES_URL or the local server)")
 def test_postgres_statements_and_lock_waits_are_bounded():
     engine = make_engine(PG_URL, timeout=0.3)
     with engine.connect() as conn:
