@@ -1,0 +1,76 @@
+"""Per-attribute logistic classifiers stored as arrays, and Direct Attribute Prediction.
+
+DAP (Lampert et al.): a novel class z with attribute vector a^z scores
+
+    log p(z | x) = sum_m log p(a_m = a^z_m | x) - log p(a_m = a^z_m) + const,
+
+with p(a_m | x) from one L2-regularised logistic regression per attribute,
+clipped to [clip, 1 - clip] so that one confident classifier cannot veto a class
+alone, and the prior p(a_m = 1) the mean of the known classes' vectors.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from sklearn.linear_model import LogisticRegression
+
+
+class LinearAttributeModel:
+    """p(a_m = 1 | z) = sigmoid(z · w_m + b_m); an attribute constant over the known
+    classes keeps that constant (w_m = 0, b_m = ±inf stands for probability 1 or 0)."""
+
+    def __init__(self, weights: np.ndarray, bias: np.ndarray, constant: np.ndarray) -> None:
+        self.weights = np.asarray(weights, np.float64)  # (M, D)
+        self.bias = np.asarray(bias, np.float64)  # (M,)
+        self.constant = np.asarray(constant, np.float64)  # (M,), NaN where the attribute varies
+        m = len(self.bias)
+        if self.weights.ndim != 2 or self.weights.shape[0] != m or self.constant.shape != (m,):
+            raise ValueError("attribute model arrays are inconsistent")
+
+    @classmethod
+    def fit(cls, z: np.ndarray, targets: np.ndarray, C: float, max_iter: int = 1000) -> LinearAttributeModel:
+        targets = (np.asarray(targets) > 0.5).astype(np.int64)
+        m = targets.shape[1]
+        weights = np.zeros((m, z.shape[1]))
+        bias = np.zeros(m)
+        constant = np.full(m, np.nan)
+        for j in range(m):
+            values = np.unique(targets[:, j])
+            if len(values) == 1:
+                constant[j] = float(values[0])
+                continue
+            lr = LogisticRegression(C=C, max_iter=max_iter).fit(z, targets[:, j])
+            weights[j], bias[j] = lr.coef_[0], lr.intercept_[0]
+        return cls(weights, bias, constant)
+
+    def predict_proba(self, z: np.ndarray) -> np.ndarray:
+        """(N, M) probabilities that each attribute is present."""
+        logits = np.asarray(z, np.float64) @ self.weights.T + self.bias
+        p = 0.5 * (1.0 + np.tanh(0.5 * logits))  # a sigmoid that cannot overflow
+        fixed = ~np.isnan(self.constant)
+        p[:, fixed] = self.constant[fixed]
+        return p
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        return {"weights": self.weights, "bias": self.bias, "constant": self.constant}
+
+    @classmethod
+    def from_state(cls, arrays: dict[str, np.ndarray]) -> LinearAttributeModel:
+        return cls(arrays["weights"], arrays["bias"], arrays["constant"])
+
+
+def dap_log_scores(attr_proba: np.ndarray, class_attributes: np.ndarray, prior: np.ndarray,
+                   clip: float) -> np.ndarray:
+    """(N, L) DAP log-scores of L classes, up to a per-sample constant."""
+    p = np.clip(attr_proba, clip, 1 - clip)
+    q = np.clip(prior, clip, 1 - clip)
+    a = (np.asarray(class_attributes) > 0.5).astype(np.float64)
+    log_like = np.log(p) @ a.T + np.log1p(-p) @ (1 - a).T
+    log_prior = np.log(q) @ a.T + np.log1p(-q) @ (1 - a).T
+    return log_like - log_prior[None, :]
+
+
+def softmax(logits: np.ndarray) -> np.ndarray:
+    z = logits - logits.max(axis=1, keepdims=True)
+    e = np.exp(z)
+    return e / e.sum(axis=1, keepdims=True)

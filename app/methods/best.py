@@ -1,0 +1,269 @@
+"""The ``best`` method (issue 5): the recognizer that measured best on PHAC-2's static features.
+
+Every sample is a flat vector (a C x T tactile image is flattened) scaled by
+``RobustInputScaler`` (signed log1p, median/IQR, clipped); PHAC-2's features
+reach 1e10.
+
+- Known classes (FC_Y): an extra-trees forest on the scaled inputs; ``known_proba``
+  is its class distribution.
+- Novelty ND(x): a logistic combination of the forest's confidence cues and a
+  feature-weighted nearest-neighbour distance, learned on pseudo-novel objects
+  carved from the known set (``known``). The threshold is tuned by the paper's
+  Sect. VI-B protocol (``novelty_validation_split`` + ``tune_threshold``) on a
+  probe model (forest, cue combiner and all) that never sees the validation
+  objects; the deployed model covers every known class and keeps it.
+- Zero-shot (FC_Z from attributes): Direct Attribute Prediction with one
+  L2-regularised logistic regression per attribute (``attributes``).
+- One-shot: a sample's *signature* is its known-class posterior, L2-normalised:
+  which known objects it feels like. A novel class with real samples gets the
+  mean signature of its samples as prototype, and samples are matched by cosine
+  similarity (softmax over ``shot_temperature``). Classes without samples keep
+  their zero-shot probability; the classes with samples share the rest.
+
+The forest is stored as plain arrays (``forest``), so model bundles need no
+pickle, and enrolment never retrains it: ``add_novel_classes`` only scores the
+new attribute vectors and ``add_one_shot`` only computes signatures.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from app.data.dataset import DatasetError, TactileDataset
+from app.framework.errors import FrameworkError
+from app.framework.novelty import novelty_validation_split, tune_threshold
+from app.framework.recognizer import TactileRecognizer
+from app.methods.attributes import LinearAttributeModel, dap_log_scores, softmax
+from app.methods.known import CUES, KnownModel, flatten
+
+
+def _check(cond: bool, message: str) -> None:
+    if not cond:
+        raise FrameworkError(message)
+
+
+def signatures(known_proba: np.ndarray) -> np.ndarray:
+    """Known-class posteriors scaled to unit length (the one-shot embedding)."""
+    p = np.asarray(known_proba, np.float64)
+    return p / np.maximum(np.linalg.norm(p, axis=1, keepdims=True), 1e-12)
+
+
+class BestRecognizer(TactileRecognizer):
+    """See the module docstring; hyper-parameters are constructor arguments."""
+
+    method = "best"
+
+    _PARAMS = ("seed", "n_estimators", "max_features", "attribute_C", "dap_clip", "shot_temperature",
+               "novelty_val_fraction", "novelty_holdout_trials", "meta_folds", "meta_val_fraction",
+               "meta_C", "n_jobs")
+
+    def __init__(
+        self,
+        seed: int = 0,
+        n_estimators: int = 300,
+        max_features: str | float = "sqrt",
+        attribute_C: float = 0.1,
+        dap_clip: float = 0.02,
+        shot_temperature: float = 0.05,
+        novelty_val_fraction: float = 0.1,
+        novelty_holdout_trials: int = 1,
+        meta_folds: int = 3,
+        meta_val_fraction: float = 0.2,
+        meta_C: float = 1.0,
+        n_jobs: int | None = 1,
+    ) -> None:
+        super().__init__()
+        self.seed = int(seed)
+        self.n_estimators = n_estimators
+        self.max_features = max_features
+        self.attribute_C = attribute_C
+        self.dap_clip = dap_clip
+        self.shot_temperature = shot_temperature
+        self.novelty_val_fraction = novelty_val_fraction
+        self.novelty_holdout_trials = novelty_holdout_trials
+        self.meta_folds = meta_folds
+        self.meta_val_fraction = meta_val_fraction
+        self.meta_C = meta_C
+        self.n_jobs = n_jobs
+        self._check_params()
+
+    def get_params(self) -> dict[str, Any]:
+        return {p: getattr(self, p) for p in self._PARAMS}
+
+    def _check_params(self) -> None:
+        _check(isinstance(self.n_estimators, int | np.integer) and self.n_estimators >= 1,
+               f"n_estimators must be a positive integer, got {self.n_estimators!r}")
+        mf = self.max_features
+        _check(mf in ("sqrt", "log2") or (isinstance(mf, int | float) and not isinstance(mf, bool) and mf > 0),
+               f"max_features must be 'sqrt', 'log2' or a positive number, got {mf!r}")
+        _check(isinstance(self.attribute_C, int | float) and self.attribute_C > 0,
+               f"attribute_C must be positive, got {self.attribute_C!r}")
+        _check(isinstance(self.dap_clip, int | float) and 0 < self.dap_clip < 0.5,
+               f"dap_clip must lie in (0, 0.5), got {self.dap_clip!r}")
+        _check(isinstance(self.shot_temperature, int | float) and self.shot_temperature > 0,
+               f"shot_temperature must be positive, got {self.shot_temperature!r}")
+        _check(isinstance(self.novelty_val_fraction, int | float) and 0 < self.novelty_val_fraction < 1,
+               f"novelty_val_fraction must lie in (0, 1), got {self.novelty_val_fraction!r}")
+        _check(isinstance(self.novelty_holdout_trials, int | np.integer) and self.novelty_holdout_trials >= 1,
+               f"novelty_holdout_trials must be a positive integer, got {self.novelty_holdout_trials!r}")
+        _check(isinstance(self.meta_folds, int | np.integer) and self.meta_folds >= 0,
+               f"meta_folds must be a non-negative integer, got {self.meta_folds!r}")
+        _check(isinstance(self.meta_val_fraction, int | float) and 0 < self.meta_val_fraction < 1,
+               f"meta_val_fraction must lie in (0, 1), got {self.meta_val_fraction!r}")
+        _check(isinstance(self.meta_C, int | float) and self.meta_C > 0,
+               f"meta_C must be positive, got {self.meta_C!r}")
+
+    def _known_model(self, dataset: TactileDataset) -> KnownModel:
+        return KnownModel.fit(dataset, int(self.n_estimators), self.max_features, self.seed, self.n_jobs,
+                              int(self.meta_folds), float(self.meta_val_fraction), float(self.meta_C))
+
+    # ----------------------------------------------------------------- fitting
+    def _fit(self, dataset: TactileDataset, progress: bool) -> None:
+        self._check_params()
+        if dataset.n_classes < 2:
+            raise DatasetError("the best method needs at least 2 known classes")
+        present = np.unique(dataset.labels)
+        if len(present) != dataset.n_classes:
+            missing = sorted(set(range(dataset.n_classes)) - set(present.tolist()))
+            raise DatasetError(f"every known class needs samples; none for classes {missing[:5]}")
+        t0 = time.perf_counter()
+        timings: dict[str, float] = {}
+        y = dataset.labels
+
+        # Sect. VI-B: a probe model fitted without validation objects and held-out trials.
+        fit_idx, known_idx, val_idx = novelty_validation_split(
+            dataset, self.novelty_val_fraction, self.novelty_holdout_trials, seed=self.seed
+        )
+        if len(known_idx) == 0 or len(val_idx) == 0:
+            raise DatasetError(
+                "novelty tuning needs validation objects and held-out trials: give every known "
+                "class at least 2 trials"
+            )
+        sub = dataset.subset(fit_idx)
+        probe = self._known_model(sub.select_classes(np.unique(sub.labels)))
+        self.novelty_tuning = tune_threshold(
+            probe.scores(flatten(dataset.samples[known_idx]))[2],
+            probe.scores(flatten(dataset.samples[val_idx]))[2],
+        )
+        self.novelty_threshold = float(self.novelty_tuning.threshold)
+        del probe
+        timings["novelty_tuning_s"] = time.perf_counter() - t0
+
+        # The deployed parts, on every known class.
+        t = time.perf_counter()
+        self.known_ = self._known_model(dataset)
+        z = self.known_.cues_model.scaled(flatten(dataset.samples))
+        timings["known_model_s"] = time.perf_counter() - t
+        t = time.perf_counter()
+        attrs = dataset.class_attributes
+        self.attributes_ = LinearAttributeModel.fit(z, attrs[y], float(self.attribute_C))
+        self.prior_ = attrs.mean(axis=0).astype(np.float64)
+        timings["attributes_s"] = time.perf_counter() - t
+        self._reset_novel()
+        timings["total_s"] = time.perf_counter() - t0
+        self.metrics = {
+            "n_train_samples": int(len(dataset)),
+            "n_known_classes": int(dataset.n_classes),
+            "nd_known_kept": self.novelty_tuning.known_kept_at_threshold,
+            "nd_val_novel": self.novelty_tuning.val_novel_at_threshold,
+            "nd_val_auroc": self.novelty_tuning.auroc,
+            "forest_nodes": int(len(self.known_.cues_model.forest.feature)),
+            "novelty_cue_weights": dict(zip(CUES, self.known_.combiner.coef.tolist(), strict=True)),
+            "timings": timings,
+            "params": self.get_params(),
+        }
+
+    def _reset_novel(self) -> None:
+        n_known = len(self.registry.known_names)
+        self.shot_prototypes_ = np.zeros((0, n_known), np.float64)
+        self.shot_has_ = np.zeros(0, bool)
+
+    # --------------------------------------------------------------- inference
+    def _known_proba(self, samples: np.ndarray) -> np.ndarray:
+        cues = self.known_.cues_model
+        return cues.proba(cues.scaled(flatten(samples)))
+
+    def _novelty_score(self, samples: np.ndarray) -> np.ndarray:
+        return self.known_.scores(flatten(samples))[2]
+
+    def _novel_proba(self, samples: np.ndarray) -> np.ndarray:
+        cues = self.known_.cues_model
+        z = cues.scaled(flatten(samples))
+        return self._novel_from(z, cues.proba(z) if self.shot_has_.any() else None)
+
+    def _novel_from(self, z: np.ndarray, known_p: np.ndarray | None) -> np.ndarray:
+        reg = self.registry
+        scores = dap_log_scores(self.attributes_.predict_proba(z), reg.novel_attributes, self.prior_,
+                                float(self.dap_clip))
+        p_zsl = softmax(scores)
+        has = self.shot_has_
+        if not has.any():
+            return p_zsl
+        sim = signatures(known_p) @ self.shot_prototypes_[has].T
+        p_shot = softmax(sim / float(self.shot_temperature))
+        out = p_zsl.copy()
+        out[:, has] = (1.0 - p_zsl[:, ~has].sum(axis=1, keepdims=True)) * p_shot
+        return out
+
+    def _all_scores(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        z, known, novelty = self.known_.scores(flatten(samples))
+        novel = self._novel_from(z, known) if self.registry.novel_names else None
+        return novelty, known, novel
+
+    # --------------------------------------------------------------- enrolment
+    def _refit_novel(self, **options: Any) -> None:
+        if options:
+            raise FrameworkError(f"method '{self.method}' takes no enrolment options, got {sorted(options)}")
+        reg = self.registry
+        protos = np.zeros((len(reg.novel_names), len(reg.known_names)), np.float64)
+        has = np.zeros(len(reg.novel_names), bool)
+        for i, name in enumerate(reg.novel_names):
+            samples = reg.novel_samples.get(name)
+            if samples is not None and len(samples):
+                mean = signatures(self._known_proba(samples)).mean(axis=0)
+                protos[i] = mean / max(float(np.linalg.norm(mean)), 1e-12)
+                has[i] = True
+        self.shot_prototypes_, self.shot_has_ = protos, has
+
+    # ------------------------------------------------------------ persistence
+    def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        arrays: dict[str, np.ndarray] = {"prior": self.prior_}
+        for key, value in self.known_.get_state().items():
+            arrays[f"known/{key}"] = value
+        for key, value in self.attributes_.get_state().items():
+            arrays[f"attributes/{key}"] = value
+        meta = {
+            "params": self.get_params(),
+            "n_features": self.known_.cues_model.forest.n_features,
+            "n_classes": self.known_.cues_model.forest.n_classes,
+        }
+        return meta, arrays
+
+    def set_state(self, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        for key, value in meta["params"].items():
+            if key not in self._PARAMS:
+                raise KeyError(f"unknown parameter {key!r} in the bundle")
+            setattr(self, key, value)
+        self._check_params()
+
+        def part(prefix: str) -> dict[str, np.ndarray]:
+            return {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)}
+
+        n_classes = int(meta["n_classes"])
+        if n_classes != len(self.registry.known_names):
+            raise ValueError(f"forest has {n_classes} classes but the bundle lists "
+                             f"{len(self.registry.known_names)} known classes")
+        n_features = int(np.prod(self.input_shape))
+        if int(meta["n_features"]) != n_features:
+            raise ValueError(f"forest expects {meta['n_features']} features, inputs have {n_features}")
+        self.known_ = KnownModel.from_state(part("known/"), n_classes, n_features)
+        self.attributes_ = LinearAttributeModel.from_state(part("attributes/"))
+        self.prior_ = np.asarray(arrays["prior"], np.float64)
+        if self.attributes_.weights.shape[1] != n_features or len(self.prior_) != len(self.registry.attribute_names):
+            raise ValueError("attribute model does not match the inputs or the attribute vocabulary")
+        self._reset_novel()
+        if self.registry.novel_names:
+            self._refit_novel()

@@ -1,0 +1,223 @@
+"""The ``best`` method on small simulated data: the full protocol beats chance on novel
+classes, enrolment works and is fast, bundles round-trip exactly, bad input is refused."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from app.data.dataset import DatasetError, TactileDataset
+from app.data.simulator import simulate_dataset
+from app.evaluation.protocol import FIGURES, evaluate
+from app.framework import bundle
+from app.framework.errors import (
+    AttributeVectorError,
+    BundleError,
+    DuplicateClassError,
+    FrameworkError,
+    InputShapeError,
+    NonFiniteInputError,
+    NotFittedError,
+    UnknownClassError,
+)
+from app.framework.registry import make_method
+from app.methods.attributes import LinearAttributeModel, dap_log_scores
+from app.methods.best import BestRecognizer
+
+FAST = {"n_estimators": 40, "meta_folds": 2}
+N_NOVEL = 6
+
+
+@pytest.fixture(scope="module")
+def protocol_results():
+    ds = simulate_dataset(n_objects=30, trials_per_object=6, seed=0)
+    return evaluate(ds, ["best"], n_novel=N_NOVEL, n_splits=2, seed=0, test_trials=1,
+                    method_params={"best": FAST}, progress=False)
+
+
+def test_full_protocol_beats_chance_on_novel_classes(protocol_results):
+    mean = protocol_results["methods"]["best"]["mean"]
+    chance = 1 / N_NOVEL
+    assert mean["zsl"] >= chance + 0.15, mean
+    assert mean["osl"] >= chance + 0.4, mean
+    assert mean["gzsl_unseen"] >= chance, mean
+    assert mean["known_acc"] >= 0.85, mean
+    assert mean["nd_auroc"] >= 0.8, mean
+    for f in FIGURES:
+        assert 0.0 <= mean[f] <= 1.0, f
+
+
+@pytest.fixture(scope="module")
+def data():
+    """16 simulated objects: 12 known (4 training trials, 1 test trial), 4 novel."""
+    ds = simulate_dataset(n_objects=16, trials_per_object=5, seed=3)
+    _, first = np.unique(ds.class_attributes, axis=0, return_index=True)
+    novel = np.sort(first)[-4:]  # distinct vectors
+    known = np.setdiff1d(np.arange(ds.n_classes), novel)
+    is_test = (ds.trials % 5) == 0
+    train = ds.subset(~is_test).select_classes(known)
+    return ds, train, known, novel, is_test
+
+
+@pytest.fixture(scope="module")
+def fitted(data):
+    _, train, *_ = data
+    return make_method("best", **FAST).fit(train)
+
+
+@pytest.fixture(scope="module")
+def enrolled(fitted, data):
+    ds, _, _, novel, _ = data
+    names = [f"new-{i}" for i in range(len(novel))]
+    return fitted.add_novel_classes(names, ds.class_attributes[novel]), names
+
+
+def test_interface_shapes_and_scores(fitted, data):
+    ds, train, known, _, is_test = data
+    x = ds.samples[is_test & np.isin(ds.labels, known)]
+    p = fitted.known_proba(x)
+    assert p.shape == (len(x), train.n_classes)
+    np.testing.assert_allclose(p.sum(axis=1), 1.0)
+    s = fitted.novelty_score(x)
+    assert s.shape == (len(x),) and np.isfinite(s).all()
+    assert np.isfinite(fitted.novelty_threshold)
+    tuning = fitted.novelty_tuning
+    assert 0 <= tuning.known_kept_at_threshold <= 1 and 0 <= tuning.val_novel_at_threshold <= 1
+    assert set(fitted.metrics["timings"]) >= {"novelty_tuning_s", "known_model_s", "total_s"}
+    answers = fitted.recognize(x[:3], top_k=2)
+    assert all(a.kind == "known" and a.class_name in train.class_names for a in answers)
+
+
+def test_enrolment_is_new_model_and_fast(fitted, enrolled, data):
+    ds, _, _, novel, _ = data
+    model, names = enrolled
+    assert fitted.registry.novel_names == [] and model.registry.novel_names == names
+    t = time.perf_counter()
+    again = fitted.add_novel_classes(["extra"], ds.class_attributes[novel[:1]])
+    assert time.perf_counter() - t < 1.0
+    x = ds.samples[ds.labels == novel[0]]
+    p = again.novel_proba(x)
+    assert p.shape == (len(x), 1)
+    t = time.perf_counter()
+    shot = model.add_one_shot(names[0], x[:1])
+    assert time.perf_counter() - t < 2.0
+    assert model.registry.novel_samples == {} and len(shot.registry.novel_samples[names[0]]) == 1
+    p = shot.novel_proba(ds.samples[np.isin(ds.labels, novel)])
+    np.testing.assert_allclose(p.sum(axis=1), 1.0)
+    answers = shot.recognize(x[:2])
+    assert all(a.class_name in shot.registry.all_names for a in answers)
+
+
+def test_one_shot_samples_help(enrolled, data):
+    ds, _, _, novel, is_test = data
+    model, names = enrolled
+    for name, c in zip(names, novel, strict=True):
+        shot_idx = np.flatnonzero((ds.labels == c) & is_test)[0]
+        model = model.add_one_shot(name, ds.samples[shot_idx])
+    test = np.isin(ds.labels, novel) & ~is_test
+    truth = np.searchsorted(novel, ds.labels[test])
+    acc = np.mean(model.novel_proba(ds.samples[test]).argmax(axis=1) == truth)
+    assert acc >= 0.7, acc  # chance is 0.25
+
+
+def test_bundle_round_trip_gives_identical_predictions(enrolled, data, tmp_path):
+    ds, *_ = data
+    model, names = enrolled
+    model = model.add_one_shot(names[1], ds.samples[:1])
+    path = tmp_path / "best.bundle"
+    bundle.save(model, path)
+    again = bundle.load(path)
+    assert isinstance(again, BestRecognizer)
+    assert again.registry.all_names == model.registry.all_names
+    x = ds.samples
+    assert np.array_equal(again.known_proba(x), model.known_proba(x))
+    assert np.array_equal(again.novel_proba(x), model.novel_proba(x))
+    assert np.array_equal(again.novelty_score(x), model.novelty_score(x))
+    assert again.novelty_threshold == model.novelty_threshold
+    assert [a.class_name for a in again.recognize(x)] == [a.class_name for a in model.recognize(x)]
+    # and it keeps growing after loading
+    grown = again.add_one_shot(names[2], x[1:2])
+    assert grown.novel_proba(x).shape == (len(x), len(names))
+
+
+def test_corrupt_bundle_is_refused(enrolled):
+    model, _ = enrolled
+    data = bundle.to_bytes(model)
+    with pytest.raises(BundleError):
+        bundle.from_bytes(data[: len(data) // 2])
+    meta, arrays = model.get_state()
+    fresh = BestRecognizer()
+    fresh.input_shape, fresh.registry = model.input_shape, model.registry
+    with pytest.raises((KeyError, ValueError)):
+        fresh.set_state(meta, {k: v for k, v in arrays.items() if not k.startswith("known/forest/")})
+
+
+def test_bad_input_raises_framework_errors(fitted, enrolled, data):
+    ds, train, *_ = data
+    model, names = enrolled
+    x = ds.samples[:2]
+    with pytest.raises(InputShapeError):
+        fitted.known_proba(x.reshape(2, -1))
+    with pytest.raises(InputShapeError):
+        fitted.recognize(np.zeros((0,) + train.input_shape, np.float32))
+    bad = x.copy()
+    bad[1, 0, 0] = np.nan
+    with pytest.raises(NonFiniteInputError):
+        fitted.novelty_score(bad)
+    with pytest.raises(AttributeVectorError):
+        fitted.add_novel_classes(["z"], [[1, 0]])
+    with pytest.raises(AttributeVectorError):
+        fitted.add_novel_classes(["z"], [np.full(train.n_attributes, 0.5)])
+    with pytest.raises(DuplicateClassError):
+        fitted.add_novel_classes([train.class_names[0] + "-twin"], train.class_attributes[:1])
+    with pytest.raises(DuplicateClassError):
+        model.add_novel_classes([names[0]], np.eye(train.n_attributes)[:1])
+    with pytest.raises(UnknownClassError):
+        model.add_one_shot("nobody", x[:1])
+    with pytest.raises(UnknownClassError):
+        model.add_one_shot(train.class_names[0], x[:1])
+    with pytest.raises(UnknownClassError):
+        fitted.novel_proba(x)
+    with pytest.raises(FrameworkError, match="enrolment options"):
+        fitted.add_novel_classes(["z"], np.eye(train.n_attributes)[:1], synthesis="genf")
+    with pytest.raises(NotFittedError):
+        BestRecognizer().known_proba(x)
+
+
+@pytest.mark.parametrize("params", [
+    {"n_estimators": 0}, {"attribute_C": -1.0}, {"dap_clip": 0.7}, {"shot_temperature": 0},
+    {"max_features": "all"}, {"meta_folds": -1}, {"novelty_val_fraction": 1.5}, {"meta_C": 0},
+])
+def test_bad_hyper_parameters(params):
+    with pytest.raises(FrameworkError):
+        BestRecognizer(**params)
+
+
+def test_datasets_it_cannot_learn_from_are_refused():
+    one_trial = TactileDataset(
+        samples=np.random.default_rng(0).normal(size=(6, 4)), labels=np.arange(6),
+        trials=np.arange(6), class_attributes=np.eye(6, 3), attribute_names=("a", "b", "c"),
+        class_names=tuple("uvwxyz"),
+    )
+    with pytest.raises(DatasetError, match="trials"):
+        BestRecognizer(**FAST).fit(one_trial)
+    single = one_trial.select_classes([0])
+    with pytest.raises(DatasetError, match="2 known classes"):
+        BestRecognizer(**FAST).fit(single)
+
+
+def test_dap_and_attribute_model():
+    rng = np.random.default_rng(0)
+    z = rng.normal(size=(80, 5))
+    t = np.c_[z[:, 0] > 0, z[:, 1] > 0, np.ones(80)]  # the last attribute is constant
+    model = LinearAttributeModel.fit(z, t, C=1.0)
+    p = model.predict_proba(z)
+    assert np.all(p[:, 2] == 1.0)
+    assert np.mean((p[:, 0] > 0.5) == t[:, 0]) > 0.9
+    classes = np.array([[1, 0, 1], [0, 1, 1]])
+    s = dap_log_scores(np.array([[0.9, 0.1, 1.0]]), classes, np.array([0.5, 0.5, 1.0]), 0.02)
+    assert s.argmax() == 0
+    again = LinearAttributeModel.from_state(model.get_state())
+    assert np.array_equal(again.predict_proba(z), p)

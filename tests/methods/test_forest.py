@@ -1,0 +1,66 @@
+"""FlatForest: the same probabilities and leaves as scikit-learn, plain arrays only, checked state."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+from sklearn.ensemble import ExtraTreesClassifier, RandomForestClassifier
+
+from app.methods.forest import FlatForest
+
+
+@pytest.fixture(scope="module")
+def data():
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(200, 7)).astype(np.float32)
+    y = (x[:, 0] + 0.5 * x[:, 1] > 0).astype(int) + 2 * (x[:, 2] > 0.3)
+    x[:10] = x[10:20]  # duplicated inputs with other labels leave impure leaves
+    return x, y
+
+
+@pytest.mark.parametrize("cls", [ExtraTreesClassifier, RandomForestClassifier])
+def test_matches_sklearn(data, cls):
+    x, y = data
+    model = cls(n_estimators=25, random_state=0).fit(x, y)
+    flat = FlatForest.from_sklearn(model)
+    q = np.random.default_rng(1).normal(size=(50, 7)).astype(np.float32)
+    np.testing.assert_allclose(flat.predict_proba(q), model.predict_proba(q), atol=1e-12)
+    np.testing.assert_allclose(flat.predict_proba(x), model.predict_proba(x), atol=1e-12)
+    assert np.array_equal(flat.apply(q) - flat.roots[None, :], model.apply(q))
+    assert flat.n_trees == 25
+
+
+def test_state_is_plain_arrays_and_round_trips(data):
+    x, y = data
+    flat = FlatForest.from_sklearn(ExtraTreesClassifier(n_estimators=10, random_state=0).fit(x, y))
+    buf = io.BytesIO()
+    np.savez(buf, **flat.get_state())
+    buf.seek(0)
+    with np.load(buf, allow_pickle=False) as npz:
+        state = {k: npz[k] for k in npz.files}
+    assert all(v.dtype.kind in "iuf" for v in state.values())
+    again = FlatForest.from_state(state, flat.n_classes, flat.n_features)
+    assert np.array_equal(again.predict_proba(x), flat.predict_proba(x))
+
+
+def test_rejects_bad_state_and_inputs(data):
+    x, y = data
+    flat = FlatForest.from_sklearn(ExtraTreesClassifier(n_estimators=5, random_state=0).fit(x, y))
+    state = flat.get_state()
+    with pytest.raises(ValueError, match="lacks"):
+        FlatForest.from_state({k: v for k, v in state.items() if k != "threshold"}, 4, 7)
+    broken = dict(state, left=np.full_like(state["left"], 10**6))
+    with pytest.raises(ValueError, match="out of range"):
+        FlatForest.from_state(broken, 4, 7)
+    with pytest.raises(ValueError, match="out of range"):
+        FlatForest.from_state(state, 4, 2)  # split features beyond the input width
+    with pytest.raises(ValueError, match="shape"):
+        flat.predict_proba(x[:, :3])
+
+
+def test_refuses_classes_it_cannot_index(data):
+    x, y = data
+    with pytest.raises(ValueError, match="0 … K-1"):
+        FlatForest.from_sklearn(ExtraTreesClassifier(n_estimators=3, random_state=0).fit(x, y + 5))
