@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable
+from datetime import UTC, datetime, timedelta
 
 import numpy as np
 from sqlalchemy import exists, select, update
@@ -55,6 +56,9 @@ class Worker:
                     # we hold the lease, so nobody else is running anything: orphans
                     if n := repo.requeue_running(s):
                         log.warning("re-queued %d job(s) left running by a stopped worker", n)
+                    # idempotency records only come with enrollments, so rounds are often enough
+                    ttl = timedelta(hours=self.settings.idempotency_ttl_hours)
+                    repo.purge_idempotency(s, datetime.now(UTC) - ttl)
                 with self.sessions() as s:
                     jobs = repo.claim_queued_jobs(s, self.id)
                 if jobs:

@@ -124,3 +124,20 @@ def test_malformed_keys_are_a_422(client, dataset):
         r = client.post("/v1/classes", json=body, headers={"Idempotency-Key": key})
         assert r.status_code == 422 and r.headers["content-type"] == PROBLEM
         assert r.json()["errors"][0]["field"] == "Idempotency-Key"
+
+
+def test_keys_older_than_the_ttl_are_purged_by_the_worker(client, app, worker, dataset):
+    from datetime import UTC, datetime, timedelta
+
+    from sqlalchemy import update
+
+    old, fresh = unused_vectors(dataset, 2)
+    assert client.post("/v1/classes", json={"name": "old", "attribute_vector": old},
+                       headers={"Idempotency-Key": "k-old"}).status_code == 202
+    with app.state.sessions.begin() as s:  # age the first record past the 24 h default
+        s.execute(update(IdempotencyRecord).values(created_at=datetime.now(UTC) - timedelta(hours=25)))
+    assert client.post("/v1/classes", json={"name": "fresh", "attribute_vector": fresh},
+                       headers={"Idempotency-Key": "k-fresh"}).status_code == 202
+    worker.run_once()
+    with app.state.sessions() as s:
+        assert set(s.scalars(select(IdempotencyRecord.key))) == {"k-fresh"}
