@@ -16,7 +16,7 @@ from pathlib import Path
 import httpx
 import numpy as np
 import pytest
-from service_fixtures import QUICK_DATASET, QUICK_PARAMS, quick_dataset
+from service_fixtures import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS, quick_dataset
 
 pytestmark = pytest.mark.slow
 
@@ -44,6 +44,7 @@ class Service:
             **os.environ,
             "TACTILE_DATA_DIR": str(data_dir),
             "TACTILE_DATASET": QUICK_DATASET,
+            "TACTILE_METHOD": QUICK_METHOD,
             "TACTILE_METHOD_PARAMS": json.dumps(QUICK_PARAMS),
             "TACTILE_MODEL_POLL_SECONDS": "0.2",
             "TACTILE_WORKER_POLL_SECONDS": "0.1",

@@ -17,7 +17,7 @@ from pathlib import Path
 import httpx
 from sqlalchemy import text
 
-from tests.service_fixtures import QUICK_DATASET, QUICK_PARAMS
+from tests.service_fixtures import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS
 
 STARTUP_TIMEOUT = 420  # the first start trains the (small) base model
 
@@ -64,6 +64,7 @@ class Cluster:
             "TACTILE_DATA_DIR": str(self.data_dir),
             "TACTILE_DATABASE_URL": self.database_url,
             "TACTILE_DATASET": QUICK_DATASET,
+            "TACTILE_METHOD": QUICK_METHOD,
             "TACTILE_METHOD_PARAMS": json.dumps(QUICK_PARAMS),
             "TACTILE_MODEL_POLL_SECONDS": "0.2",
             "TACTILE_WORKER_POLL_SECONDS": "0.1",
