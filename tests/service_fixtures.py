@@ -28,7 +28,7 @@ from app.framework.registry import make_method
 
 # Small and short: seconds on 2 CPU cores. Accuracy is not what these tests check.
 # The service tests pin the paper's pipeline: its epochs can be cut to seconds, and the
-# service must work with any method (the default is covered by the e2e test).
+# service only uses the TactileRecognizer interface, which tests/methods checks for `best`.
 QUICK_METHOD = "paper"
 QUICK_PARAMS: dict = {
     "seed": 0, "encoder_epochs": 3, "alg1_epochs": 5, "alg2_epochs": 2, "fc_z_epochs": 5,
