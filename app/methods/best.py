@@ -6,12 +6,15 @@ reach 1e10.
 
 - Known classes (FC_Y): an extra-trees forest on the scaled inputs; ``known_proba``
   is its class distribution.
-- Novelty ND(x): a logistic combination of the forest's confidence cues and a
-  feature-weighted nearest-neighbour distance, learned on pseudo-novel objects
-  carved from the known set (``known``). The threshold is tuned by the paper's
-  Sect. VI-B protocol (``novelty_validation_split`` + ``tune_threshold``) on a
-  probe model (forest, cue combiner and all) that never sees the validation
-  objects; the deployed model covers every known class and keeps it.
+- Novelty ND(x): ``1 - max p`` of the forest plus ``knn_weight`` x the log distance
+  to the nearest training sample and ``top_weight`` x the log distance to the
+  nearest training sample of the top class, in a feature-weighted space, each
+  relative to the training set's own trial spacing (``known``). The threshold is
+  tuned by the paper's Sect. VI-B protocol (``novelty_validation_split`` +
+  ``tune_threshold``) on probe models that never see the validation objects;
+  ``tuning_rounds`` such splits (different validation objects) are pooled into
+  one ``tune_threshold`` call, which steadies the threshold. The deployed model
+  covers every known class and keeps it.
 - Zero-shot (FC_Z from attributes): Direct Attribute Prediction with one
   L2-regularised logistic regression per attribute (``attributes``).
 - One-shot: a sample's *signature* is its known-class posterior, L2-normalised:
@@ -20,8 +23,8 @@ reach 1e10.
   similarity (softmax over ``shot_temperature``). Classes without samples keep
   their zero-shot probability; the classes with samples share the rest.
 
-The forest is stored as plain arrays (``forest``), so model bundles need no
-pickle, and enrolment never retrains it: ``add_novel_classes`` only scores the
+The forest is stored as plain arrays (``forest``), like every other part, so
+model bundles need no pickle, and enrolment never retrains it: ``add_novel_classes`` only scores the
 new attribute vectors and ``add_one_shot`` only computes signatures.
 """
 
@@ -37,7 +40,7 @@ from app.framework.errors import FrameworkError
 from app.framework.novelty import novelty_validation_split, tune_threshold
 from app.framework.recognizer import TactileRecognizer
 from app.methods.attributes import LinearAttributeModel, dap_log_scores, softmax
-from app.methods.known import CUES, KnownModel, flatten
+from app.methods.known import CUES, KnownModel, flatten, relabelled
 
 
 def _check(cond: bool, message: str) -> None:
@@ -57,8 +60,8 @@ class BestRecognizer(TactileRecognizer):
     method = "best"
 
     _PARAMS = ("seed", "n_estimators", "max_features", "attribute_C", "dap_clip", "shot_temperature",
-               "novelty_val_fraction", "novelty_holdout_trials", "meta_folds", "meta_val_fraction",
-               "meta_C", "n_jobs")
+               "knn_weight", "top_weight", "novelty_val_fraction", "novelty_holdout_trials",
+               "tuning_rounds", "n_jobs")
 
     def __init__(
         self,
@@ -69,10 +72,10 @@ class BestRecognizer(TactileRecognizer):
         dap_clip: float = 0.02,
         shot_temperature: float = 0.05,
         novelty_val_fraction: float = 0.1,
+        knn_weight: float = 0.1,
+        top_weight: float = 0.1,
         novelty_holdout_trials: int = 1,
-        meta_folds: int = 3,
-        meta_val_fraction: float = 0.2,
-        meta_C: float = 1.0,
+        tuning_rounds: int = 3,
         n_jobs: int | None = 1,
     ) -> None:
         super().__init__()
@@ -83,10 +86,10 @@ class BestRecognizer(TactileRecognizer):
         self.dap_clip = dap_clip
         self.shot_temperature = shot_temperature
         self.novelty_val_fraction = novelty_val_fraction
+        self.knn_weight = knn_weight
+        self.top_weight = top_weight
         self.novelty_holdout_trials = novelty_holdout_trials
-        self.meta_folds = meta_folds
-        self.meta_val_fraction = meta_val_fraction
-        self.meta_C = meta_C
+        self.tuning_rounds = tuning_rounds
         self.n_jobs = n_jobs
         self._check_params()
 
@@ -109,16 +112,23 @@ class BestRecognizer(TactileRecognizer):
                f"novelty_val_fraction must lie in (0, 1), got {self.novelty_val_fraction!r}")
         _check(isinstance(self.novelty_holdout_trials, int | np.integer) and self.novelty_holdout_trials >= 1,
                f"novelty_holdout_trials must be a positive integer, got {self.novelty_holdout_trials!r}")
-        _check(isinstance(self.meta_folds, int | np.integer) and self.meta_folds >= 0,
-               f"meta_folds must be a non-negative integer, got {self.meta_folds!r}")
-        _check(isinstance(self.meta_val_fraction, int | float) and 0 < self.meta_val_fraction < 1,
-               f"meta_val_fraction must lie in (0, 1), got {self.meta_val_fraction!r}")
-        _check(isinstance(self.meta_C, int | float) and self.meta_C > 0,
-               f"meta_C must be positive, got {self.meta_C!r}")
+        for name in ("knn_weight", "top_weight"):
+            value = getattr(self, name)
+            _check(isinstance(value, int | float) and not isinstance(value, bool) and value >= 0,
+                   f"{name} must be a non-negative number, got {value!r}")
+        _check(isinstance(self.tuning_rounds, int | np.integer) and self.tuning_rounds >= 1,
+               f"tuning_rounds must be a positive integer, got {self.tuning_rounds!r}")
+
+    def _cue_weights(self) -> np.ndarray:
+        w = np.zeros(len(CUES))
+        w[CUES.index("one_minus_maxp")] = 1.0
+        w[CUES.index("log_knn1")] = float(self.knn_weight)
+        w[CUES.index("log_top")] = float(self.top_weight)
+        return w
 
     def _known_model(self, dataset: TactileDataset) -> KnownModel:
-        return KnownModel.fit(dataset, int(self.n_estimators), self.max_features, self.seed, self.n_jobs,
-                              int(self.meta_folds), float(self.meta_val_fraction), float(self.meta_C))
+        return KnownModel.fit(dataset, self._cue_weights(), int(self.n_estimators), self.max_features,
+                              self.seed, self.n_jobs)
 
     # ----------------------------------------------------------------- fitting
     def _fit(self, dataset: TactileDataset, progress: bool) -> None:
@@ -133,23 +143,24 @@ class BestRecognizer(TactileRecognizer):
         timings: dict[str, float] = {}
         y = dataset.labels
 
-        # Sect. VI-B: a probe model fitted without validation objects and held-out trials.
-        fit_idx, known_idx, val_idx = novelty_validation_split(
-            dataset, self.novelty_val_fraction, self.novelty_holdout_trials, seed=self.seed
-        )
-        if len(known_idx) == 0 or len(val_idx) == 0:
+        # Sect. VI-B: probe models fitted without validation objects and held-out trials, pooled.
+        known_scores, val_scores = [], []
+        for r in range(int(self.tuning_rounds)):
+            fit_idx, known_idx, val_idx = novelty_validation_split(
+                dataset, self.novelty_val_fraction, self.novelty_holdout_trials, seed=self.seed + r
+            )
+            if len(known_idx) == 0 or len(val_idx) == 0:
+                continue
+            probe = self._known_model(relabelled(dataset, fit_idx))
+            known_scores.append(probe.scores(flatten(dataset.samples[known_idx]))[2])
+            val_scores.append(probe.scores(flatten(dataset.samples[val_idx]))[2])
+        if not known_scores:
             raise DatasetError(
                 "novelty tuning needs validation objects and held-out trials: give every known "
                 "class at least 2 trials"
             )
-        sub = dataset.subset(fit_idx)
-        probe = self._known_model(sub.select_classes(np.unique(sub.labels)))
-        self.novelty_tuning = tune_threshold(
-            probe.scores(flatten(dataset.samples[known_idx]))[2],
-            probe.scores(flatten(dataset.samples[val_idx]))[2],
-        )
+        self.novelty_tuning = tune_threshold(np.concatenate(known_scores), np.concatenate(val_scores))
         self.novelty_threshold = float(self.novelty_tuning.threshold)
-        del probe
         timings["novelty_tuning_s"] = time.perf_counter() - t0
 
         # The deployed parts, on every known class.
@@ -171,7 +182,7 @@ class BestRecognizer(TactileRecognizer):
             "nd_val_novel": self.novelty_tuning.val_novel_at_threshold,
             "nd_val_auroc": self.novelty_tuning.auroc,
             "forest_nodes": int(len(self.known_.cues_model.forest.feature)),
-            "novelty_cue_weights": dict(zip(CUES, self.known_.combiner.coef.tolist(), strict=True)),
+            "novelty_tuning_rounds": len(known_scores),
             "timings": timings,
             "params": self.get_params(),
         }
@@ -259,7 +270,7 @@ class BestRecognizer(TactileRecognizer):
         n_features = int(np.prod(self.input_shape))
         if int(meta["n_features"]) != n_features:
             raise ValueError(f"forest expects {meta['n_features']} features, inputs have {n_features}")
-        self.known_ = KnownModel.from_state(part("known/"), n_classes, n_features)
+        self.known_ = KnownModel.from_state(part("known/"), self._cue_weights(), n_classes, n_features)
         self.attributes_ = LinearAttributeModel.from_state(part("attributes/"))
         self.prior_ = np.asarray(arrays["prior"], np.float64)
         if self.attributes_.weights.shape[1] != n_features or len(self.prior_) != len(self.registry.attribute_names):

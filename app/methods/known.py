@@ -1,39 +1,41 @@
-"""Known classes and novelty for the ``best`` method: an extra-trees forest plus a learned
-novelty score that combines several cues.
+"""Known classes and novelty for the ``best`` method: an extra-trees forest, and a novelty
+score that adds nearest-neighbour distances to the forest's confidence.
 
-Cues of a sample (all "higher = more novel"):
+Cues of a sample (all "higher = more novel"), ``CUES`` in this order:
 
 - ``1 - max p``: one minus the forest's largest class probability (the extra-trees
   baseline's whole score);
 - the entropy of the forest's class distribution, and minus the gap between its
   two largest probabilities;
-- ``log knn``: the log mean squared distance to the 3 nearest training samples in
-  a feature-weighted space (each robust-scaled feature divided by its pooled
-  within-class spread and multiplied by its Fisher ratio to the power 1/4), which
-  sees how far a sample lies from every known object's trials rather than which
-  object the forest would vote for.
+- ``log knn3``, ``log knn1``, ``log top``: the log mean squared distance to the 3
+  nearest training samples, to the nearest one, and to the nearest training
+  sample of the forest's top class, in a feature-weighted space (each
+  robust-scaled feature divided by its pooled within-class spread and multiplied
+  by its Fisher ratio to the power 1/4), each relative to the same distance
+  measured inside the training set between different trials (``_offsets``).
+  They see how far a sample lies from the known objects' trials rather than
+  which object the forest would vote for.
 
-A logistic regression combines the standardised cues. It is trained on
-*pseudo-novel* objects carved from the known set: in each of ``meta_folds``
-folds, ``novelty_validation_split`` removes some known objects entirely (they
-play novel) and one trial of every other object (it plays known); a fold model
-fitted on the rest scores both. Only known-class data is ever used, and the
-recognizer tunes its threshold on yet another, outer validation split (Sect. VI-B).
+The novelty score is a fixed weighted sum of the cues (by default
+``1 - max p + 0.1 log knn1 + 0.1 log top``). Fixed weights, not learned ones: a
+logistic combination learned on pseudo-novel objects separated known from novel
+samples as well (AUROC) but its scale moved between the Sect. VI-B probe and the
+deployed model, so the tuned threshold did not carry over (see bench/explore_best.py
+and docs/RESULTS.md).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from sklearn.ensemble import ExtraTreesClassifier
-from sklearn.linear_model import LogisticRegression
 
-from app.data.dataset import DatasetError, TactileDataset
-from app.framework.novelty import novelty_validation_split
+from app.data.dataset import TactileDataset
 from app.framework.scaling import RobustInputScaler
 from app.methods.forest import FlatForest
 
-CUES = ("one_minus_maxp", "entropy", "neg_gap", "log_knn")
+CUES = ("one_minus_maxp", "entropy", "neg_gap", "log_knn3", "log_knn1", "log_top")
 _KNN = 3
+_EPS = 1e-6
 
 
 def flatten(samples: np.ndarray) -> np.ndarray:
@@ -53,21 +55,35 @@ class ForestCues:
     """Scaler + forest + weighted reference samples: the known-class model and raw cues."""
 
     def __init__(self, scaler: RobustInputScaler, forest: FlatForest, weights: np.ndarray,
-                 reference: np.ndarray) -> None:
+                 reference: np.ndarray, reference_labels: np.ndarray, offsets: np.ndarray) -> None:
         self.scaler = scaler
         self.forest = forest
         self.weights = np.asarray(weights, np.float32)
         self.reference = np.asarray(reference, np.float32)
+        self.reference_labels = np.asarray(reference_labels, np.int64)
+        if self.reference_labels.shape != (len(self.reference),):
+            raise ValueError("novelty reference samples and labels differ in number")
+        if len(self.reference_labels) and (self.reference_labels.min() < 0
+                                           or self.reference_labels.max() >= forest.n_classes):
+            raise ValueError("novelty reference labels are out of range")
+        # log-distance offsets: knn3, knn1 (global), then each class's own trial spacing
+        self.offsets = np.asarray(offsets, np.float64)
+        if self.offsets.shape != (2 + forest.n_classes,):
+            raise ValueError("novelty distance offsets do not match the classes")
+        ref = self.reference.astype(np.float64)
+        self._ref64, self._ref_sq = ref, (ref**2).sum(axis=1)
 
     @classmethod
-    def fit(cls, x: np.ndarray, y: np.ndarray, n_classes: int, n_estimators: int, max_features,
-            seed: int, n_jobs: int | None) -> ForestCues:
+    def fit(cls, x: np.ndarray, y: np.ndarray, trials: np.ndarray, n_classes: int, n_estimators: int,
+            max_features, seed: int, n_jobs: int | None) -> ForestCues:
         scaler = RobustInputScaler().fit(x)
         z = scaler.transform(x)
         et = ExtraTreesClassifier(n_estimators=n_estimators, max_features=max_features,
                                   random_state=seed, n_jobs=n_jobs).fit(z, y)
         w = fisher_weights(z, y, n_classes)
-        return cls(scaler, FlatForest.from_sklearn(et), w, z * w)
+        ref = z * w
+        return cls(scaler, FlatForest.from_sklearn(et), w, ref, y,
+                   _offsets(ref, np.asarray(y), np.asarray(trials), n_classes))
 
     def scaled(self, x: np.ndarray) -> np.ndarray:
         return self.scaler.transform(x)
@@ -80,19 +96,20 @@ class ForestCues:
         top = np.sort(proba, axis=1)
         entropy = -(proba * np.log(np.clip(proba, 1e-12, None))).sum(axis=1)
         gap = top[:, -1] - (top[:, -2] if proba.shape[1] > 1 else 0.0)
-        q = z * self.weights
-        # squared distances by the expansion |q|^2 - 2 q.r + |r|^2, in float64 to avoid cancellation
-        d2 = ((q.astype(np.float64) ** 2).sum(axis=1)[:, None]
-              - 2.0 * q.astype(np.float64) @ self.reference.T.astype(np.float64)
-              + (self.reference.astype(np.float64) ** 2).sum(axis=1)[None, :])
-        k = min(_KNN, d2.shape[1])
-        knn = np.partition(np.maximum(d2, 0.0), k - 1, axis=1)[:, :k].mean(axis=1)
-        return np.stack([1.0 - top[:, -1], entropy, -gap, np.log(knn + 1e-6)], axis=1)
+        d2 = _sq_distances((z * self.weights).astype(np.float64), self._ref64, self._ref_sq)
+        knn3, knn1 = _knn(d2)
+        best = proba.argmax(axis=1)
+        own = self.reference_labels[None, :] == best[:, None]
+        top_d = np.where(own, d2, np.inf).min(axis=1)
+        off = self.offsets
+        return np.stack([1.0 - top[:, -1], entropy, -gap, np.log(knn3 + _EPS) - off[0],
+                         np.log(knn1 + _EPS) - off[1], np.log(top_d + _EPS) - off[2 + best]], axis=1)
 
     def get_state(self) -> dict[str, np.ndarray]:
         out = {f"forest/{k}": v for k, v in self.forest.get_state().items()}
         out.update({f"scaler/{k}": v for k, v in self.scaler.get_state().items()})
         out["weights"], out["reference"] = self.weights, self.reference
+        out["reference_labels"], out["offsets"] = self.reference_labels, self.offsets
         return out
 
     @classmethod
@@ -106,99 +123,79 @@ class ForestCues:
         weights, reference = arrays["weights"], arrays["reference"]
         if weights.shape != (n_features,) or reference.ndim != 2 or reference.shape[1] != n_features:
             raise ValueError("novelty reference samples do not match the inputs")
-        return cls(scaler, forest, weights, reference)
+        return cls(scaler, forest, weights, reference, arrays["reference_labels"], arrays["offsets"])
 
 
-class CueCombiner:
-    """Standardise the cues, then a logistic regression's decision function (higher = more novel)."""
-
-    def __init__(self, mean: np.ndarray, scale: np.ndarray, coef: np.ndarray, intercept: float) -> None:
-        self.mean = np.asarray(mean, np.float64)
-        self.scale = np.asarray(scale, np.float64)
-        self.coef = np.asarray(coef, np.float64)
-        self.intercept = float(intercept)
-        if not (self.mean.shape == self.scale.shape == self.coef.shape == (len(CUES),)):
-            raise ValueError(f"the cue combiner needs {len(CUES)} weights")
-
-    @classmethod
-    def fit(cls, cues: np.ndarray, is_novel: np.ndarray, C: float) -> CueCombiner:
-        mean, scale = cues.mean(axis=0), cues.std(axis=0)
-        scale = np.where(scale > 1e-9, scale, 1.0)
-        lr = LogisticRegression(C=C, class_weight="balanced", max_iter=1000)
-        lr.fit((cues - mean) / scale, is_novel.astype(np.int64))
-        return cls(mean, scale, lr.coef_[0], lr.intercept_[0])
-
-    @classmethod
-    def only_maxp(cls) -> CueCombiner:
-        """1 - max p alone (used when the known set is too small for pseudo-novel folds)."""
-        coef = np.zeros(len(CUES))
-        coef[0] = 1.0
-        return cls(np.zeros(len(CUES)), np.ones(len(CUES)), coef, 0.0)
-
-    def score(self, cues: np.ndarray) -> np.ndarray:
-        return ((cues - self.mean) / self.scale) @ self.coef + self.intercept
-
-    def get_state(self) -> dict[str, np.ndarray]:
-        return {"mean": self.mean, "scale": self.scale, "coef": self.coef,
-                "intercept": np.asarray([self.intercept])}
-
-    @classmethod
-    def from_state(cls, arrays: dict[str, np.ndarray]) -> CueCombiner:
-        return cls(arrays["mean"], arrays["scale"], arrays["coef"], float(arrays["intercept"][0]))
+def _sq_distances(q: np.ndarray, ref: np.ndarray, ref_sq: np.ndarray) -> np.ndarray:
+    """Squared distances |q|^2 - 2 q.r + |r|^2 (float64 against cancellation), floored at 0."""
+    return np.maximum((q**2).sum(axis=1)[:, None] - 2.0 * q @ ref.T + ref_sq[None, :], 0.0)
 
 
-def _relabelled(dataset: TactileDataset, idx: np.ndarray) -> TactileDataset:
-    sub = dataset.subset(idx)
-    return sub.select_classes(np.unique(sub.labels))
+def _knn(d2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean of the (up to) 3 smallest squared distances per row, and the smallest."""
+    k = min(_KNN, d2.shape[1])
+    part = np.partition(d2, k - 1, axis=1)[:, :k]
+    return part.mean(axis=1), part.min(axis=1)
+
+
+def _offsets(ref: np.ndarray, y: np.ndarray, trials: np.ndarray, n_classes: int) -> np.ndarray:
+    """Typical log distances *within* the reference set, each sample compared with the samples
+    of other trials only: median log knn3 and knn1 over all samples, and per class the median
+    log distance to the nearest other trial of the same class (the class's trial spacing).
+
+    Subtracting them makes the distance cues relative to the reference's own density, which
+    differs between the Sect. VI-B probe (one trial per class held out, fewer classes) and the
+    deployed model; without it the tuned threshold did not carry over.
+    """
+    ref = ref.astype(np.float64)
+    d2 = _sq_distances(ref, ref, (ref**2).sum(axis=1))
+    d2[trials[:, None] == trials[None, :]] = np.inf
+    if not np.isfinite(d2).any(axis=1).all():
+        return np.zeros(2 + n_classes)
+    knn3, knn1 = _knn(d2)
+    own = np.where(y[:, None] == y[None, :], d2, np.inf).min(axis=1)
+    log_own = np.log(own + _EPS)
+    fallback = float(np.median(log_own[np.isfinite(log_own)])) if np.isfinite(log_own).any() else 0.0
+    spacing = np.array([
+        float(np.median(log_own[(y == c) & np.isfinite(log_own)])) if np.isfinite(log_own[y == c]).any()
+        else fallback
+        for c in range(n_classes)
+    ])
+    return np.r_[np.median(np.log(knn3 + _EPS)), np.median(np.log(knn1 + _EPS)), spacing]
 
 
 class KnownModel:
-    """ForestCues + CueCombiner: ``known_proba`` and the novelty score of the best method."""
+    """ForestCues and fixed cue weights: ``known_proba`` and the novelty score of the best method."""
 
-    def __init__(self, cues: ForestCues, combiner: CueCombiner) -> None:
+    def __init__(self, cues: ForestCues, weights: np.ndarray) -> None:
         self.cues_model = cues
-        self.combiner = combiner
+        self.weights = np.asarray(weights, np.float64)
+        if self.weights.shape != (len(CUES),):
+            raise ValueError(f"the novelty score needs {len(CUES)} cue weights")
 
     @classmethod
-    def fit(cls, dataset: TactileDataset, n_estimators: int, max_features, seed: int,
-            n_jobs: int | None, meta_folds: int, meta_val_fraction: float, meta_C: float) -> KnownModel:
-        x, y, k = flatten(dataset.samples), dataset.labels, dataset.n_classes
-        cues, labels = [], []
-        for f in range(meta_folds):
-            try:
-                fit_idx, known_idx, val_idx = novelty_validation_split(
-                    dataset, meta_val_fraction, 1, seed=seed + 1009 * (f + 1))
-            except DatasetError:
-                break
-            if len(known_idx) == 0 or len(val_idx) == 0:
-                break
-            sub = _relabelled(dataset, fit_idx)
-            fold = ForestCues.fit(flatten(sub.samples), sub.labels, sub.n_classes, n_estimators,
-                                  max_features, seed + f + 1, n_jobs)
-            for idx, novel in ((known_idx, 0), (val_idx, 1)):
-                z = fold.scaled(x[idx])
-                cues.append(fold.cues(z, fold.proba(z)))
-                labels.append(np.full(len(idx), novel))
-        if cues:
-            combiner = CueCombiner.fit(np.concatenate(cues), np.concatenate(labels), meta_C)
-        else:
-            combiner = CueCombiner.only_maxp()
-        model = ForestCues.fit(x, y, k, n_estimators, max_features, seed, n_jobs)
-        return cls(model, combiner)
+    def fit(cls, dataset: TactileDataset, weights: np.ndarray, n_estimators: int, max_features,
+            seed: int, n_jobs: int | None) -> KnownModel:
+        cues = ForestCues.fit(flatten(dataset.samples), dataset.labels, dataset.trials, dataset.n_classes,
+                              n_estimators, max_features, seed, n_jobs)
+        return cls(cues, weights)
 
     def scores(self, x_flat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(scaled inputs, known-class probabilities, novelty scores)."""
         z = self.cues_model.scaled(x_flat)
         p = self.cues_model.proba(z)
-        return z, p, self.combiner.score(self.cues_model.cues(z, p))
+        return z, p, self.cues_model.cues(z, p) @ self.weights
 
     def get_state(self) -> dict[str, np.ndarray]:
-        out = self.cues_model.get_state()
-        out.update({f"combiner/{k}": v for k, v in self.combiner.get_state().items()})
-        return out
+        return self.cues_model.get_state()
 
     @classmethod
-    def from_state(cls, arrays: dict[str, np.ndarray], n_classes: int, n_features: int) -> KnownModel:
-        comb = {k[len("combiner/"):]: v for k, v in arrays.items() if k.startswith("combiner/")}
-        rest = {k: v for k, v in arrays.items() if not k.startswith("combiner/")}
-        return cls(ForestCues.from_state(rest, n_classes, n_features), CueCombiner.from_state(comb))
+    def from_state(cls, arrays: dict[str, np.ndarray], weights: np.ndarray, n_classes: int,
+                   n_features: int) -> KnownModel:
+        return cls(ForestCues.from_state(arrays, n_classes, n_features), weights)
+
+
+def relabelled(dataset: TactileDataset, idx: np.ndarray) -> TactileDataset:
+    """The samples ``idx`` of ``dataset``, with only the classes present, relabelled 0 … K'-1."""
+    sub = dataset.subset(idx)
+    return sub.select_classes(np.unique(sub.labels))

@@ -26,7 +26,7 @@ from app.framework.registry import make_method
 from app.methods.attributes import LinearAttributeModel, dap_log_scores
 from app.methods.best import BestRecognizer
 
-FAST = {"n_estimators": 40, "meta_folds": 2}
+FAST = {"n_estimators": 40, "tuning_rounds": 2}
 N_NOVEL = 6
 
 
@@ -188,7 +188,7 @@ def test_bad_input_raises_framework_errors(fitted, enrolled, data):
 
 @pytest.mark.parametrize("params", [
     {"n_estimators": 0}, {"attribute_C": -1.0}, {"dap_clip": 0.7}, {"shot_temperature": 0},
-    {"max_features": "all"}, {"meta_folds": -1}, {"novelty_val_fraction": 1.5}, {"meta_C": 0},
+    {"max_features": "all"}, {"tuning_rounds": 0}, {"novelty_val_fraction": 1.5}, {"knn_weight": -1},
 ])
 def test_bad_hyper_parameters(params):
     with pytest.raises(FrameworkError):
