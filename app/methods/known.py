@@ -138,30 +138,34 @@ def _knn(d2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return part.mean(axis=1), part.min(axis=1)
 
 
-def _offsets(ref: np.ndarray, y: np.ndarray, trials: np.ndarray, n_classes: int) -> np.ndarray:
+def _offsets(ref: np.ndarray, y: np.ndarray, trials: np.ndarray, n_classes: int,
+             block: int = 1024) -> np.ndarray:
     """Typical log distances *within* the reference set, each sample compared with the samples
     of other trials only: median log knn3 and knn1 over all samples, and per class the median
     log distance to the nearest other trial of the same class (the class's trial spacing).
 
     Subtracting them makes the distance cues relative to the reference's own density, which
     differs between the Sect. VI-B probe (one trial per class held out, fewer classes) and the
-    deployed model; without it the tuned threshold did not carry over.
+    deployed model (more trials and classes, so nearer neighbours for every query).
     """
     ref = ref.astype(np.float64)
-    d2 = _sq_distances(ref, ref, (ref**2).sum(axis=1))
-    d2[trials[:, None] == trials[None, :]] = np.inf
-    if not np.isfinite(d2).any(axis=1).all():
-        return np.zeros(2 + n_classes)
-    knn3, knn1 = _knn(d2)
-    own = np.where(y[:, None] == y[None, :], d2, np.inf).min(axis=1)
-    log_own = np.log(own + _EPS)
-    fallback = float(np.median(log_own[np.isfinite(log_own)])) if np.isfinite(log_own).any() else 0.0
-    spacing = np.array([
-        float(np.median(log_own[(y == c) & np.isfinite(log_own)])) if np.isfinite(log_own[y == c]).any()
-        else fallback
-        for c in range(n_classes)
-    ])
-    return np.r_[np.median(np.log(knn3 + _EPS)), np.median(np.log(knn1 + _EPS)), spacing]
+    ref_sq = (ref**2).sum(axis=1)
+    n = len(ref)
+    knn3, knn1, own = np.empty(n), np.empty(n), np.empty(n)
+    for lo in range(0, n, block):  # row blocks keep memory at block x n
+        rows = slice(lo, min(lo + block, n))
+        d2 = _sq_distances(ref[rows], ref, ref_sq)
+        d2[trials[rows, None] == trials[None, :]] = np.inf
+        knn3[rows], knn1[rows] = _knn(d2)
+        own[rows] = np.where(y[rows, None] == y[None, :], d2, np.inf).min(axis=1)
+
+    def median_log(values: np.ndarray, default: float) -> float:
+        finite = values[np.isfinite(values)]
+        return float(np.median(np.log(finite + _EPS))) if len(finite) else default
+
+    overall = median_log(own, 0.0)
+    spacing = [median_log(own[y == c], overall) for c in range(n_classes)]
+    return np.r_[median_log(knn3, 0.0), median_log(knn1, 0.0), spacing]
 
 
 class KnownModel:

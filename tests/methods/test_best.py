@@ -221,3 +221,16 @@ def test_dap_and_attribute_model():
     assert s.argmax() == 0
     again = LinearAttributeModel.from_state(model.get_state())
     assert np.array_equal(again.predict_proba(z), p)
+
+
+def test_distance_offsets_are_blockwise_exact_and_finite():
+    from app.methods.known import _offsets
+
+    rng = np.random.default_rng(0)
+    ref = rng.normal(size=(40, 5))
+    y = np.repeat(np.arange(8), 5)
+    trials = np.arange(40)
+    trials[35:] = 35  # class 7: one trial only, so it has no own-class spacing of its own
+    whole = _offsets(ref, y, trials, 8)
+    assert np.allclose(whole, _offsets(ref, y, trials, 8, block=7))
+    assert np.isfinite(whole).all() and whole.shape == (10,)
