@@ -14,6 +14,10 @@ from __future__ import annotations
 import numpy as np
 from sklearn.linear_model import LogisticRegression
 
+# DAP scoring and the softmax are the DAP baseline's own; `best` re-uses them.
+from app.baselines.common import softmax  # noqa: F401
+from app.baselines.dap import dap_log_scores  # noqa: F401
+
 
 class LinearAttributeModel:
     """p(a_m = 1 | z) = sigmoid(z · w_m + b_m); an attribute constant over the known
@@ -58,19 +62,3 @@ class LinearAttributeModel:
     def from_state(cls, arrays: dict[str, np.ndarray]) -> LinearAttributeModel:
         return cls(arrays["weights"], arrays["bias"], arrays["constant"])
 
-
-def dap_log_scores(attr_proba: np.ndarray, class_attributes: np.ndarray, prior: np.ndarray,
-                   clip: float) -> np.ndarray:
-    """(N, L) DAP log-scores of L classes, up to a per-sample constant."""
-    p = np.clip(attr_proba, clip, 1 - clip)
-    q = np.clip(prior, clip, 1 - clip)
-    a = (np.asarray(class_attributes) > 0.5).astype(np.float64)
-    log_like = np.log(p) @ a.T + np.log1p(-p) @ (1 - a).T
-    log_prior = np.log(q) @ a.T + np.log1p(-q) @ (1 - a).T
-    return log_like - log_prior[None, :]
-
-
-def softmax(logits: np.ndarray) -> np.ndarray:
-    z = logits - logits.max(axis=1, keepdims=True)
-    e = np.exp(z)
-    return e / e.sum(axis=1, keepdims=True)
