@@ -18,6 +18,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from app.framework import bundle
 from app.framework.recognizer import TactileRecognizer
 from app.service.metrics import Metrics
+from app.service.polling import Poller
 from app.store import repo
 
 log = logging.getLogger(__name__)
@@ -30,18 +31,19 @@ class LoadedModel:
     class_ids: dict[str, int]  # class name -> store id, for API responses
 
 
-class ModelHolder:
+class ModelHolder(Poller):
+    _thread_name = "model-poll"
+    _failure = "could not load the active model version"
+
     def __init__(
         self, sessions: sessionmaker[Session], poll_seconds: float = 0.5,
         metrics: Metrics | None = None,
     ) -> None:
+        super().__init__(poll_seconds)
         self._sessions = sessions
-        self._poll = poll_seconds
         self._metrics = metrics
         self._current: LoadedModel | None = None
         self._load_lock = threading.Lock()  # one load at a time; readers never take it
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
 
     @property
     def current(self) -> LoadedModel | None:
@@ -64,20 +66,3 @@ class ModelHolder:
             self._metrics.active_version.set(version)
         log.info("serving model version %s", version)
         return True
-
-    def start(self) -> None:
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name="model-poll", daemon=True)
-        self._thread.start()
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5)
-
-    def _run(self) -> None:
-        while not self._stop.wait(self._poll):
-            try:
-                self.refresh()
-            except Exception:  # keep serving the old model; try again next tick
-                log.exception("could not load the active model version")

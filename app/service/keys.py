@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.service.polling import Poller
 from app.store import repo
 
 log = logging.getLogger(__name__)
@@ -37,17 +38,18 @@ class Principal:
         return RANK[self.scope] >= RANK[scope]
 
 
-class KeyRing:
+class KeyRing(Poller):
+    _thread_name = "api-keys"
+    _failure = "could not read the API keys"
+
     def __init__(
         self, sessions: sessionmaker[Session], env_keys: list[str], poll_seconds: float = 1.0
     ) -> None:
+        super().__init__(poll_seconds)
         self._sessions = sessions
         self._env_keys = env_keys  # the settings' list: read at each refresh
-        self._poll = poll_seconds
         self._table: dict[str, tuple[str, str, str]] = {}  # sha256 -> (principal, scope, sha256)
         self._required = False
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
 
     @property
     def required(self) -> bool:
@@ -73,23 +75,6 @@ class KeyRing:
         if entry is None or not hmac.compare_digest(entry[2].encode(), sha.encode()):
             return None
         return Principal(entry[0], entry[1])
-
-    def start(self) -> None:
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name="api-keys", daemon=True)
-        self._thread.start()
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5)
-
-    def _run(self) -> None:
-        while not self._stop.wait(self._poll):
-            try:
-                self.refresh()
-            except Exception:  # keep the last known keys; try again next tick
-                log.exception("could not read the API keys")
 
 
 class RateLimiter:
