@@ -7,32 +7,20 @@ import itertools
 import json
 import os
 import signal
-import socket
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import httpx
 import numpy as np
 import pytest
-from service_fixtures import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS, quick_dataset
+
+from tests.reliability.harness import STARTUP_TIMEOUT, free_port, tactile_zsl
+from tests.service_fixtures import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS, quick_dataset
 
 pytestmark = pytest.mark.slow
 
-STARTUP_TIMEOUT = 420  # the first start trains the (small) base model
 JOB_TIMEOUT = 180
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def tactile_zsl() -> list[str]:
-    script = Path(sys.executable).with_name("tactile-zsl")
-    return [str(script)] if script.exists() else [sys.executable, "-m", "app.cli"]
 
 
 class Service:
