@@ -47,5 +47,6 @@ def run(args: argparse.Namespace) -> int:
         ensure_ready(settings, engine, make_sessionmaker(engine))
     finally:
         engine.dispose()
-    uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level="info")
+    uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level="info",
+                access_log=settings.access_log)
     return 0

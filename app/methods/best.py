@@ -39,6 +39,7 @@ from app.data.dataset import DatasetError, TactileDataset
 from app.framework.errors import FrameworkError
 from app.framework.novelty import novelty_validation_split, tune_threshold
 from app.framework.recognizer import TactileRecognizer
+from app.framework.runtime import configure_torch_threads  # noqa: F401  (sets torch and BLAS threads)
 from app.methods.attributes import LinearAttributeModel, dap_log_scores, softmax
 from app.methods.known import CUES, KnownModel, flatten, relabelled
 

@@ -38,7 +38,7 @@ class FlatForest:
         self.leaf_value = np.asarray(arrays["leaf_value"], np.float64)
         self.n_classes = int(n_classes)
         self.n_features = int(n_features)
-        self._walk: tuple[np.ndarray, ...] | None = None
+        self._children: np.ndarray | None = None  # (left, right) interleaved, built on first use
         self._check()
 
     def _check(self) -> None:
@@ -112,23 +112,28 @@ class FlatForest:
         x = np.asarray(x, np.float32)  # scikit-learn compares float32 inputs with float64 thresholds
         if x.ndim != 2 or x.shape[1] != self.n_features:
             raise ValueError(f"expected inputs of shape (N, {self.n_features}), got {x.shape}")
-        if self._walk is None:
-            self._walk = self._walk_arrays()
-        feature, threshold, left, right = self._walk
-        node = np.tile(self.roots, (len(x), 1))
-        rows = np.arange(len(x))[:, None]
-        # Leaves loop onto themselves, so every sample can step as often as the deepest path.
+        if self._children is None:
+            self._children = np.stack([self.left, self.right], axis=1).ravel()
+        n, t = len(x), self.n_trees
+        out = np.empty(n * t, np.int64)
+        # One (sample, tree) walker per entry, all stepped together; a walker leaves the
+        # active set at its leaf, so each step costs only the paths still descending.
+        walker = np.arange(n * t)
+        offset = np.repeat(np.arange(n, dtype=np.int64) * self.n_features, t)  # row start in x
+        node = np.tile(self.roots.astype(np.int64), n)
+        feature = self.feature[node]
+        flat = x.ravel()
         while True:
-            nxt = np.where(x[rows, feature[node]] <= threshold[node], left[node], right[node])
-            if np.array_equal(nxt, node):
-                return node
-            node = nxt
-
-    def _walk_arrays(self) -> tuple[np.ndarray, ...]:
-        leaf = self.feature < 0
-        own = np.arange(len(self.feature), dtype=np.int32)
-        return (np.where(leaf, 0, self.feature), np.where(leaf, np.inf, self.threshold),
-                np.where(leaf, own, self.left), np.where(leaf, own, self.right))
+            descending = feature >= 0
+            if not descending.all():
+                out[walker[~descending]] = node[~descending]
+                walker, node = walker[descending], node[descending]
+                offset, feature = offset[descending], feature[descending]
+                if not len(walker):
+                    return out.reshape(n, t)
+            go_right = flat[offset + feature] > self.threshold[node]
+            node = self._children[2 * node + go_right]
+            feature = self.feature[node]
 
     def predict_proba(self, x: np.ndarray) -> np.ndarray:
         """(N, K) mean over trees of the reached leaf's class distribution."""

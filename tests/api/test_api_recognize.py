@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from app.api.schemas import RecognizeResponse
 from tests.service_fixtures import npy
 
 PROBLEM = "application/problem+json"
@@ -35,6 +36,20 @@ def test_json_batch(client, dataset):
         probs = [s["probability"] for s in res["top_k"]]
         assert probs == sorted(probs, reverse=True)
         assert res["top_k"][0]["class_name"] == res["class_name"]
+    RecognizeResponse.model_validate(body)  # the documented schema, field for field
+
+
+def test_fast_json_path_agrees_with_the_validating_one(client, dataset):
+    """Well-formed numbers take the orjson fast path; a body it does not take (here a
+    numeric string, which the schema coerces) goes through pydantic: same answers."""
+    x = dataset.samples[:2].astype(np.float64)
+    fast = client.post("/v1/recognize", json={"samples": x.tolist()}).json()
+    as_ints = client.post("/v1/recognize", json={"samples": np.rint(x * 0).astype(int).tolist()})
+    assert as_ints.status_code == 200
+    slow_body = x.tolist()
+    slow_body[0][0][0] = str(slow_body[0][0][0])
+    slow = client.post("/v1/recognize", json={"samples": slow_body}).json()
+    assert slow == fast
 
 
 def test_npy_batch_matches_json(client, dataset):
