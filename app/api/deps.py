@@ -16,10 +16,10 @@ from sqlalchemy.orm import Session
 
 from app.api.problems import Problem
 from app.config import Settings
-from app.service.batcher import RecognitionBatcher
 from app.service.holder import LoadedModel, ModelHolder
 from app.service.keys import Principal, retry_after
 from app.service.metrics import Metrics
+from app.service.recognition import RecognitionService
 from app.store import repo
 
 # async: trivial dependencies then run on the event loop, not in the thread pool
@@ -33,8 +33,8 @@ async def get_holder(request: Request) -> ModelHolder:
     return request.app.state.holder
 
 
-async def get_batcher(request: Request) -> RecognitionBatcher:
-    return request.app.state.batcher
+async def get_recognition(request: Request) -> RecognitionService:
+    return request.app.state.recognition
 
 
 async def get_metrics(request: Request) -> Metrics:
@@ -169,7 +169,7 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 SessionDep = Annotated[Session, Depends(get_session)]
 HolderDep = Annotated[ModelHolder, Depends(get_holder)]
 MetricsDep = Annotated[Metrics, Depends(get_metrics)]
-BatcherDep = Annotated[RecognitionBatcher, Depends(get_batcher)]
+RecognitionDep = Annotated[RecognitionService, Depends(get_recognition)]
 ModelDep = Annotated[LoadedModel, Depends(get_model)]
 ReadAccess = Depends(require_read)
 EnrollAccess = Depends(require_enroll)

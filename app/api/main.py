@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import logging
 import time
 from collections.abc import AsyncIterator
@@ -21,11 +22,11 @@ from app.api import problems
 from app.api.deps import Replay, replay_handler
 from app.api.routes import attributes, classes, health, jobs, models, recognize, samples
 from app.config import Settings
-from app.service.batcher import RecognitionBatcher
 from app.service.bootstrap import Trainer, ensure_ready
 from app.service.holder import ModelHolder
 from app.service.keys import KeyRing, RateLimiter
 from app.service.metrics import Metrics
+from app.service.recognition import RecognitionService
 from app.store.db import make_engine, make_sessionmaker
 
 log = logging.getLogger(__name__)
@@ -49,6 +50,11 @@ def create_app(settings: Settings | None = None, trainer: Trainer | None = None)
         await run_in_threadpool(ensure_ready, settings, engine, sessions, trainer)
         await run_in_threadpool(holder.refresh)
         await run_in_threadpool(keys.refresh)
+        # Everything imported and loaded so far (torch, pydantic, the model) lives as long
+        # as the process: out of the collector's sight, a full collection under load takes
+        # ~1 ms instead of ~165 ms, which was most of the p99 recognition latency.
+        gc.collect()
+        gc.freeze()
         holder.start()
         keys.start()
         embedded = None
@@ -80,7 +86,7 @@ def create_app(settings: Settings | None = None, trainer: Trainer | None = None)
     app.state.sessions = sessions
     app.state.holder = holder
     app.state.metrics = metrics
-    app.state.batcher = RecognitionBatcher()
+    app.state.recognition = RecognitionService(metrics, settings.top_k, settings.batch_limit)
     app.state.keys = keys
     app.state.limiter = RateLimiter(settings.rate_limit, settings.rate_burst)
     problems.install(app)

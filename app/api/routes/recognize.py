@@ -8,7 +8,7 @@ from fastapi.exceptions import RequestValidationError
 from pydantic import ValidationError
 
 from app.api import problems
-from app.api.deps import BatcherDep, MetricsDep, ModelDep, ReadAccess, SettingsDep
+from app.api.deps import ModelDep, ReadAccess, RecognitionDep
 from app.api.problems import Problem, blame
 from app.api.schemas import RecognizeRequest, RecognizeResponse
 
@@ -19,9 +19,8 @@ router = APIRouter(
 
 NPY = "application/x-npy"
 # Bodies above this are parsed in the thread pool, so one big JSON batch cannot stall
-# the event loop; batches up to COALESCE samples share forward passes (see batcher).
+# the event loop.
 PARSE_INLINE_BYTES = 64 * 1024
-COALESCE = 64
 
 # The body is read by hand to accept JSON or .npy; this documents both.
 REQUEST_BODY = {
@@ -44,10 +43,7 @@ REQUEST_BODY = {
     "/recognize", response_model=RecognizeResponse, openapi_extra=REQUEST_BODY,
     responses=problems.responses(413, 422, 503),
 )
-async def recognize(
-    request: Request, model: ModelDep, settings: SettingsDep, metrics: MetricsDep,
-    batcher: BatcherDep,
-) -> Response:
+async def recognize(request: Request, model: ModelDep, service: RecognitionDep) -> Response:
     """Recognise a batch of samples as known or novel objects.
 
     Send `{"samples": [...]}` as JSON, or the same batch as a binary `.npy` body
@@ -63,22 +59,12 @@ async def recognize(
         samples = await run_in_threadpool(_from_json, body) if len(body) > PARSE_INLINE_BYTES \
             else _from_json(body)
         n = len(samples)
-    if n > settings.batch_limit:
+    if n > service.batch_limit:
         raise Problem(
-            422, f"{n} samples is more than the batch limit of {settings.batch_limit}", "samples"
+            422, f"{n} samples is more than the batch limit of {service.batch_limit}", "samples"
         )
-    # inference runs off the event loop; `model` stays this request's snapshot
     with blame("samples"):
-        if n <= COALESCE:
-            x = rec.validate_samples(samples)  # each request's own errors, before sharing a pass
-            results = await batcher.recognize(model, x, settings.top_k)
-        else:
-            results = await run_in_threadpool(rec.recognize, samples, settings.top_k)
-    counts: dict[str, int] = {}
-    for r in results:
-        counts[r.kind] = counts.get(r.kind, 0) + 1
-    for kind, count in counts.items():
-        metrics.recognitions.labels(kind).inc(count)
+        results = await service.recognize(model, samples, n)
     # Serialised directly (the shape is RecognizeResponse, which documents it): building
     # and re-validating pydantic models cost more than the forward pass of one sample.
     ids = model.class_ids

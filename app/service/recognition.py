@@ -1,0 +1,43 @@
+"""What ``POST /v1/recognize`` does once its body is parsed, behind one dependency.
+
+Small requests (up to ``coalesce`` samples) are validated on their own, so each gets
+its own errors, then share forward passes through the RecognitionBatcher; larger
+ones run alone in the thread pool. Recognitions are counted for /metrics.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from fastapi.concurrency import run_in_threadpool
+
+from app.framework.recognizer import Recognition
+from app.service.batcher import RecognitionBatcher
+from app.service.holder import LoadedModel
+from app.service.metrics import Metrics
+
+
+class RecognitionService:
+    def __init__(
+        self, metrics: Metrics, top_k: int, batch_limit: int, coalesce: int = 64,
+        batcher: RecognitionBatcher | None = None,
+    ) -> None:
+        self.metrics = metrics
+        self.top_k = top_k
+        self.batch_limit = batch_limit
+        self.coalesce = coalesce
+        self.batcher = batcher or RecognitionBatcher()
+
+    async def recognize(self, model: LoadedModel, samples: np.ndarray | list, n: int) -> list[Recognition]:
+        """Recognise ``n`` samples with ``model``, the caller's snapshot to the end."""
+        rec = model.recognizer
+        if n <= self.coalesce:
+            x = rec.validate_samples(samples)
+            results = await self.batcher.recognize(model, x, self.top_k)
+        else:
+            results = await run_in_threadpool(rec.recognize, samples, self.top_k)
+        counts: dict[str, int] = {}
+        for r in results:
+            counts[r.kind] = counts.get(r.kind, 0) + 1
+        for kind, count in counts.items():
+            self.metrics.recognitions.labels(kind).inc(count)
+        return results
