@@ -32,6 +32,24 @@ def test_matches_sklearn(data, cls):
     assert flat.n_trees == 25
 
 
+def test_inputs_at_the_thresholds_go_where_sklearn_sends_them(data):
+    """The walk compares in float32; values on and right beside each float64 threshold
+    must still take scikit-learn's branch."""
+    x, y = data
+    model = ExtraTreesClassifier(n_estimators=10, random_state=0).fit(x, y)
+    flat = FlatForest.from_sklearn(model)
+    internal = flat.feature >= 0
+    rows = []
+    for f, t in zip(flat.feature[internal][:200], flat.threshold[internal][:200], strict=True):
+        t32 = np.float32(t)
+        for v in (t32, np.nextafter(t32, np.float32(-np.inf)), np.nextafter(t32, np.float32(np.inf))):
+            row = x[len(rows) % len(x)].copy()
+            row[f] = v
+            rows.append(row)
+    q = np.asarray(rows, np.float32)
+    assert np.array_equal(flat.apply(q) - flat.roots[None, :], model.apply(q))
+
+
 def test_state_is_plain_arrays_and_round_trips(data):
     x, y = data
     flat = FlatForest.from_sklearn(ExtraTreesClassifier(n_estimators=10, random_state=0).fit(x, y))
