@@ -74,6 +74,10 @@ class Settings(BaseSettings):
         0.5, gt=0, description="How often an API process checks for a new active model."
     )
     worker_poll_seconds: float = Field(0.2, gt=0, description="How often a worker looks for jobs.")
+    worker_nice: int = Field(
+        5, ge=0, le=19, description="Scheduling niceness of the retraining worker, so retrains "
+        "yield the CPU to recognition on a shared machine; 0 = same priority."
+    )
     lease_seconds: float = Field(
         30.0, gt=0, description="A worker or bootstrap lock not renewed for this long is taken over."
     )

@@ -5,9 +5,9 @@
 The service runs as deployed by default (the embedded simulated dataset, the default
 method, no rate limit). A lean asyncio HTTP/1.1 client measures requests/s and p50/p99
 latency of single-sample JSON recognition and of binary (.npy) batch recognition, then
-the enrollment-to-live time
-(POST /v1/classes until the class is in the active model of *both* API processes) while
-the single-sample load keeps running. Only 127.0.0.1 is ever targeted.
+the enrollment-to-live times (POST /v1/classes, then POST /v1/classes/{id}/samples, until
+the job succeeded and *both* API processes serve its model version), idle and while the
+single-sample load runs. Only 127.0.0.1 is ever targeted.
 """
 
 from __future__ import annotations
@@ -77,16 +77,18 @@ class Connection:
             self.writer = None
 
 
-async def hammer(urls, seconds, clients, request: bytes) -> dict:
-    """``clients`` connections, each sending ``request`` back to back for ``seconds``."""
+async def hammer(urls, seconds, clients, request: bytes, stop: asyncio.Event | None = None) -> dict:
+    """``clients`` connections, each sending ``request`` back to back for ``seconds`` (or
+    until ``stop`` is set)."""
     latencies, errors = [], 0
     deadline = time.monotonic() + seconds
+    stop = stop or asyncio.Event()
 
     async def one(i: int) -> None:
         nonlocal errors
         conn = Connection(urls[i % len(urls)])
         try:
-            while time.monotonic() < deadline:
+            while time.monotonic() < deadline and not stop.is_set():
                 t = time.perf_counter()
                 try:
                     ok = await conn.send(request) == 200
@@ -107,22 +109,38 @@ async def hammer(urls, seconds, clients, request: bytes) -> dict:
             "p50_ms": round(pct(latencies, 50), 2), "p99_ms": round(pct(latencies, 99), 2)}
 
 
-async def enrollment_to_live(urls, dataset, n: int, offset: int) -> list[float]:
+async def enrollment_to_live(urls, dataset, n: int, offset: int) -> dict[str, list[float]]:
+    """Seconds from ``POST /v1/classes``, then from ``POST …/samples`` (one real sample of
+    the new class), until every API process serves a model that includes it."""
     vectors = unused_vectors(dataset, offset + n)[offset:]
-    times = []
+    times: dict[str, list[float]] = {"class": [], "sample": []}
     async with httpx.AsyncClient(timeout=30) as c:
+
+        async def live(job: dict) -> None:
+            while job["status"] != "succeeded":
+                if job["status"] == "failed":
+                    raise RuntimeError(f"enrollment job failed: {job['error']}")
+                await asyncio.sleep(0.02)
+                job = (await c.get(f"{urls[0]}/v1/jobs/{job['id']}")).json()
+            pending = list(urls)
+            while pending:
+                for url in list(pending):
+                    active = (await c.get(f"{url}/v1/models/active")).json()["version"]
+                    if active >= job["model_version"]:
+                        pending.remove(url)
+                await asyncio.sleep(0.02)
+
         for i, v in enumerate(vectors):
             t = time.perf_counter()
             r = await c.post(f"{urls[0]}/v1/classes",
                              json={"name": f"load-{offset + i}", "attribute_vector": v})
-            cid = r.json()["class"]["id"]
-            pending = list(urls)
-            while pending:
-                for url in list(pending):
-                    if (await c.get(f"{url}/v1/classes/{cid}")).json()["in_active_model"]:
-                        pending.remove(url)
-                await asyncio.sleep(0.02)
-            times.append(time.perf_counter() - t)
+            await live(r.json()["job"])
+            times["class"].append(time.perf_counter() - t)
+            t = time.perf_counter()
+            r = await c.post(f"{urls[0]}/v1/classes/{r.json()['class']['id']}/samples",
+                             json={"sample": dataset.samples[i].tolist()})
+            await live(r.json()["job"])
+            times["sample"].append(time.perf_counter() - t)
     return times
 
 
@@ -141,13 +159,16 @@ async def run(cluster: Cluster, seconds: float, clients: int, batch: int, datase
     b["samples_per_s"] = round(b["rps"] * batch, 1)
     out[f"npy_batch_{batch}"] = b
     idle = await enrollment_to_live(urls, dataset, 3, 0)
-    load_task = asyncio.create_task(hammer(urls, seconds, clients, single))
+    done = asyncio.Event()
+    load_task = asyncio.create_task(hammer(urls, 600, clients, single, done))
     await asyncio.sleep(1)
     busy = await enrollment_to_live(urls, dataset, 3, 3)
+    done.set()
     out["single_during_enrollments"] = await load_task
-    out["enroll_to_live_s"] = {"idle_median": round(statistics.median(idle), 2),
-                               "under_load_median": round(statistics.median(busy), 2),
-                               "under_load_max": round(max(busy), 2)}
+    for kind in ("class", "sample"):
+        out[f"{kind}_to_live_s"] = {"idle_median": round(statistics.median(idle[kind]), 2),
+                                    "under_load_median": round(statistics.median(busy[kind]), 2),
+                                    "under_load_max": round(max(busy[kind]), 2)}
     return out
 
 
@@ -157,6 +178,8 @@ def main() -> int:
     p.add_argument("--seconds", type=float, default=15)
     p.add_argument("--clients", type=int, default=32)
     p.add_argument("--batch", type=int, default=1024)
+    p.add_argument("--env", action="append", default=[], metavar="TACTILE_X=V",
+                   help="extra service setting for every process (repeatable)")
     p.add_argument("--dataset", default="simulated",
                    help="bootstrap data, as TACTILE_DATASET (default: the embedded default)")
     p.add_argument("--method", default=DEFAULT_METHOD,
@@ -165,7 +188,7 @@ def main() -> int:
     dataset = load_dataset(args.dataset)
     # the deployed model, not the tests' quick one; no rate limit: this measures capacity
     env = {"TACTILE_DATASET": args.dataset, "TACTILE_METHOD": args.method,
-           "TACTILE_METHOD_PARAMS": "{}", "TACTILE_RATE_LIMIT": "0"}
+           "TACTILE_METHOD_PARAMS": "{}", "TACTILE_RATE_LIMIT": "0", **dict(a.split("=", 1) for a in args.env)}
     with tempfile.TemporaryDirectory() as tmp, contextlib.ExitStack() as stack:
         url = stack.enter_context(fresh_postgres_database(args.postgres)) if args.postgres else ""
         cluster = Cluster(Path(tmp) / "data", url, n_api=2, n_workers=1, extra_env=env)

@@ -11,6 +11,7 @@ bad enrollment does not sink the others.
 from __future__ import annotations
 
 import logging
+import os
 import threading
 from collections.abc import Callable
 from datetime import UTC, datetime, timedelta
@@ -69,6 +70,10 @@ class Worker:
                 leases.release(s, LEASE, self.id)
 
     def run(self, stop: threading.Event) -> None:
+        # Linux niceness is per thread: this lowers the retrains only, in the worker
+        # process and in the API process's embedded worker thread alike.
+        if self.settings.worker_nice and hasattr(os, "nice"):
+            os.nice(self.settings.worker_nice)
         while not stop.is_set():
             try:
                 busy = self.run_once()
