@@ -96,7 +96,8 @@ def _from_json(body: bytes) -> np.ndarray | list:
         if isinstance(samples, list) and samples:
             x = np.asarray(samples)
             if x.dtype.kind in "fiu" and x.ndim in (2, 3):
-                return x.astype(np.float32, copy=False)
+                with np.errstate(over="ignore"):  # beyond float32 is inf: rejected by name below
+                    return x.astype(np.float32, copy=False)
     except (orjson.JSONDecodeError, KeyError, ValueError, OverflowError):
         pass
     # pydantic's own JSON parser; like json.loads it reads NaN/Infinity literals, which
