@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 
 import numpy as np
+import pytest
 from sqlalchemy import select
 
 from app.framework.recognizer import TactileRecognizer
@@ -249,6 +251,26 @@ def test_run_worker_stops_on_request(settings, store):
     thread.join(10)
     assert not thread.is_alive()
 
+
+
+@pytest.mark.skipif(not hasattr(os, "nice"), reason="niceness is POSIX")
+def test_retrains_run_at_the_worker_niceness_and_the_api_keeps_its_own(worker):
+    """Linux niceness is per thread: the worker's thread yields the CPU, the rest do not."""
+    base = os.getpriority(os.PRIO_PROCESS, 0)
+    seen = []
+
+    def run() -> None:
+        stop = threading.Event()
+        stop.set()
+        worker.run(stop)
+        seen.append(os.getpriority(os.PRIO_PROCESS, 0))
+
+    thread = threading.Thread(target=run)
+    thread.start()
+    thread.join(10)
+    assert worker.settings.worker_nice > 0
+    assert seen == [min(19, base + worker.settings.worker_nice)]
+    assert os.getpriority(os.PRIO_PROCESS, 0) == base
 
 
 def test_job_timings_reach_the_metrics_of_every_api_process(client, worker, dataset):
