@@ -1,6 +1,7 @@
 """Load on 2 API processes (plus 1 worker) on loopback, SQLite and PostgreSQL side by side.
 
     .venv/bin/python bench/load.py --seconds 15 --clients 32 [--postgres URL]
+    .venv/bin/python bench/load.py --seconds 15 --clients 32 --embedded   # plain `serve`
 
 The service runs as deployed by default (the embedded simulated dataset, the default
 method, no rate limit). A lean asyncio HTTP/1.1 client measures requests/s and p50/p99
@@ -178,6 +179,8 @@ def main() -> int:
     p.add_argument("--seconds", type=float, default=15)
     p.add_argument("--clients", type=int, default=32)
     p.add_argument("--batch", type=int, default=1024)
+    p.add_argument("--embedded", action="store_true",
+                   help="one plain `tactile-zsl serve` (worker thread inside) instead of 2 APIs + 1 worker")
     p.add_argument("--env", action="append", default=[], metavar="TACTILE_X=V",
                    help="extra service setting for every process (repeatable)")
     p.add_argument("--dataset", default="simulated",
@@ -191,7 +194,9 @@ def main() -> int:
            "TACTILE_METHOD_PARAMS": "{}", "TACTILE_RATE_LIMIT": "0", **dict(a.split("=", 1) for a in args.env)}
     with tempfile.TemporaryDirectory() as tmp, contextlib.ExitStack() as stack:
         url = stack.enter_context(fresh_postgres_database(args.postgres)) if args.postgres else ""
-        cluster = Cluster(Path(tmp) / "data", url, n_api=2, n_workers=1, extra_env=env)
+        shape = {"n_api": 1, "n_workers": 0, "embedded_worker": True} if args.embedded else \
+            {"n_api": 2, "n_workers": 1}
+        cluster = Cluster(Path(tmp) / "data", url, extra_env=env, **shape)
         try:
             cluster.start()
             cluster.wait_ready()
@@ -199,6 +204,7 @@ def main() -> int:
         finally:
             cluster.stop()
     report.update(store="postgresql" if args.postgres else "sqlite", clients=args.clients,
+                  processes="1 API, embedded worker" if args.embedded else "2 APIs + 1 worker",
                   dataset=args.dataset, method=args.method)
     print(json.dumps(report, indent=2))
     return 0

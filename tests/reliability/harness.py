@@ -55,6 +55,7 @@ class Cluster:
     n_api: int = 1
     n_workers: int = 1
     extra_env: dict[str, str] = field(default_factory=dict)
+    embedded_worker: bool = False  # API processes run the worker as a thread (plain `serve`)
     procs: list[Proc] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -74,7 +75,8 @@ class Cluster:
         }
         for i in range(self.n_api):
             port = free_port()
-            self.procs.append(Proc(f"api-{i}", ["serve", "--no-worker", "--port", str(port)], port))
+            serve = ["serve", "--port", str(port)] + ([] if self.embedded_worker else ["--no-worker"])
+            self.procs.append(Proc(f"api-{i}", serve, port))
         for i in range(self.n_workers):
             self.procs.append(Proc(f"worker-{i}", ["worker"]))
 
