@@ -125,17 +125,16 @@ class FlatForest:
         node = np.tile(self.roots, n)
         feature = self.feature[node]
         flat = x.ravel()
-        while True:
+        while len(walker):
             descending = feature >= 0
             if not descending.all():
                 out[walker[~descending]] = node[~descending]
                 walker, node = walker[descending], node[descending]
                 offset, feature = offset[descending], feature[descending]
-                if not len(walker):
-                    return out.reshape(n, t)
             go_right = flat[offset + feature] > self._threshold32[node]
             node = self._children[2 * node + go_right]
             feature = self.feature[node]
+        return out.reshape(n, t)
 
     def _prepare_walk(self) -> None:
         # For a float32 x, x <= t (float64) exactly when x <= the largest float32 <= t, so

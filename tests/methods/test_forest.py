@@ -50,6 +50,17 @@ def test_inputs_at_the_thresholds_go_where_sklearn_sends_them(data):
     assert np.array_equal(flat.apply(q) - flat.roots[None, :], model.apply(q))
 
 
+def test_an_empty_batch_and_single_leaf_trees(data):
+    x, y = data
+    flat = FlatForest.from_sklearn(ExtraTreesClassifier(n_estimators=3, random_state=0).fit(x, y))
+    assert flat.apply(x[:0]).shape == (0, 3) and flat.predict_proba(x[:0]).shape == (0, 4)
+    stump = ExtraTreesClassifier(n_estimators=2, max_depth=1, random_state=0).fit(x, y)
+    one_leaf = ExtraTreesClassifier(n_estimators=2, random_state=0).fit(x, np.zeros(len(x), int))
+    for model in (stump, one_leaf):  # a tree may be a lone leaf: its root is its answer
+        f = FlatForest.from_sklearn(model)
+        assert np.array_equal(f.apply(x) - f.roots[None, :], model.apply(x))
+
+
 def test_state_is_plain_arrays_and_round_trips(data):
     x, y = data
     flat = FlatForest.from_sklearn(ExtraTreesClassifier(n_estimators=10, random_state=0).fit(x, y))
