@@ -27,7 +27,12 @@ def main() -> int:
     from hypothesis import HealthCheck, given, settings
 
     from app.api.main import create_app
-    from tests.service_fixtures import fresh_postgres_database, quick_settings, trained_base
+    from tests.service_fixtures import (
+        error_contract_breach,
+        fresh_postgres_database,
+        quick_settings,
+        trained_base,
+    )
 
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--examples", type=int, default=1000, help="generated cases per operation")
@@ -52,11 +57,8 @@ def main() -> int:
                 response = case.call()
                 per_op[case.operation.label] += 1
                 statuses[response.status_code] += 1
-                ctype = response.headers.get("content-type", [""])[0]
-                if response.status_code >= 500:
-                    failures.append(f"{case.operation.label}: {response.status_code}")
-                elif response.status_code >= 400 and ctype != "application/problem+json":
-                    failures.append(f"{case.operation.label}: {response.status_code} as {ctype}")
+                if breach := error_contract_breach(case.operation.label, response):
+                    failures.append(breach)
 
             exercise()
     report = {

@@ -81,6 +81,17 @@ def npy(array: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
+def error_contract_breach(label: str, response) -> str | None:
+    """What a (fuzzed) response does wrong, if anything: every 5xx is a bug, and every 4xx
+    must be application/problem+json. Shared by the fuzz test and bench/fuzz.py."""
+    content_type = response.headers.get("content-type", [""])[0]
+    if response.status_code >= 500:
+        return f"{label}: {response.status_code} {response.text[:200]}"
+    if response.status_code >= 400 and content_type != "application/problem+json":
+        return f"{label}: {response.status_code} as {content_type}"
+    return None
+
+
 def quick_settings(data_dir, **overrides) -> Settings:
     values = {
         "data_dir": data_dir, "embedded_worker": False, "dataset": QUICK_DATASET,

@@ -6,6 +6,8 @@ from __future__ import annotations
 import schemathesis
 from hypothesis import HealthCheck, given, settings
 
+from tests.service_fixtures import error_contract_breach
+
 EXAMPLES_PER_OPERATION = 15
 
 
@@ -22,11 +24,8 @@ def test_no_server_errors_and_every_4xx_is_a_problem(app, client):
             label = case.operation.label
             response = case.call()
             calls.append(label)
-            content_type = response.headers.get("content-type", [""])[0]
-            if response.status_code >= 500:
-                failures.append(f"{label}: {response.status_code} {response.text[:200]}")
-            elif response.status_code >= 400 and content_type != "application/problem+json":
-                failures.append(f"{label}: {response.status_code} as {content_type}")
+            if breach := error_contract_breach(label, response):
+                failures.append(breach)
 
         exercise()
     assert failures == []
