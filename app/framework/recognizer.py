@@ -17,7 +17,7 @@ import copy
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Self
+from typing import Any, ClassVar, NamedTuple, Self
 
 import numpy as np
 
@@ -32,14 +32,14 @@ from app.framework.errors import (
 )
 
 
-@dataclass(frozen=True)
-class ClassScore:
+# Named tuples, not frozen dataclasses: a batch of 1,024 answers builds 4,096 of them,
+# and a named tuple is built about 4x faster (immutable all the same).
+class ClassScore(NamedTuple):
     class_name: str
     probability: float
 
 
-@dataclass(frozen=True)
-class Recognition:
+class Recognition(NamedTuple):
     """The answer for one sample."""
 
     class_name: str
@@ -193,14 +193,13 @@ class TactileRecognizer(ABC):
             p = probs[rows]
             order = np.argsort(-p, axis=1)[:, :k]
             top_p = np.take_along_axis(p, order, axis=1).tolist()
-            for row, idx, tp in zip(rows.tolist(), order.tolist(), top_p, strict=True):
-                results.append((row, Recognition(
-                    class_name=names[idx[0]],
-                    kind=kind,
-                    is_novel=bool(novel[row]),
-                    novelty_score=float(scores[row]),
-                    top_k=tuple(ClassScore(names[j], q) for j, q in zip(idx, tp, strict=True)),
-                )))
+            top_names = np.asarray(names, dtype=object)[order].tolist()
+            answers = [
+                Recognition(tn[0], kind, is_nov, score, tuple(map(ClassScore, tn, tp)))
+                for tn, tp, is_nov, score in zip(top_names, top_p, novel[rows].tolist(),
+                                                  scores[rows].astype(float).tolist(), strict=True)
+            ]
+            results.extend(zip(rows.tolist(), answers, strict=True))
         results.sort(key=lambda r: r[0])
         return [r for _, r in results]
 

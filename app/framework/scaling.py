@@ -20,7 +20,11 @@ class RobustInputScaler:
 
     def _compress(self, x: np.ndarray, dtype=np.float64) -> np.ndarray:
         x = np.asarray(x, dtype=dtype)
-        return np.copysign(np.log1p(np.abs(x)), x) if self.log_compress else x.copy()
+        if not self.log_compress:
+            return x.copy()
+        z = np.abs(x)  # the only new array: the rest is in place
+        np.log1p(z, out=z)
+        return np.copysign(z, x, out=z)
 
     def _axes(self, x: np.ndarray) -> tuple[int, ...]:
         return (0,) if x.ndim == 2 else (0, 2)

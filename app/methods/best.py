@@ -67,7 +67,7 @@ class BestRecognizer(TactileRecognizer):
     def __init__(
         self,
         seed: int = 0,
-        n_estimators: int = 300,
+        n_estimators: int = 100,
         max_features: str | float = "sqrt",
         attribute_C: float = 0.1,
         dap_clip: float = 0.02,

@@ -13,6 +13,7 @@ import logging
 import threading
 from dataclasses import dataclass
 
+import numpy as np
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.framework import bundle
@@ -61,6 +62,9 @@ class ModelHolder(Poller):
                 data = repo.bundle_data(s, row.bundle_sha256)
                 class_ids = repo.class_ids_by_name(s)
             recognizer = bundle.from_bytes(data)
+            # One sample through the model before it is served: the compiled forest walk
+            # is built (or read from numba's cache) now, not on the first robot's request.
+            recognizer.recognize(np.zeros((1, *recognizer.input_shape), np.float32))
             self._current = LoadedModel(version, recognizer, class_ids)
         if self._metrics:
             self._metrics.active_version.set(version)

@@ -85,6 +85,13 @@ def test_rejects_bad_state_and_inputs(data):
         FlatForest.from_state(broken, 4, 7)
     with pytest.raises(ValueError, match="out of range"):
         FlatForest.from_state(state, 4, 2)  # split features beyond the input width
+    cycle = dict(state, left=np.where(state["feature"] >= 0, 0, state["left"]))  # back to the root
+    with pytest.raises(ValueError, match="after their parent"):
+        FlatForest.from_state(cycle, 4, 7)
+    ptr = state["leaf_ptr"].copy()
+    ptr[1] = ptr[-1] + 5  # a leaf's distribution beyond the stored ones
+    with pytest.raises(ValueError, match="leaf distributions"):
+        FlatForest.from_state(dict(state, leaf_ptr=ptr), 4, 7)
     with pytest.raises(ValueError, match="shape"):
         flat.predict_proba(x[:, :3])
 
