@@ -62,7 +62,7 @@ class BestRecognizer(TactileRecognizer):
 
     _PARAMS = ("seed", "n_estimators", "max_features", "attribute_C", "dap_clip", "shot_temperature",
                "knn_weight", "top_weight", "novelty_val_fraction", "novelty_holdout_trials",
-               "tuning_rounds", "n_jobs")
+               "tuning_rounds", "distance_components", "n_jobs")
 
     def __init__(
         self,
@@ -77,6 +77,7 @@ class BestRecognizer(TactileRecognizer):
         top_weight: float = 0.1,
         novelty_holdout_trials: int = 1,
         tuning_rounds: int = 3,
+        distance_components: int = 64,
         n_jobs: int | None = 1,
     ) -> None:
         super().__init__()
@@ -91,6 +92,7 @@ class BestRecognizer(TactileRecognizer):
         self.top_weight = top_weight
         self.novelty_holdout_trials = novelty_holdout_trials
         self.tuning_rounds = tuning_rounds
+        self.distance_components = distance_components
         self.n_jobs = n_jobs
         self._check_params()
 
@@ -119,6 +121,10 @@ class BestRecognizer(TactileRecognizer):
                    f"{name} must be a non-negative number, got {value!r}")
         _check(isinstance(self.tuning_rounds, int | np.integer) and self.tuning_rounds >= 1,
                f"tuning_rounds must be a positive integer, got {self.tuning_rounds!r}")
+        _check(isinstance(self.distance_components, int | np.integer) and not isinstance(
+            self.distance_components, bool) and self.distance_components >= 0,
+               f"distance_components must be a non-negative integer (0 = exact), got "
+               f"{self.distance_components!r}")
 
     def _cue_weights(self) -> np.ndarray:
         w = np.zeros(len(CUES))
@@ -129,7 +135,7 @@ class BestRecognizer(TactileRecognizer):
 
     def _known_model(self, dataset: TactileDataset) -> KnownModel:
         return KnownModel.fit(dataset, self._cue_weights(), int(self.n_estimators), self.max_features,
-                              self.seed, self.n_jobs)
+                              self.seed, self.n_jobs, int(self.distance_components))
 
     # ----------------------------------------------------------------- fitting
     def _fit(self, dataset: TactileDataset, progress: bool) -> None:
@@ -255,6 +261,7 @@ class BestRecognizer(TactileRecognizer):
         return meta, arrays
 
     def set_state(self, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        self.distance_components = 0  # bundles made before the parameter measure exact distances
         for key, value in meta["params"].items():
             if key not in self._PARAMS:
                 raise KeyError(f"unknown parameter {key!r} in the bundle")

@@ -26,7 +26,7 @@ from app.framework.registry import make_method
 from app.methods.attributes import LinearAttributeModel, dap_log_scores
 from app.methods.best import BestRecognizer
 
-FAST = {"n_estimators": 40, "tuning_rounds": 2}
+FAST = {"n_estimators": 40, "tuning_rounds": 2, "distance_components": 8}  # 8 < rank: subspace distances
 N_NOVEL = 6
 
 
@@ -130,6 +130,7 @@ def test_bundle_round_trip_gives_identical_predictions(enrolled, data, tmp_path)
     bundle.save(model, path)
     again = bundle.load(path)
     assert isinstance(again, BestRecognizer)
+    assert again.known_.cues_model.distances.basis.shape[1] == FAST["distance_components"]
     assert again.registry.all_names == model.registry.all_names
     x = ds.samples
     assert np.array_equal(again.known_proba(x), model.known_proba(x))
@@ -189,6 +190,7 @@ def test_bad_input_raises_framework_errors(fitted, enrolled, data):
 @pytest.mark.parametrize("params", [
     {"n_estimators": 0}, {"attribute_C": -1.0}, {"dap_clip": 0.7}, {"shot_temperature": 0},
     {"max_features": "all"}, {"tuning_rounds": 0}, {"novelty_val_fraction": 1.5}, {"knn_weight": -1},
+    {"distance_components": -1}, {"distance_components": 2.5},
 ])
 def test_bad_hyper_parameters(params):
     with pytest.raises(FrameworkError):
@@ -224,13 +226,46 @@ def test_dap_and_attribute_model():
 
 
 def test_distance_offsets_are_blockwise_exact_and_finite():
-    from app.methods.known import _offsets
+    from app.methods.known import ReferenceDistances, _offsets
 
     rng = np.random.default_rng(0)
-    ref = rng.normal(size=(40, 5))
+    ref = ReferenceDistances(rng.normal(size=(40, 5)))
     y = np.repeat(np.arange(8), 5)
     trials = np.arange(40)
     trials[35:] = 35  # class 7: one trial only, so it has no own-class spacing of its own
     whole = _offsets(ref, y, trials, 8)
     assert np.allclose(whole, _offsets(ref, y, trials, 8, block=7))
     assert np.isfinite(whole).all() and whole.shape == (10,)
+
+
+def test_reference_distances_exact_and_in_a_principal_subspace():
+    from app.methods.known import ReferenceDistances
+
+    rng = np.random.default_rng(0)
+    # 3 strong directions plus small noise in 40 dimensions
+    ref = (rng.normal(size=(60, 3)) * 10) @ rng.normal(size=(3, 40)) + 0.1 * rng.normal(size=(60, 40))
+    q = np.r_[ref[:5] + 0.05, rng.normal(size=(5, 40)) * 3]  # near references, then off-subspace
+    truth = ((q[:, None, :] - ref[None, :, :]) ** 2).sum(axis=2)
+    exact = ReferenceDistances.fit(ref, 0)
+    assert exact.basis is None
+    np.testing.assert_allclose(exact.to_reference(q), truth, rtol=1e-3, atol=1e-2)
+    assert ReferenceDistances.fit(ref, 40).basis is None  # at least the rank: exact
+    sub = ReferenceDistances.fit(ref, 3)
+    assert sub.basis.shape == (40, 3)
+    d2 = sub.to_reference(q)
+    assert np.all(d2 <= truth * (1 + 1e-4) + 1e-2)  # a lower bound of the true distance
+    assert np.all(np.diag(sub.to_reference(ref)) < 1e-2)  # a sample is at distance 0 from itself
+    # same nearest reference, and the off-subspace queries stay far
+    assert np.array_equal(d2.argmin(axis=1)[:5], truth.argmin(axis=1)[:5])
+    assert d2[5:].min() > 10 * d2[:5].min(axis=1).max()
+    # the fused nearest-reference pass agrees with the full distance matrix
+    labels = np.arange(60) % 6
+    top = np.array([0, 1, 2, 3, 4, 5, 0, 1, 2, 3])
+    for dist in (exact, sub):
+        full = dist.to_reference(q)
+        near = dist.nearest(q, labels, top)
+        expected = np.c_[np.sort(full, axis=1)[:, :3].mean(axis=1), full.min(axis=1),
+                         [full[i, labels == top[i]].min() for i in range(len(q))]]
+        np.testing.assert_allclose(near, expected, rtol=1e-4, atol=1e-3)
+    with pytest.raises(ValueError, match="basis"):
+        ReferenceDistances(ref, np.zeros((7, 3)))
