@@ -44,8 +44,7 @@ class FlatForest:
         self.leaf_value = np.asarray(arrays["leaf_value"], np.float64)
         self.n_classes = int(n_classes)
         self.n_features = int(n_features)
-        self._children: np.ndarray | None = None  # (left, right) interleaved, built on first use
-        self._threshold32: np.ndarray | None = None
+        self._nodes: np.ndarray | None = None  # the walk's packed node records, built on first use
         self._check()
 
     def _check(self) -> None:
@@ -124,7 +123,7 @@ class FlatForest:
         x = np.ascontiguousarray(x, np.float32)  # scikit-learn compares float32 inputs
         if x.ndim != 2 or x.shape[1] != self.n_features:
             raise ValueError(f"expected inputs of shape (N, {self.n_features}), got {x.shape}")
-        if self._children is None:
+        if self._nodes is None:
             self._prepare_walk()
         return x
 
@@ -132,15 +131,15 @@ class FlatForest:
         """(N, n_trees) global node index of the leaf each sample reaches in each tree."""
         x = self._inputs(x)
         out = np.empty((len(x), self.n_trees), np.int32)
-        _walk(x, self.feature, self._threshold32, self._children, self.roots, out)
+        _walk(x, self._nodes, self._nodes.view(np.float32), self.roots, out)
         return out
 
     def predict_proba(self, x: np.ndarray) -> np.ndarray:
         """(N, K) mean over trees of the reached leaf's class distribution."""
         x = self._inputs(x)
         out = np.zeros((len(x), self.n_classes), np.float64)
-        _walk_proba(x, self.feature, self._threshold32, self._children, self.roots, self.leaf_of_node,
-                    self.leaf_ptr, self.leaf_class, self.leaf_value, out)
+        _walk_proba(x, self._nodes, self._nodes.view(np.float32), self.roots, self.leaf_ptr,
+                    self.leaf_class, self.leaf_value, out)
         out /= self.n_trees
         return out
 
@@ -150,8 +149,16 @@ class FlatForest:
         t32 = self.threshold.astype(np.float32)
         above = t32.astype(np.float64) > self.threshold
         t32[above] = np.nextafter(t32[above], np.float32(-np.inf))
-        self._threshold32 = t32
-        self._children = np.ascontiguousarray(np.stack([self.left, self.right], axis=1).ravel())
+        # One 16-byte record per node, so a step touches one cache line: split feature,
+        # threshold (float32 bits), left and right child; a leaf (feature -1) keeps its leaf
+        # index where the left child would be.
+        leaf = self.feature < 0
+        nodes = np.empty((len(self.feature), 4), np.int32)
+        nodes[:, 0] = self.feature
+        nodes[:, 1] = t32.view(np.int32)
+        nodes[:, 2] = np.where(leaf, self.leaf_of_node, self.left)
+        nodes[:, 3] = self.right
+        self._nodes = nodes
 
     # ------------------------------------------------------------ persistence
     def get_state(self) -> dict[str, np.ndarray]:
@@ -167,47 +174,46 @@ class FlatForest:
 
 
 # ---------------------------------------------------------------- compiled walk
-_BLOCK = 16  # samples taken through a tree together (independent load chains)
+_BLOCK = 8  # samples taken through a tree together (independent load chains)
 
 
 @njit(cache=True, nogil=True)
-def _walk_block(x, lo, hi, feature, threshold, children, root, nodes):
-    """The leaf each sample lo … hi-1 reaches from ``root``, into ``nodes[:hi-lo]``."""
+def _walk_block(x, lo, hi, nodes, thresholds, root, at):
+    """The leaf node each sample lo … hi-1 reaches from ``root``, into ``at[:hi-lo]``."""
     for k in range(hi - lo):
-        nodes[k] = root
+        at[k] = root
     descending = True
     while descending:
         descending = False
         for k in range(hi - lo):
-            node = nodes[k]
-            f = feature[node]
+            node = at[k]
+            f = nodes[node, 0]
             if f >= 0:
-                nodes[k] = children[2 * node + (x[lo + k, f] > threshold[node])]
+                at[k] = nodes[node, 2 + (x[lo + k, f] > thresholds[node, 1])]
                 descending = True
 
 
 @njit(cache=True, nogil=True)
-def _walk(x, feature, threshold, children, roots, out):
-    nodes = np.empty(_BLOCK, np.int32)
+def _walk(x, nodes, thresholds, roots, out):
+    at = np.empty(_BLOCK, np.int32)
     for lo in range(0, x.shape[0], _BLOCK):
         hi = min(lo + _BLOCK, x.shape[0])
         for t in range(roots.shape[0]):
-            _walk_block(x, lo, hi, feature, threshold, children, roots[t], nodes)
+            _walk_block(x, lo, hi, nodes, thresholds, roots[t], at)
             for k in range(hi - lo):
-                out[lo + k, t] = nodes[k]
+                out[lo + k, t] = at[k]
 
 
 @njit(cache=True, nogil=True)
-def _walk_proba(x, feature, threshold, children, roots, leaf_of_node, leaf_ptr, leaf_class,
-                leaf_value, out):
+def _walk_proba(x, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, out):
     # Sums each sample's leaf distributions tree by tree, in tree order (a fixed order:
     # the same bits on every call and after a bundle round-trip).
-    nodes = np.empty(_BLOCK, np.int32)
+    at = np.empty(_BLOCK, np.int32)
     for lo in range(0, x.shape[0], _BLOCK):
         hi = min(lo + _BLOCK, x.shape[0])
         for t in range(roots.shape[0]):
-            _walk_block(x, lo, hi, feature, threshold, children, roots[t], nodes)
+            _walk_block(x, lo, hi, nodes, thresholds, roots[t], at)
             for k in range(hi - lo):
-                leaf = leaf_of_node[nodes[k]]
+                leaf = nodes[at[k], 2]
                 for j in range(leaf_ptr[leaf], leaf_ptr[leaf + 1]):
                     out[lo + k, leaf_class[j]] += leaf_value[j]

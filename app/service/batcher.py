@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from app.framework.recognizer import Recognition
+from app.framework.recognizer import RecognitionBatch
 from app.service.holder import LoadedModel
 
 
@@ -37,7 +37,7 @@ class RecognitionBatcher:
         self._queue: deque[_Request] = deque()
         self._draining = False  # only touched on the event loop: no lock needed
 
-    async def recognize(self, model: LoadedModel, samples: np.ndarray, top_k: int) -> list[Recognition]:
+    async def recognize(self, model: LoadedModel, samples: np.ndarray, top_k: int) -> RecognitionBatch:
         loop = asyncio.get_running_loop()
         request = _Request(model, samples, top_k, loop.create_future())
         self._queue.append(request)
@@ -74,7 +74,7 @@ class RecognitionBatcher:
         first = group[0]
         x = np.concatenate([r.samples for r in group]) if len(group) > 1 else first.samples
         try:
-            results = first.model.recognizer.recognize(x, first.top_k)
+            results = first.model.recognizer.recognize_batch(x, first.top_k)
         except Exception as exc:
             for r in group:
                 if not r.answer.done():  # a caller that went away is not answered

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from fastapi.concurrency import run_in_threadpool
 
-from app.framework.recognizer import Recognition
+from app.framework.recognizer import RecognitionBatch
 from app.service.batcher import RecognitionBatcher
 from app.service.holder import LoadedModel
 from app.service.metrics import Metrics
@@ -27,17 +27,16 @@ class RecognitionService:
         self.coalesce = coalesce
         self.batcher = batcher or RecognitionBatcher()
 
-    async def recognize(self, model: LoadedModel, samples: np.ndarray | list, n: int) -> list[Recognition]:
+    async def recognize(self, model: LoadedModel, samples: np.ndarray | list, n: int) -> RecognitionBatch:
         """Recognise ``n`` samples with ``model``, the caller's snapshot to the end."""
         rec = model.recognizer
         if n <= self.coalesce:
             x = rec.validate_samples(samples)
             results = await self.batcher.recognize(model, x, self.top_k)
         else:
-            results = await run_in_threadpool(rec.recognize, samples, self.top_k)
-        counts: dict[str, int] = {}
-        for r in results:
-            counts[r.kind] = counts.get(r.kind, 0) + 1
-        for kind, count in counts.items():
-            self.metrics.recognitions.labels(kind).inc(count)
+            results = await run_in_threadpool(rec.recognize_batch, samples, self.top_k)
+        novel = int(results.is_novel_class.sum())
+        for kind, count in (("known", len(results) - novel), ("novel", novel)):
+            if count:
+                self.metrics.recognitions.labels(kind).inc(count)
         return results

@@ -17,7 +17,7 @@ class Echo:
     def __init__(self, name: str, fail: bool = False) -> None:
         self.name, self.fail, self.calls = name, fail, []
 
-    def recognize(self, x: np.ndarray, top_k: int):
+    def recognize_batch(self, x: np.ndarray, top_k: int):
         self.calls.append(len(x))
         if self.fail:
             raise RuntimeError("boom")

@@ -269,3 +269,19 @@ def test_reference_distances_exact_and_in_a_principal_subspace():
         np.testing.assert_allclose(near, expected, rtol=1e-4, atol=1e-3)
     with pytest.raises(ValueError, match="basis"):
         ReferenceDistances(ref, np.zeros((7, 3)))
+
+
+def test_recognize_batch_is_recognize_as_arrays(enrolled, data):
+    ds, *_ = data
+    model, names = enrolled
+    x = ds.samples
+    batch = model.recognize_batch(x, top_k=6)  # more than the 4 novel classes
+    answers = model.recognize(x, top_k=6)
+    assert batch.answers() == answers
+    assert len(batch) == len(x) and batch[2:5].answers() == answers[2:5]
+    novel = batch.is_novel_class
+    assert novel.any() and not novel.all()  # both classifiers answer some samples here
+    assert [a.kind == "novel" for a in answers] == novel.tolist()
+    # rankings from the 4 novel classes are padded with -1 and come back 4 long
+    assert (batch.top_index[novel, 4:] == -1).all() and (batch.top_index[~novel] >= 0).all()
+    assert {len(a.top_k) for a in answers if a.kind == "novel"} == {len(names)}

@@ -11,6 +11,7 @@ from app.api import problems
 from app.api.deps import ModelDep, ReadAccess, RecognitionDep
 from app.api.problems import Problem, blame
 from app.api.schemas import RecognizeRequest, RecognizeResponse
+from app.framework.recognizer import RecognitionBatch
 
 router = APIRouter(
     prefix="/v1", tags=["recognize"], dependencies=[ReadAccess],
@@ -65,21 +66,29 @@ async def recognize(request: Request, model: ModelDep, service: RecognitionDep) 
         )
     with blame("samples"):
         results = await service.recognize(model, samples, n)
-    # Serialised directly (the shape is RecognizeResponse, which documents it): building
-    # and re-validating pydantic models cost more than the forward pass of one sample.
-    ids = model.class_ids
-    return Response(orjson.dumps({
-        "model_version": model.version,
+    return Response(_to_json(model.version, results, model.class_ids), media_type="application/json")
+
+
+def _to_json(version: int, batch: RecognitionBatch, class_ids: dict[str, int]) -> bytes:
+    """The RecognizeResponse body (the schema documents it), built straight from the arrays:
+    building and re-validating pydantic models cost more than the forward pass of a sample."""
+    names, n_known = batch.class_names, batch.n_known
+    ids = [class_ids.get(name) for name in names]
+    kinds = ["known"] * n_known + ["novel"] * (len(names) - n_known)
+    return orjson.dumps({
+        "model_version": version,
         "results": [
             {
-                "class_id": ids.get(r.class_name), "class_name": r.class_name, "kind": r.kind,
-                "is_novel": r.is_novel, "novelty_score": r.novelty_score,
-                "top_k": [{"class_id": ids.get(s.class_name), "class_name": s.class_name,
-                           "probability": s.probability} for s in r.top_k],
+                "class_id": ids[idx[0]], "class_name": names[idx[0]], "kind": kinds[idx[0]],
+                "is_novel": novel, "novelty_score": score,
+                "top_k": [{"class_id": ids[j], "class_name": names[j], "probability": q}
+                          for j, q in zip(idx, top_p, strict=True) if j >= 0],
             }
-            for r in results
+            for idx, top_p, novel, score in zip(
+                batch.top_index.tolist(), batch.top_probability.tolist(), batch.is_novel.tolist(),
+                batch.novelty_score.tolist(), strict=True)
         ],
-    }), media_type="application/json")
+    })
 
 
 def _from_json(body: bytes) -> np.ndarray | list:
