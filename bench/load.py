@@ -8,7 +8,9 @@ method, no rate limit). A lean asyncio HTTP/1.1 client measures requests/s and p
 latency of single-sample JSON recognition and of binary (.npy) batch recognition, then
 the enrollment-to-live times (POST /v1/classes, then POST /v1/classes/{id}/samples, until
 the job succeeded and *both* API processes serve its model version), idle and while the
-single-sample load runs. Only 127.0.0.1 is ever targeted.
+single-sample load runs. Each load phase also reports ``cpu_steal_pct``, the share of CPU
+time the hypervisor gave to other guests meanwhile (on a shared VM, a phase with high steal
+measured the neighbours, not the service). Only 127.0.0.1 is ever targeted.
 """
 
 from __future__ import annotations
@@ -35,6 +37,24 @@ from app.data.sources import load_dataset  # noqa: E402
 from app.framework.registry import DEFAULT_METHOD  # noqa: E402
 from tests.reliability.harness import Cluster  # noqa: E402
 from tests.service_fixtures import fresh_postgres_database, unused_vectors  # noqa: E402
+
+
+def cpu_jiffies() -> list[int] | None:
+    """The machine's CPU time counters (/proc/stat: user … steal), or None off Linux."""
+    try:
+        with open("/proc/stat") as f:
+            return [int(v) for v in f.readline().split()[1:9]]
+    except OSError:
+        return None
+
+
+def steal_pct(before: list[int] | None, after: list[int] | None) -> float | None:
+    """Share of CPU time the hypervisor gave to other guests ("steal") between two readings:
+    on a shared VM the figures of a phase with high steal are not the machine's capacity."""
+    if before is None or after is None:
+        return None
+    delta = [b - a for a, b in zip(before, after, strict=True)]
+    return round(100 * delta[7] / sum(delta), 1) if sum(delta) else 0.0
 
 
 def pct(values: list[float], q: float) -> float:
@@ -103,11 +123,12 @@ async def hammer(urls, seconds, clients, request: bytes, stop: asyncio.Event | N
         finally:
             conn.close()
 
-    start = time.monotonic()
+    start, jiffies = time.monotonic(), cpu_jiffies()
     await asyncio.gather(*(one(i) for i in range(clients)))
     elapsed = time.monotonic() - start
     return {"requests": len(latencies), "errors": errors, "rps": round(len(latencies) / elapsed, 1),
-            "p50_ms": round(pct(latencies, 50), 2), "p99_ms": round(pct(latencies, 99), 2)}
+            "p50_ms": round(pct(latencies, 50), 2), "p99_ms": round(pct(latencies, 99), 2),
+            "cpu_steal_pct": steal_pct(jiffies, cpu_jiffies())}
 
 
 async def enrollment_to_live(urls, dataset, n: int, offset: int) -> dict[str, list[float]]:
