@@ -8,7 +8,8 @@ reach 1e10.
   is its class distribution.
 - Novelty ND(x): ``1 - max p`` of the forest plus ``knn_weight`` x the log distance
   to the nearest training sample and ``top_weight`` x the log distance to the
-  nearest training sample of the top class, in a feature-weighted space, each
+  nearest training sample of the top class, in a feature-weighted space (its top
+  ``distance_components`` principal directions plus residual norms), each
   relative to the training set's own trial spacing (``known``). The threshold is
   tuned by the paper's Sect. VI-B protocol (``novelty_validation_split`` +
   ``tune_threshold``) on probe models that never see the validation objects;

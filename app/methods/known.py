@@ -144,7 +144,7 @@ class ReferenceDistances:
     when either residual is zero, so a sample's distance to itself is 0). It keeps what lies
     outside the known objects' subspace (a novel object's signature) and costs a k-dim
     product instead of a D-dim one: on the 960-feature simulator 64 components make the
-    cue ~3x cheaper. Without a basis the distance is exact.
+    products ~2.5x cheaper. Without a basis the distance is exact.
     """
 
     def __init__(self, reference: np.ndarray, basis: np.ndarray | None = None) -> None:
