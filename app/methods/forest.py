@@ -11,8 +11,9 @@ instead of hundreds.
 
 The walk takes a block of samples through one tree at a time: the tree's nodes
 stay in cache, and the block's paths are independent chains of loads that the
-CPU overlaps. That is about 4x faster than stepping all (sample, tree) paths
-together in numpy, and 30x faster for a single sample (docs/BENCHMARKS.md).
+CPU overlaps. That is 3-4x faster per tree than stepping all (sample, tree) paths
+together in numpy, and a single sample takes ~15 us instead of ~300 us
+(docs/BENCHMARKS.md).
 """
 
 from __future__ import annotations
@@ -131,17 +132,23 @@ class FlatForest:
         """(N, n_trees) global node index of the leaf each sample reaches in each tree."""
         x = self._inputs(x)
         out = np.empty((len(x), self.n_trees), np.int32)
-        _walk(x, self._nodes, self._nodes.view(np.float32), self.roots, out)
+        self._walk(x, leaves=out)
         return out
 
     def predict_proba(self, x: np.ndarray) -> np.ndarray:
         """(N, K) mean over trees of the reached leaf's class distribution."""
         x = self._inputs(x)
         out = np.zeros((len(x), self.n_classes), np.float64)
-        _walk_proba(x, self._nodes, self._nodes.view(np.float32), self.roots, self.leaf_ptr,
-                    self.leaf_class, self.leaf_value, out)
+        self._walk(x, proba=out)
         out /= self.n_trees
         return out
+
+    def _walk(self, x: np.ndarray, leaves: np.ndarray | None = None,
+              proba: np.ndarray | None = None) -> None:
+        none = np.zeros((0, 0), np.int32)
+        _walk(x, self._nodes, self._nodes.view(np.float32), self.roots, self.leaf_ptr, self.leaf_class,
+              self.leaf_value, none if leaves is None else leaves,
+              none.astype(np.float64) if proba is None else proba)
 
     def _prepare_walk(self) -> None:
         # For a float32 x, x <= t (float64) exactly when x <= the largest float32 <= t, so
@@ -194,26 +201,20 @@ def _walk_block(x, lo, hi, nodes, thresholds, root, at):
 
 
 @njit(cache=True, nogil=True)
-def _walk(x, nodes, thresholds, roots, out):
+def _walk(x, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, leaves, proba):
+    """Every sample through every tree: the leaf node reached into ``leaves`` (N, T) and/or
+    the leaf distributions summed into ``proba`` (N, K); an empty array skips that output.
+    Sums go tree by tree in tree order (the same bits on every call and after a bundle
+    round-trip)."""
     at = np.empty(_BLOCK, np.int32)
     for lo in range(0, x.shape[0], _BLOCK):
         hi = min(lo + _BLOCK, x.shape[0])
         for t in range(roots.shape[0]):
             _walk_block(x, lo, hi, nodes, thresholds, roots[t], at)
             for k in range(hi - lo):
-                out[lo + k, t] = at[k]
-
-
-@njit(cache=True, nogil=True)
-def _walk_proba(x, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, out):
-    # Sums each sample's leaf distributions tree by tree, in tree order (a fixed order:
-    # the same bits on every call and after a bundle round-trip).
-    at = np.empty(_BLOCK, np.int32)
-    for lo in range(0, x.shape[0], _BLOCK):
-        hi = min(lo + _BLOCK, x.shape[0])
-        for t in range(roots.shape[0]):
-            _walk_block(x, lo, hi, nodes, thresholds, roots[t], at)
-            for k in range(hi - lo):
-                leaf = nodes[at[k], 2]
-                for j in range(leaf_ptr[leaf], leaf_ptr[leaf + 1]):
-                    out[lo + k, leaf_class[j]] += leaf_value[j]
+                if leaves.shape[0] > 0:
+                    leaves[lo + k, t] = at[k]
+                if proba.shape[0] > 0:
+                    leaf = nodes[at[k], 2]
+                    for j in range(leaf_ptr[leaf], leaf_ptr[leaf + 1]):
+                        proba[lo + k, leaf_class[j]] += leaf_value[j]
