@@ -72,14 +72,19 @@ class RecognitionBatch:
                                 self.top_probability[rows], self.is_novel[rows], self.novelty_score[rows])
 
     @property
+    def class_kinds(self) -> list[str]:
+        """``"known"`` or ``"novel"`` for each of ``class_names``."""
+        return ["known"] * self.n_known + ["novel"] * (len(self.class_names) - self.n_known)
+
+    @property
     def is_novel_class(self) -> np.ndarray:
         """(N,) bool: the answer is a novel class (FC_Z), not a known one (FC_Y)."""
         return self.top_index[:, 0] >= self.n_known
 
     def answers(self) -> list[Recognition]:
-        names, n_known = self.class_names, self.n_known
+        names, kinds = self.class_names, self.class_kinds
         return [
-            Recognition(names[idx[0]], "novel" if idx[0] >= n_known else "known", nov, score,
+            Recognition(names[idx[0]], kinds[idx[0]], nov, score,
                         tuple(ClassScore(names[j], q) for j, q in zip(idx, tp, strict=True) if j >= 0))
             for idx, tp, nov, score in zip(self.top_index.tolist(), self.top_probability.tolist(),
                                            self.is_novel.tolist(), self.novelty_score.tolist(), strict=True)

@@ -72,9 +72,8 @@ async def recognize(request: Request, model: ModelDep, service: RecognitionDep) 
 def _to_json(version: int, batch: RecognitionBatch, class_ids: dict[str, int]) -> bytes:
     """The RecognizeResponse body (the schema documents it), built straight from the arrays:
     building and re-validating pydantic models cost more than the forward pass of a sample."""
-    names, n_known = batch.class_names, batch.n_known
+    names, kinds = batch.class_names, batch.class_kinds
     ids = [class_ids.get(name) for name in names]
-    kinds = ["known"] * n_known + ["novel"] * (len(names) - n_known)
     return orjson.dumps({
         "model_version": version,
         "results": [
