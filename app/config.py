@@ -27,6 +27,11 @@ class Settings(BaseSettings):
         False, description="Log every request (uvicorn's access log); off by default because at "
         "robot request rates it costs about a tenth of the API's CPU. /metrics counts requests."
     )
+    opentelemetry: bool = Field(
+        False, description="FastAPI's native OpenTelemetry traces, metrics and logs, sent to the "
+        "providers an OpenTelemetry SDK configures; off by default: /metrics serves Prometheus, and "
+        "even unconfigured the per-request check costs several microseconds."
+    )
     # NoDecode: a plain comma-separated list in the environment, not JSON.
     api_keys: Annotated[list[str], NoDecode] = Field(
         default_factory=list,

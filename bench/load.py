@@ -10,7 +10,10 @@ the enrollment-to-live times (POST /v1/classes, then POST /v1/classes/{id}/sampl
 the job succeeded and *both* API processes serve its model version), idle and while the
 single-sample load runs. Each load phase also reports ``cpu_steal_pct``, the share of CPU
 time the hypervisor gave to other guests meanwhile (on a shared VM, a phase with high steal
-measured the neighbours, not the service). Only 127.0.0.1 is ever targeted.
+measured the neighbours, not the service), and ``cpu_us_per_request``, the CPU time each
+process (every API, the worker, this load generator) spent per answered request: where a
+2-core budget goes. ``--phases single,batch`` skips the enrollment phases.
+Only 127.0.0.1 is ever targeted.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import asyncio
 import contextlib
 import io
 import json
+import os
 import statistics
 import sys
 import tempfile
@@ -55,6 +59,25 @@ def steal_pct(before: list[int] | None, after: list[int] | None) -> float | None
         return None
     delta = [b - a for a, b in zip(before, after, strict=True)]
     return round(100 * delta[7] / sum(delta), 1) if sum(delta) else 0.0
+
+
+def process_cpu_s(pid: int) -> float | None:
+    """CPU seconds (user + system) a process has used so far, or None off Linux."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rpartition(")")[2].split()
+    except OSError:
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def cpu_per_request(pids: dict[str, int], before: dict, after: dict, requests: int) -> dict:
+    """Microseconds of CPU each process spent per answered request during a phase."""
+    out = {}
+    for name in pids:
+        if before.get(name) is not None and after.get(name) is not None and requests:
+            out[name] = round(1e6 * (after[name] - before[name]) / requests)
+    return out
 
 
 def pct(values: list[float], q: float) -> float:
@@ -98,9 +121,11 @@ class Connection:
             self.writer = None
 
 
-async def hammer(urls, seconds, clients, request: bytes, stop: asyncio.Event | None = None) -> dict:
+async def hammer(urls, seconds, clients, request: bytes, stop: asyncio.Event | None = None,
+                 pids: dict[str, int] | None = None) -> dict:
     """``clients`` connections, each sending ``request`` back to back for ``seconds`` (or
-    until ``stop`` is set)."""
+    until ``stop`` is set). With ``pids`` (name → process id), also the CPU time each of
+    those processes and this load generator spent per answered request."""
     latencies, errors = [], 0
     deadline = time.monotonic() + seconds
     stop = stop or asyncio.Event()
@@ -123,12 +148,16 @@ async def hammer(urls, seconds, clients, request: bytes, stop: asyncio.Event | N
         finally:
             conn.close()
 
+    pids = {**(pids or {}), "load_generator": os.getpid()}
     start, jiffies = time.monotonic(), cpu_jiffies()
+    cpu_before = {name: process_cpu_s(pid) for name, pid in pids.items()}
     await asyncio.gather(*(one(i) for i in range(clients)))
     elapsed = time.monotonic() - start
+    cpu_after = {name: process_cpu_s(pid) for name, pid in pids.items()}
     return {"requests": len(latencies), "errors": errors, "rps": round(len(latencies) / elapsed, 1),
             "p50_ms": round(pct(latencies, 50), 2), "p99_ms": round(pct(latencies, 99), 2),
-            "cpu_steal_pct": steal_pct(jiffies, cpu_jiffies())}
+            "cpu_steal_pct": steal_pct(jiffies, cpu_jiffies()),
+            "cpu_us_per_request": cpu_per_request(pids, cpu_before, cpu_after, len(latencies))}
 
 
 async def enrollment_to_live(urls, dataset, n: int, offset: int) -> dict[str, list[float]]:
@@ -166,8 +195,10 @@ async def enrollment_to_live(urls, dataset, n: int, offset: int) -> dict[str, li
     return times
 
 
-async def run(cluster: Cluster, seconds: float, clients: int, batch: int, dataset) -> dict:
+async def run(cluster: Cluster, seconds: float, clients: int, batch: int, dataset,
+              phases: set[str]) -> dict:
     urls = cluster.urls
+    pids = {p.name: p.popen.pid for p in cluster.procs if p.popen is not None}
     samples = dataset.samples
     single = Connection.prepare("POST", "/v1/recognize",
                                 json.dumps({"samples": samples[:1].tolist()}).encode(),
@@ -176,13 +207,18 @@ async def run(cluster: Cluster, seconds: float, clients: int, batch: int, datase
     np.save(buf, np.resize(samples, (batch, *samples.shape[1:])).astype(np.float32))
     npy = Connection.prepare("POST", "/v1/recognize", buf.getvalue(), "application/x-npy")
     await hammer(urls, 2, clients, single)  # warm-up
-    out = {"single": await hammer(urls, seconds, clients, single)}
-    b = await hammer(urls, seconds, 4, npy)
-    b["samples_per_s"] = round(b["rps"] * batch, 1)
-    out[f"npy_batch_{batch}"] = b
+    out = {}
+    if "single" in phases:
+        out["single"] = await hammer(urls, seconds, clients, single, pids=pids)
+    if "batch" in phases:
+        b = await hammer(urls, seconds, 4, npy, pids=pids)
+        b["samples_per_s"] = round(b["rps"] * batch, 1)
+        out[f"npy_batch_{batch}"] = b
+    if "enroll" not in phases:
+        return out
     idle = await enrollment_to_live(urls, dataset, 3, 0)
     done = asyncio.Event()
-    load_task = asyncio.create_task(hammer(urls, 600, clients, single, done))
+    load_task = asyncio.create_task(hammer(urls, 600, clients, single, done, pids=pids))
     await asyncio.sleep(1)
     busy = await enrollment_to_live(urls, dataset, 3, 3)
     done.set()
@@ -208,7 +244,12 @@ def main() -> int:
                    help="bootstrap data, as TACTILE_DATASET (default: the embedded default)")
     p.add_argument("--method", default=DEFAULT_METHOD,
                    help=f"recognition method, as TACTILE_METHOD (default: {DEFAULT_METHOD})")
+    p.add_argument("--phases", default="single,batch,enroll",
+                   help="which phases to run, comma-separated (default: all three)")
     args = p.parse_args()
+    phases = set(args.phases.split(","))
+    if not phases <= {"single", "batch", "enroll"}:
+        p.error(f"--phases: unknown phase(s) {sorted(phases - {'single', 'batch', 'enroll'})}")
     dataset = load_dataset(args.dataset)
     # the deployed model, not the tests' quick one; no rate limit: this measures capacity
     env = {"TACTILE_DATASET": args.dataset, "TACTILE_METHOD": args.method,
@@ -221,7 +262,7 @@ def main() -> int:
         try:
             cluster.start()
             cluster.wait_ready()
-            report = uvloop.run(run(cluster, args.seconds, args.clients, args.batch, dataset))
+            report = uvloop.run(run(cluster, args.seconds, args.clients, args.batch, dataset, phases))
         finally:
             cluster.stop()
     report.update(store="postgresql" if args.postgres else "sqlite", clients=args.clients,

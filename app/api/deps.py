@@ -6,7 +6,7 @@ import hashlib
 import hmac
 import json
 from collections.abc import Iterator
-from typing import Annotated
+from typing import Annotated, NamedTuple
 
 from fastapi import Depends, Header, Path, Request, Security
 from fastapi.responses import JSONResponse
@@ -33,10 +33,6 @@ async def get_holder(request: Request) -> ModelHolder:
     return request.app.state.holder
 
 
-async def get_recognition(request: Request) -> RecognitionService:
-    return request.app.state.recognition
-
-
 async def get_metrics(request: Request) -> Metrics:
     return request.app.state.metrics
 
@@ -46,12 +42,16 @@ def get_session(request: Request) -> Iterator[Session]:
         yield session
 
 
-async def get_model(request: Request) -> LoadedModel:
+def current_model(request: Request) -> LoadedModel:
     """The snapshot a request works with from start to end, even if a swap happens."""
     model = request.app.state.holder.current
     if model is None:
         raise Problem(503, "no model is loaded yet; try again shortly", "model", {"Retry-After": "5"})
     return model
+
+
+async def get_model(request: Request) -> LoadedModel:
+    return current_model(request)
 
 
 api_key_header = APIKeyHeader(
@@ -60,38 +60,57 @@ api_key_header = APIKeyHeader(
 )
 
 
+def authorize(request: Request, key: str | None, scope: str) -> Principal:
+    """The caller of ``request``: 401 without a valid key (once keys exist), 403 without
+    ``scope``, 429 over the rate."""
+    state = request.app.state
+    if not state.keys.required:
+        client = request.client.host if request.client else "unknown"
+        principal = Principal(f"addr:{client}", "admin")
+    else:
+        principal = state.keys.authenticate(key) if key else None
+        if principal is None:
+            raise Problem(
+                401, "a valid X-API-Key header is required", "X-API-Key",
+                {"WWW-Authenticate": "APIKey"},
+            )
+        if not principal.allows(scope):
+            raise Problem(
+                403, f"this API key has scope '{principal.scope}'; this request needs "
+                f"'{scope}'", "X-API-Key",
+            )
+    wait = state.limiter.acquire(principal.id)
+    if wait:
+        raise Problem(
+            429, "rate limit exceeded for this API key; slow down", "X-API-Key",
+            {"Retry-After": retry_after(wait)},
+        )
+    request.state.principal = principal
+    return principal
+
+
 def _access(scope: str):
     async def check(
         request: Request, key: Annotated[str | None, Security(api_key_header)]
     ) -> Principal:
-        """401 without a valid key (once keys exist), 403 without ``scope``, 429 over the rate."""
-        state = request.app.state
-        if not state.keys.required:
-            client = request.client.host if request.client else "unknown"
-            principal = Principal(f"addr:{client}", "admin")
-        else:
-            principal = state.keys.authenticate(key) if key else None
-            if principal is None:
-                raise Problem(
-                    401, "a valid X-API-Key header is required", "X-API-Key",
-                    {"WWW-Authenticate": "APIKey"},
-                )
-            if not principal.allows(scope):
-                raise Problem(
-                    403, f"this API key has scope '{principal.scope}'; this request needs "
-                    f"'{scope}'", "X-API-Key",
-                )
-        wait = state.limiter.acquire(principal.id)
-        if wait:
-            raise Problem(
-                429, "rate limit exceeded for this API key; slow down", "X-API-Key",
-                {"Retry-After": retry_after(wait)},
-            )
-        request.state.principal = principal
-        return principal
+        return authorize(request, key, scope)
 
     check.__name__ = f"require_{scope}"
     return check
+
+
+class Recognizing(NamedTuple):
+    model: LoadedModel
+    service: RecognitionService
+
+
+async def get_recognizing(request: Request) -> Recognizing:
+    """All that ``POST /v1/recognize`` needs (read access, the model, the service) as one
+    dependency. It is the hot path: FastAPI spends ~15 µs resolving each dependency, and
+    the five of the separate ones were a fifth of a single-sample request's CPU. The key
+    is read from the header here; the route documents the same security scheme."""
+    authorize(request, request.headers.get(api_key_header.model.name), "read")
+    return Recognizing(current_model(request), request.app.state.recognition)
 
 
 # one function object per scope, so a route depending on one twice runs it once
@@ -169,7 +188,7 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 SessionDep = Annotated[Session, Depends(get_session)]
 HolderDep = Annotated[ModelHolder, Depends(get_holder)]
 MetricsDep = Annotated[Metrics, Depends(get_metrics)]
-RecognitionDep = Annotated[RecognitionService, Depends(get_recognition)]
+RecognizingDep = Annotated[Recognizing, Depends(get_recognizing)]
 ModelDep = Annotated[LoadedModel, Depends(get_model)]
 ReadAccess = Depends(require_read)
 EnrollAccess = Depends(require_enroll)

@@ -79,6 +79,7 @@ def create_app(settings: Settings | None = None, trainer: Trainer | None = None)
         version="1",
         description=DESCRIPTION,
         lifespan=lifespan,
+        telemetry=None if settings.opentelemetry else {"tracing": False, "metrics": False, "logs": False},
         docs_url=None,  # served below from the package: no CDN
         redoc_url=None,
     )

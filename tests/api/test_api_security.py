@@ -86,15 +86,20 @@ def test_scopes_read_enroll_admin(client, app, vectors, sample):
 
 
 def test_every_v1_operation_needs_a_key_once_one_exists(client, app):
-    """Walks the OpenAPI schema, so a route added later cannot forget its check."""
+    """Walks the OpenAPI schema, so a route added later cannot forget its check, nor
+    forget to document it (recognize checks the key inside its one dependency)."""
     read = make_key(app, "read")
+    paths = client.get("/openapi.json").json()["paths"]
     operations = [
         (method.upper(), path.replace("{class_id}", "1").replace("{job_id}", "1")
          .replace("{version}", "1"))
-        for path, item in client.get("/openapi.json").json()["paths"].items()
-        if path.startswith("/v1") for method in item
+        for path, item in paths.items() if path.startswith("/v1") for method in item
     ]
     assert len(operations) == 10
+    for path, item in paths.items():
+        for method, operation in item.items():
+            if path.startswith("/v1"):
+                assert operation.get("security") == [{"APIKeyHeader": []}], (method, path)
     for method, path in operations:
         problem(client.request(method, path), 401, "X-API-Key")
         r = client.request(method, path, headers={"X-API-Key": read})

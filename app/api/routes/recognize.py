@@ -8,23 +8,22 @@ from fastapi.exceptions import RequestValidationError
 from pydantic import ValidationError
 
 from app.api import problems
-from app.api.deps import ModelDep, ReadAccess, RecognitionDep
+from app.api.deps import RecognizingDep, api_key_header
 from app.api.problems import Problem, blame
 from app.api.schemas import RecognizeRequest, RecognizeResponse
 from app.framework.recognizer import RecognitionBatch
 
-router = APIRouter(
-    prefix="/v1", tags=["recognize"], dependencies=[ReadAccess],
-    responses=problems.responses(401, 403, 429),
-)
+router = APIRouter(prefix="/v1", tags=["recognize"], responses=problems.responses(401, 403, 429))
 
 NPY = "application/x-npy"
 # Bodies above this are parsed in the thread pool, so one big JSON batch cannot stall
 # the event loop.
 PARSE_INLINE_BYTES = 64 * 1024
 
-# The body is read by hand to accept JSON or .npy; this documents both.
-REQUEST_BODY = {
+# The body is read by hand to accept JSON or .npy; this documents both, and the API key
+# that RecognizingDep checks (the other routes' Security dependency documents it for them).
+OPENAPI_EXTRA = {
+    "security": [{api_key_header.scheme_name: []}],
     "requestBody": {
         "required": True,
         "content": {
@@ -41,15 +40,16 @@ REQUEST_BODY = {
 
 
 @router.post(
-    "/recognize", response_model=RecognizeResponse, openapi_extra=REQUEST_BODY,
+    "/recognize", response_model=RecognizeResponse, openapi_extra=OPENAPI_EXTRA,
     responses=problems.responses(413, 422, 503),
 )
-async def recognize(request: Request, model: ModelDep, service: RecognitionDep) -> Response:
+async def recognize(request: Request, recognizing: RecognizingDep) -> Response:
     """Recognise a batch of samples as known or novel objects.
 
     Send `{"samples": [...]}` as JSON, or the same batch as a binary `.npy` body
     with `Content-Type: application/x-npy`.
     """
+    model, service = recognizing
     body = await request.body()
     content_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
     rec = model.recognizer
