@@ -28,6 +28,7 @@ def run(args: argparse.Namespace) -> int:
 
     import uvicorn
 
+    from app.api.http_protocol import CoalescingHttpToolsProtocol
     from app.api.main import create_app
     from app.config import Settings
     from app.service.bootstrap import ensure_ready
@@ -48,5 +49,5 @@ def run(args: argparse.Namespace) -> int:
     finally:
         engine.dispose()
     uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level="info",
-                access_log=settings.access_log)
+                access_log=settings.access_log, http=CoalescingHttpToolsProtocol)
     return 0
