@@ -91,3 +91,40 @@ def test_save_is_atomic_and_leaves_no_temporary_files(fitted, tmp_path, monkeypa
         bundle.save(fitted, path)
     assert path.read_bytes() == before  # the old bundle is intact
     assert [p.name for p in tmp_path.iterdir()] == ["m.bundle"]
+
+
+def test_arrays_are_deflated_only_where_it_pays():
+    """Repetitive arrays (trees, indices) are compressed; noise-like float32 features are
+    stored as they are; np.load reads both back exactly."""
+    rng = np.random.default_rng(0)
+    arrays = {
+        "known/forest/left": np.repeat(np.arange(500, dtype=np.int32), 100),
+        "known/reference": rng.normal(size=(300, 400)).astype(np.float32),
+        "tiny": np.array([1.5]),
+    }
+    data = bundle._npz(arrays)
+    with zipfile.ZipFile(io.BytesIO(data)) as zf:
+        kinds = {i.filename: i.compress_type for i in zf.infolist()}
+    assert kinds["known/forest/left.npy"] == zipfile.ZIP_DEFLATED
+    assert kinds["known/reference.npy"] == zipfile.ZIP_STORED
+    with np.load(io.BytesIO(data), allow_pickle=False) as npz:
+        assert sorted(npz.files) == sorted(arrays)
+        for name, array in arrays.items():
+            assert npz[name].dtype == array.dtype and np.array_equal(npz[name], array)
+
+
+def test_bundles_written_as_one_deflated_npz_still_load(fitted):
+    """The layout before per-array compression: np.savez inside a deflated zip."""
+    meta_zip = zipfile.ZipFile(io.BytesIO(bundle.to_bytes(fitted)))
+    manifest = meta_zip.read("manifest.json")
+    with np.load(io.BytesIO(meta_zip.read("arrays.npz"))) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    npz_bytes = io.BytesIO()
+    np.savez(npz_bytes, **arrays)
+    old = io.BytesIO()
+    with zipfile.ZipFile(old, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr("manifest.json", manifest)
+        zf.writestr("arrays.npz", npz_bytes.getvalue())
+    x = np.zeros((3, *fitted.input_shape), np.float32)
+    again = bundle.from_bytes(old.getvalue())
+    assert np.array_equal(again.known_proba(x), fitted.known_proba(x))
