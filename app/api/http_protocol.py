@@ -26,6 +26,7 @@ class CoalescingTransport:
         self._transport = transport
         self._loop = loop
         self._pending: list[bytes] = []
+        self._pending_bytes = 0
 
     def write(self, data: bytes) -> None:
         if len(data) > COALESCE_BYTES:
@@ -35,12 +36,15 @@ class CoalescingTransport:
         if not self._pending:
             self._loop.call_soon(self.flush)
         self._pending.append(data)
+        self._pending_bytes += len(data)
+        if self._pending_bytes > COALESCE_BYTES:  # many small writes in one step: no hoarding
+            self.flush()
 
     def flush(self) -> None:
         if not self._pending:
             return
         data = b"".join(self._pending) if len(self._pending) > 1 else self._pending[0]
-        self._pending = []
+        self._pending, self._pending_bytes = [], 0
         if not self._transport.is_closing():
             self._transport.write(data)
 

@@ -64,6 +64,23 @@ def test_a_large_write_goes_out_at_once_after_what_is_pending():
     assert len(asyncio.run(run()).writes) == 2
 
 
+def test_many_small_writes_in_one_step_are_sent_once_they_add_up():
+    async def run() -> RecordingTransport:
+        real = RecordingTransport()
+        t = CoalescingTransport(real, asyncio.get_running_loop())
+        chunk = b"c" * 1000
+        for _ in range(COALESCE_BYTES // 1000 + 1):
+            t.write(chunk)
+        assert len(real.writes) == 1  # sent in the same step, not hoarded
+        t.write(b"tail")
+        await asyncio.sleep(0)
+        return real
+
+    real = asyncio.run(run())
+    assert b"".join(real.writes) == b"c" * 1000 * (COALESCE_BYTES // 1000 + 1) + b"tail"
+    assert len(real.writes) == 2
+
+
 def test_close_sends_what_is_pending_first():
     async def run() -> RecordingTransport:
         real = RecordingTransport()
