@@ -160,7 +160,7 @@ async def hammer(urls, seconds, clients, request: bytes, stop: asyncio.Event | N
             "cpu_us_per_request": cpu_per_request(pids, cpu_before, cpu_after, len(latencies))}
 
 
-async def enrollment_to_live(urls, dataset, n: int, offset: int) -> dict[str, list[float]]:
+async def enrollment_to_live(urls, dataset, n: int, offset: int, poll: float) -> dict[str, list[float]]:
     """Seconds from ``POST /v1/classes``, then from ``POST …/samples`` (one real sample of
     the new class), until every API process serves a model that includes it."""
     vectors = unused_vectors(dataset, offset + n)[offset:]
@@ -171,7 +171,7 @@ async def enrollment_to_live(urls, dataset, n: int, offset: int) -> dict[str, li
             while job["status"] != "succeeded":
                 if job["status"] == "failed":
                     raise RuntimeError(f"enrollment job failed: {job['error']}")
-                await asyncio.sleep(0.02)
+                await asyncio.sleep(poll)
                 job = (await c.get(f"{urls[0]}/v1/jobs/{job['id']}")).json()
             pending = list(urls)
             while pending:
@@ -179,7 +179,7 @@ async def enrollment_to_live(urls, dataset, n: int, offset: int) -> dict[str, li
                     active = (await c.get(f"{url}/v1/models/active")).json()["version"]
                     if active >= job["model_version"]:
                         pending.remove(url)
-                await asyncio.sleep(0.02)
+                await asyncio.sleep(poll)
 
         for i, v in enumerate(vectors):
             t = time.perf_counter()
@@ -196,7 +196,7 @@ async def enrollment_to_live(urls, dataset, n: int, offset: int) -> dict[str, li
 
 
 async def run(cluster: Cluster, seconds: float, clients: int, batch: int, dataset,
-              phases: set[str]) -> dict:
+              phases: set[str], poll: float) -> dict:
     urls = cluster.urls
     pids = {p.name: p.popen.pid for p in cluster.procs if p.popen is not None}
     samples = dataset.samples
@@ -216,11 +216,11 @@ async def run(cluster: Cluster, seconds: float, clients: int, batch: int, datase
         out[f"npy_batch_{batch}"] = b
     if "enroll" not in phases:
         return out
-    idle = await enrollment_to_live(urls, dataset, 3, 0)
+    idle = await enrollment_to_live(urls, dataset, 3, 0, poll)
     done = asyncio.Event()
     load_task = asyncio.create_task(hammer(urls, 600, clients, single, done, pids=pids))
     await asyncio.sleep(1)
-    busy = await enrollment_to_live(urls, dataset, 3, 3)
+    busy = await enrollment_to_live(urls, dataset, 3, 3, poll)
     done.set()
     out["single_during_enrollments"] = await load_task
     for kind in ("class", "sample"):
@@ -244,6 +244,8 @@ def main() -> int:
                    help="bootstrap data, as TACTILE_DATASET (default: the embedded default)")
     p.add_argument("--method", default=DEFAULT_METHOD,
                    help=f"recognition method, as TACTILE_METHOD (default: {DEFAULT_METHOD})")
+    p.add_argument("--poll-seconds", type=float, default=0.02,
+                   help="how often the enrolling client polls its job and the APIs' active model")
     p.add_argument("--phases", default="single,batch,enroll",
                    help="which phases to run, comma-separated (default: all three)")
     args = p.parse_args()
@@ -262,7 +264,7 @@ def main() -> int:
         try:
             cluster.start()
             cluster.wait_ready()
-            report = uvloop.run(run(cluster, args.seconds, args.clients, args.batch, dataset, phases))
+            report = uvloop.run(run(cluster, args.seconds, args.clients, args.batch, dataset, phases, args.poll_seconds))
         finally:
             cluster.stop()
     report.update(store="postgresql" if args.postgres else "sqlite", clients=args.clients,

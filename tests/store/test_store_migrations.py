@@ -4,11 +4,16 @@ from __future__ import annotations
 
 import threading
 
+import pytest
 from alembic import command
-from sqlalchemy import inspect
+from sqlalchemy import inspect, text
 
 from app.store import migrate
 from app.store.db import make_engine
+from tests.service_fixtures import fresh_postgres_database, postgres_url
+
+HEAD = "0003"
+PG_URL = postgres_url()
 
 TABLES = {
     "attributes", "classes", "samples", "bundles", "model_versions", "jobs", "leases", "api_keys",
@@ -19,7 +24,7 @@ TABLES = {
 def test_upgrade_downgrade_upgrade(tmp_path):
     engine = make_engine(f"sqlite:///{tmp_path / 'm.db'}")
     migrate.upgrade(engine)
-    assert migrate.current_revision(engine) == "0002"
+    assert migrate.current_revision(engine) == HEAD
     assert TABLES <= set(inspect(engine).get_table_names())
     migrate.downgrade(engine, "base")
     assert migrate.current_revision(engine) is None
@@ -75,7 +80,7 @@ def test_concurrent_upgrades_do_not_collide(tmp_path):
         t.join()
     assert errors == []
     engine = make_engine(url)
-    assert migrate.current_revision(engine) == "0002"
+    assert migrate.current_revision(engine) == HEAD
     engine.dispose()
 
 
@@ -83,3 +88,30 @@ def test_a_bare_postgresql_url_uses_the_installed_driver():
     engine = make_engine("postgresql://user@db.invalid:5432/tactile")  # no connection is made
     assert engine.url.drivername == "postgresql+psycopg2"
     engine.dispose()
+
+
+@pytest.mark.postgres
+@pytest.mark.skipif(not PG_URL, reason="no PostgreSQL reachable (TACTILE_TEST_POSTGRES_URL or the local server)")
+def test_postgresql_upgrade_downgrade_and_bundle_storage():
+    """Bundles (already compressed) skip TOAST compression on PostgreSQL; the whole chain
+    also goes down and up again there."""
+
+    def bundle_storage(engine) -> str:
+        with engine.connect() as conn:
+            return conn.execute(text(
+                "SELECT attstorage FROM pg_attribute "
+                "WHERE attrelid = 'bundles'::regclass AND attname = 'data'"
+            )).scalar()
+
+    with fresh_postgres_database(PG_URL) as url:
+        engine = make_engine(url)
+        migrate.upgrade(engine)
+        assert migrate.current_revision(engine) == HEAD
+        assert bundle_storage(engine) == "e"  # EXTERNAL
+        migrate.downgrade(engine, "0002")
+        assert bundle_storage(engine) == "x"  # EXTENDED, PostgreSQL's default for bytea
+        migrate.downgrade(engine, "base")
+        assert set(inspect(engine).get_table_names()) <= {"alembic_version"}
+        migrate.upgrade(engine)
+        assert TABLES <= set(inspect(engine).get_table_names()) and bundle_storage(engine) == "e"
+        engine.dispose()

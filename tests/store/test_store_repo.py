@@ -6,9 +6,10 @@ import time
 
 import numpy as np
 import pytest
-from sqlalchemy import func, select
+from sqlalchemy import func, select, update
 from sqlalchemy.exc import IntegrityError
 
+from app.framework.errors import BundleError
 from app.store import leases, repo
 from app.store.models import Bundle, Job, ModelVersion
 
@@ -40,6 +41,31 @@ def test_bundles_are_content_addressed(store):
     with sessions() as s:
         assert s.scalar(select(func.count()).select_from(Bundle).where(Bundle.sha256 == a)) == 1
         assert repo.bundle_data(s, a) == b"same bytes"
+
+
+def test_large_bundles_read_back_exactly_in_slices(store):
+    """Read in slices (so no driver holds the GIL for a whole bundle); sizes around the
+    slice boundary, and the empty bundle, come back byte for byte."""
+    _, sessions = store
+    rng = np.random.default_rng(0)
+    n = repo.BUNDLE_READ_BYTES
+    sizes = [0, 1, n - 1, n, n + 1, 3 * n + 12345]
+    with sessions.begin() as s:
+        stored = {size: (rng.bytes(size), None) for size in sizes}
+        stored = {size: (data, repo.store_bundle(s, data)) for size, (data, _) in stored.items()}
+    with sessions() as s:
+        for data, sha in stored.values():
+            assert repo.bundle_data(s, sha) == data
+        assert repo.bundle_data(s, "0" * 64) is None
+
+
+def test_a_damaged_bundle_is_an_error_that_says_so(store):
+    _, sessions = store
+    with sessions.begin() as s:
+        sha = repo.store_bundle(s, b"x" * 1000)
+        s.execute(update(Bundle).where(Bundle.sha256 == sha).values(data=b"y" * 1000))
+    with sessions() as s, pytest.raises(BundleError, match="damaged"):
+        repo.bundle_data(s, sha)
 
 
 def test_only_one_version_is_ever_active(store):
