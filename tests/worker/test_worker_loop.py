@@ -47,6 +47,15 @@ def test_enrollment_makes_a_new_active_version(client, worker, dataset):
     assert {"name": "mug", "kind": "novel"} in active["classes"]
 
 
+def test_the_worker_holds_the_active_model_before_its_first_job(client, worker):
+    worker.warm_up()
+    with client.app.state.sessions() as s:
+        active = repo.active_version(s)
+    version, model = worker._cache
+    assert version == active.version and isinstance(model, TactileRecognizer)
+    assert model.input_shape == tuple(active.input_shape)
+
+
 def test_one_shot_sample_is_folded_in(client, app, worker, dataset):
     created = register(client, dataset, "mug")
     worker.run_once()
