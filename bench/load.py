@@ -105,6 +105,10 @@ class Connection:
 
     async def send(self, request: bytes) -> int:
         """The response status; the body is read and dropped."""
+        return (await self.fetch(request))[0]
+
+    async def fetch(self, request: bytes) -> tuple[int, bytes]:
+        """The response status and body."""
         if self.writer is None:
             self.reader, self.writer = await asyncio.open_connection(self.host, self.port)
         self.writer.write(request)
@@ -114,8 +118,14 @@ class Connection:
             name, _, value = line.partition(b":")
             if name.strip().lower() == b"content-length":
                 length = int(value)
-        await self.reader.readexactly(length)
-        return int(head[9:12])
+        body = await self.reader.readexactly(length)
+        return int(head[9:12]), body
+
+    async def get_json(self, path: str) -> dict:
+        status, body = await self.fetch(self.prepare("GET", path, b"", "application/json"))
+        if status != 200:
+            raise RuntimeError(f"GET {path}: {status} {body[:200]!r}")
+        return json.loads(body)
 
     def close(self) -> None:
         if self.writer is not None:
@@ -167,6 +177,8 @@ async def enrollment_to_live(urls, dataset, n: int, offset: int, poll: float) ->
     the new class), until every API process serves a model that includes it."""
     vectors = unused_vectors(dataset, offset + n)[offset:]
     times: dict[str, list[float]] = {"class": [], "sample": []}
+    # polls on lean keep-alive connections: it shares the 2 cores with the service
+    polls = {url: Connection(url) for url in urls}
     async with httpx.AsyncClient(timeout=30) as c:
 
         async def live(job: dict) -> None:
@@ -174,11 +186,11 @@ async def enrollment_to_live(urls, dataset, n: int, offset: int, poll: float) ->
                 if job["status"] == "failed":
                     raise RuntimeError(f"enrollment job failed: {job['error']}")
                 await asyncio.sleep(poll)
-                job = (await c.get(f"{urls[0]}/v1/jobs/{job['id']}")).json()
+                job = await polls[urls[0]].get_json(f"/v1/jobs/{job['id']}")
             pending = list(urls)
             while pending:
                 for url in list(pending):
-                    active = (await c.get(f"{url}/v1/models/active")).json()["version"]
+                    active = (await polls[url].get_json("/v1/models/active"))["version"]
                     if active >= job["model_version"]:
                         pending.remove(url)
                 await asyncio.sleep(poll)
@@ -194,6 +206,8 @@ async def enrollment_to_live(urls, dataset, n: int, offset: int, poll: float) ->
                              json={"sample": dataset.samples[i].tolist()})
             await live(r.json()["job"])
             times["sample"].append(time.perf_counter() - t)
+    for conn in polls.values():
+        conn.close()
     return times
 
 
