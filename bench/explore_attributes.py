@@ -115,8 +115,9 @@ from sklearn.model_selection import GroupKFold  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from dev_splits import add_split_arguments, splits  # noqa: E402
+
 from app.data.phac2 import load_phac2  # noqa: E402
-from app.evaluation.splits import make_zsl_splits  # noqa: E402
 from app.framework.scaling import RobustInputScaler  # noqa: E402
 from app.methods.attributes import LinearAttributeModel, dap_log_scores, softmax  # noqa: E402
 from app.methods.known import flatten  # noqa: E402
@@ -259,10 +260,7 @@ def greedy_select(oof: np.ndarray, objective: PseudoZsl, key: str, passes: int =
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--data", default=str(ROOT / ".." / "shared" / "data" / "phac2"))
-    p.add_argument("--seeds", default="1,2", help="development split seeds (never 0, the reported one)")
-    p.add_argument("--novel", type=int, default=6)
-    p.add_argument("--splits", type=int, default=7)
+    add_split_arguments(p)
     p.add_argument("--space", default="ep", choices=("ep", "group", "all"))
     p.add_argument("--Cs", default="0.1", help="comma-separated C values searched with every subset")
     p.add_argument("--folds", type=int, default=5, help="GroupKFold folds over the known objects")
@@ -272,9 +270,6 @@ def main() -> int:
     p.add_argument("--cache", default="", help="folder for out-of-object and test predictions (reruns reuse them)")
     p.add_argument("--verify", action="store_true", help="check dap against a fitted best (slow)")
     args = p.parse_args()
-    seeds = [int(s) for s in args.seeds.split(",")]
-    if 0 in seeds:
-        raise SystemExit("seed 0 holds the reported splits: use development seeds (1, 2)")
     warnings.filterwarnings("ignore", category=UserWarning)
     Cs = sorted(float(c) for c in args.Cs.split(","))
     if BASE_C not in Cs:
@@ -291,109 +286,108 @@ def main() -> int:
     rows, chosen_counts = [], [Counter() for _ in range(M)]
     oof_auc = {"dap": [], "sel": []}
     pooled: dict[str, list] = {"truth": []}
-    for seed in seeds:
-        for split in make_zsl_splits(data, args.novel, args.splits, seed):
-            t = time.perf_counter()
-            train = split.train_dataset(data)
-            y = train.labels
-            attrs = train.class_attributes
-            targets = (attrs[y] > 0.5).astype(np.int64)
-            prior = attrs.mean(axis=0).astype(np.float64)
-            scaler = RobustInputScaler().fit(flatten(train.samples))
-            z = scaler.transform(flatten(train.samples))  # float32, as best
-            xn = data.samples[split.novel_test_idx]
-            zn = scaler.transform(flatten(xn))
-            yn = split.novel_labels(data, split.novel_test_idx)
-            vectors = split.novel_attributes(data)
-            tn = (vectors[yn] > 0.5).astype(np.int64)
+    for seed, split in splits(data, args, development_only=True):
+        t = time.perf_counter()
+        train = split.train_dataset(data)
+        y = train.labels
+        attrs = train.class_attributes
+        targets = (attrs[y] > 0.5).astype(np.int64)
+        prior = attrs.mean(axis=0).astype(np.float64)
+        scaler = RobustInputScaler().fit(flatten(train.samples))
+        z = scaler.transform(flatten(train.samples))  # float32, as best
+        xn = data.samples[split.novel_test_idx]
+        zn = scaler.transform(flatten(xn))
+        yn = split.novel_labels(data, split.novel_test_idx)
+        vectors = split.novel_attributes(data)
+        tn = (vectors[yn] > 0.5).astype(np.int64)
 
-            # plain DAP, exactly as best fits it
-            p_dap = LinearAttributeModel.fit(z, attrs[y], BASE_C).predict_proba(zn)
-            if args.verify and split.index == 0:
-                from app.evaluation.protocol import make_recognizer
-                best = make_recognizer("best", None, 0).fit(train)
-                p_best = best.add_novel_classes(list(split.novel_names), vectors,
-                                                allow_known_vectors=True).novel_proba(xn)
-                p_here = softmax(dap_log_scores(p_dap, vectors, prior, CLIP))
-                print(json.dumps({"verify_seed": seed, "max_abs_diff": float(np.abs(p_best - p_here).max()),
-                                  "same_argmax": bool((p_best.argmax(1) == p_here.argmax(1)).all())}),
-                      file=sys.stderr, flush=True)
+        # plain DAP, exactly as best fits it
+        p_dap = LinearAttributeModel.fit(z, attrs[y], BASE_C).predict_proba(zn)
+        if args.verify and split.index == 0:
+            from app.evaluation.protocol import make_recognizer
+            best = make_recognizer("best", None, 0).fit(train)
+            p_best = best.add_novel_classes(list(split.novel_names), vectors,
+                                            allow_known_vectors=True).novel_proba(xn)
+            p_here = softmax(dap_log_scores(p_dap, vectors, prior, CLIP))
+            print(json.dumps({"verify_seed": seed, "max_abs_diff": float(np.abs(p_best - p_here).max()),
+                              "same_argmax": bool((p_best.argmax(1) == p_here.argmax(1)).all())}),
+                  file=sys.stderr, flush=True)
 
-            folds = list(GroupKFold(n_splits=args.folds).split(z, targets, groups=y))
-            oof = np.empty((len(combos), len(z), M))
-            test = np.empty((len(combos), len(zn), M))
-            cache_file, cached = None, {}
-            if args.cache:
-                cache_file = Path(args.cache) / f"novel{args.novel}-of{args.splits}-seed{seed}-split{split.index}-folds{args.folds}.npz"
-                if cache_file.exists():
-                    cached = dict(np.load(cache_file))
-            for k, (s, C) in enumerate(combos):
-                cols = subs[s][1]
-                key = f"{args.space if subs[s][0] != 'all' else 'any'}:{subs[s][0]}@{C:g}"
-                if f"oof/{key}" in cached:
-                    oof[k], test[k] = cached[f"oof/{key}"], cached[f"test/{key}"]
-                    continue
-                for fit_idx, val_idx in folds:
-                    oof[k][val_idx] = fit_predict(z[fit_idx][:, cols], targets[fit_idx], z[val_idx][:, cols], C)
-                test[k] = fit_predict(z[:, cols], targets, zn[:, cols], C)
-                cached[f"oof/{key}"], cached[f"test/{key}"] = oof[k].copy(), test[k].copy()
-            if cache_file is not None:
-                cache_file.parent.mkdir(parents=True, exist_ok=True)
-                np.savez(cache_file, **cached)
-            assert np.allclose(test[0], p_dap, atol=1e-6), "combo (all, 0.1) must be plain DAP"
-            loss = np.stack([log_loss_cols(oof[k], targets) for k in range(len(combos))])  # (K, M)
-            # per-object mean log-loss (K, objects, M): paired comparisons over known objects
-            objects = np.unique(y)
-            obj_loss = np.stack([np.stack([sample_log_loss(oof[k][y == o], targets[y == o]).mean(axis=0)
-                                           for o in objects]) for k in range(len(combos))])
-            auc = np.stack([auc_cols(oof[k], targets) for k in range(len(combos))])
-            cols_m = np.arange(M)
+        folds = list(GroupKFold(n_splits=args.folds).split(z, targets, groups=y))
+        oof = np.empty((len(combos), len(z), M))
+        test = np.empty((len(combos), len(zn), M))
+        cache_file, cached = None, {}
+        if args.cache:
+            cache_file = Path(args.cache) / f"novel{args.novel}-of{args.splits}-seed{seed}-split{split.index}-folds{args.folds}.npz"
+            if cache_file.exists():
+                cached = dict(np.load(cache_file))
+        for k, (s, C) in enumerate(combos):
+            cols = subs[s][1]
+            key = f"{args.space if subs[s][0] != 'all' else 'any'}:{subs[s][0]}@{C:g}"
+            if f"oof/{key}" in cached:
+                oof[k], test[k] = cached[f"oof/{key}"], cached[f"test/{key}"]
+                continue
+            for fit_idx, val_idx in folds:
+                oof[k][val_idx] = fit_predict(z[fit_idx][:, cols], targets[fit_idx], z[val_idx][:, cols], C)
+            test[k] = fit_predict(z[:, cols], targets, zn[:, cols], C)
+            cached[f"oof/{key}"], cached[f"test/{key}"] = oof[k].copy(), test[k].copy()
+        if cache_file is not None:
+            cache_file.parent.mkdir(parents=True, exist_ok=True)
+            np.savez(cache_file, **cached)
+        assert np.allclose(test[0], p_dap, atol=1e-6), "combo (all, 0.1) must be plain DAP"
+        loss = np.stack([log_loss_cols(oof[k], targets) for k in range(len(combos))])  # (K, M)
+        # per-object mean log-loss (K, objects, M): paired comparisons over known objects
+        objects = np.unique(y)
+        obj_loss = np.stack([np.stack([sample_log_loss(oof[k][y == o], targets[y == o]).mean(axis=0)
+                                       for o in objects]) for k in range(len(combos))])
+        auc = np.stack([auc_cols(oof[k], targets) for k in range(len(combos))])
+        cols_m = np.arange(M)
 
-            sel = loss.argmin(axis=0)  # first minimum: plain DAP's combo on ties
-            variants = {"dap": p_dap, "sel": pick(test, sel)}
-            if len(Cs) > 1:
-                c01 = [k for k, (_, C) in enumerate(combos) if C == BASE_C]
-                variants["sel_c01"] = pick(test, np.array(c01)[loss[c01].argmin(axis=0)])
-            variants["sel_auc"] = pick(test, np.nan_to_num(auc, nan=-1).argmax(axis=0))
-            keep = loss[sel, cols_m] < (1 - args.margin) * loss[0]
-            variants[f"sel_m{args.margin:g}"] = pick(test, np.where(keep, sel, 0))
-            gain = obj_loss[0][None] - obj_loss  # (K, objects, M), > 0: the combo is better
-            tstat = gain.mean(axis=1) / (gain.std(axis=1, ddof=1) / np.sqrt(len(objects)) + 1e-12)
-            for thr in (float(x) for x in args.tstat.split(",") if x):
-                variants[f"sel_t{thr:g}"] = pick(test, np.where(tstat[sel, cols_m] > thr, sel, 0))
-            objective = PseudoZsl(folds, y, attrs)
-            zchoice = {}
-            for crit in ("acc", "lp"):
-                zchoice[crit] = greedy_select(oof, objective, crit)
-                variants[f"z{crit}"] = pick(test, zchoice[crit])
-            row_extra = {"pseudo_dap": objective(oof[0])[0],
-                         "pseudo_zacc": objective(pick(oof, zchoice["acc"]))[0]}
-            order = np.argsort(loss, axis=0, kind="stable")
-            for kk in ens_ks:
-                variants[f"ens{kk}"] = np.stack([test[order[:kk, m], :, m].mean(axis=0) for m in range(M)], 1)
-            if args.space == "ep" and BASE_C in Cs:
-                by_name = {subs[s][0]: k for k, (s, C) in enumerate(combos) if C == BASE_C}
-                prior_choice = []
-                for a in names:
-                    eps = PRIOR_EPS[a]
-                    prior_choice.append(by_name["all" if len(eps) == N_EP else "+".join(EP_NAMES[q] for q in eps)])
-                variants["prior"] = pick(test, np.array(prior_choice))
+        sel = loss.argmin(axis=0)  # first minimum: plain DAP's combo on ties
+        variants = {"dap": p_dap, "sel": pick(test, sel)}
+        if len(Cs) > 1:
+            c01 = [k for k, (_, C) in enumerate(combos) if C == BASE_C]
+            variants["sel_c01"] = pick(test, np.array(c01)[loss[c01].argmin(axis=0)])
+        variants["sel_auc"] = pick(test, np.nan_to_num(auc, nan=-1).argmax(axis=0))
+        keep = loss[sel, cols_m] < (1 - args.margin) * loss[0]
+        variants[f"sel_m{args.margin:g}"] = pick(test, np.where(keep, sel, 0))
+        gain = obj_loss[0][None] - obj_loss  # (K, objects, M), > 0: the combo is better
+        tstat = gain.mean(axis=1) / (gain.std(axis=1, ddof=1) / np.sqrt(len(objects)) + 1e-12)
+        for thr in (float(x) for x in args.tstat.split(",") if x):
+            variants[f"sel_t{thr:g}"] = pick(test, np.where(tstat[sel, cols_m] > thr, sel, 0))
+        objective = PseudoZsl(folds, y, attrs)
+        zchoice = {}
+        for crit in ("acc", "lp"):
+            zchoice[crit] = greedy_select(oof, objective, crit)
+            variants[f"z{crit}"] = pick(test, zchoice[crit])
+        row_extra = {"pseudo_dap": objective(oof[0])[0],
+                     "pseudo_zacc": objective(pick(oof, zchoice["acc"]))[0]}
+        order = np.argsort(loss, axis=0, kind="stable")
+        for kk in ens_ks:
+            variants[f"ens{kk}"] = np.stack([test[order[:kk, m], :, m].mean(axis=0) for m in range(M)], 1)
+        if args.space == "ep" and BASE_C in Cs:
+            by_name = {subs[s][0]: k for k, (s, C) in enumerate(combos) if C == BASE_C}
+            prior_choice = []
+            for a in names:
+                eps = PRIOR_EPS[a]
+                prior_choice.append(by_name["all" if len(eps) == N_EP else "+".join(EP_NAMES[q] for q in eps)])
+            variants["prior"] = pick(test, np.array(prior_choice))
 
-            row = {"seed": seed, "split": split.index + 1}
-            row.update({v: zsl_acc(pv, vectors, prior, yn) for v, pv in variants.items()})
-            row.update({k: round(v, 3) for k, v in row_extra.items()})
-            row["zacc_changed"] = int((zchoice["acc"] != 0).sum())
-            row["seconds"] = round(time.perf_counter() - t, 1)
-            rows.append(row)
-            print(json.dumps(row), file=sys.stderr, flush=True)
-            for m in range(M):
-                s, C = combos[sel[m]]
-                chosen_counts[m][f"{subs[s][0]}@{C:g}"] += 1
-            oof_auc["dap"].append(auc[0])
-            oof_auc["sel"].append(auc[sel, cols_m])
-            for v, pv in variants.items():
-                pooled.setdefault(v, []).append(pv)
-            pooled["truth"].append(tn)
+        row = {"seed": seed, "split": split.index + 1}
+        row.update({v: zsl_acc(pv, vectors, prior, yn) for v, pv in variants.items()})
+        row.update({k: round(v, 3) for k, v in row_extra.items()})
+        row["zacc_changed"] = int((zchoice["acc"] != 0).sum())
+        row["seconds"] = round(time.perf_counter() - t, 1)
+        rows.append(row)
+        print(json.dumps(row), file=sys.stderr, flush=True)
+        for m in range(M):
+            s, C = combos[sel[m]]
+            chosen_counts[m][f"{subs[s][0]}@{C:g}"] += 1
+        oof_auc["dap"].append(auc[0])
+        oof_auc["sel"].append(auc[sel, cols_m])
+        for v, pv in variants.items():
+            pooled.setdefault(v, []).append(pv)
+        pooled["truth"].append(tn)
 
     keys = [k for k in rows[0] if k not in ("seed", "split", "seconds", "zacc_changed")
             and not k.startswith("pseudo_")]

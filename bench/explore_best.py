@@ -25,10 +25,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from dev_splits import add_split_arguments, split_seeds  # noqa: E402
+
 from app.data.phac2 import load_phac2  # noqa: E402
 from app.evaluation.protocol import FIGURES, evaluate  # noqa: E402
-
-DEFAULT_DATA = ROOT / ".." / "shared" / "data" / "phac2"
 
 
 def parse_variant(spec: str) -> tuple[str, str, dict]:
@@ -46,17 +46,14 @@ def parse_variant(spec: str) -> tuple[str, str, dict]:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
     ap.add_argument("--variants", default="best", help="';'-separated method[:k=v,...] specs")
-    ap.add_argument("--seeds", default="1,2", help="comma-separated split seeds (development: 1,2)")
-    ap.add_argument("--novel", type=int, default=6)
-    ap.add_argument("--splits", type=int, default=7)
+    add_split_arguments(ap)
     ap.add_argument("--out", type=Path, default=None, help="write every run's results JSON here")
     args = ap.parse_args()
 
     dataset = load_phac2(args.data)
     variants = [parse_variant(s) for s in args.variants.split(";") if s.strip()]
-    seeds = [int(s) for s in args.seeds.split(",")]
+    seeds = split_seeds(args)
     table: dict[str, dict[str, list[float]]] = {}
     timings: dict[str, list[float]] = {}
     dump = []

@@ -104,9 +104,10 @@ from torch import nn  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from dev_splits import add_split_arguments, splits  # noqa: E402
+
 from app.baselines.common import validation_folds  # noqa: E402
 from app.data.phac2 import load_phac2  # noqa: E402
-from app.evaluation.splits import make_zsl_splits  # noqa: E402
 from app.framework.scaling import RobustInputScaler  # noqa: E402
 from app.methods.attributes import LinearAttributeModel, dap_log_scores, softmax  # noqa: E402
 from app.methods.known import flatten  # noqa: E402
@@ -237,22 +238,19 @@ def dap_proba(z_train: np.ndarray, y: np.ndarray, class_attributes: np.ndarray, 
 
 def tasks(data, args):
     """(seed, split, train dataset, eval samples, eval labels, eval vectors) per split."""
-    for seed in (int(s) for s in args.seeds.split(",")):
-        if seed == 0:
-            raise SystemExit("seed 0 is the reported seed: development seeds only")
-        for split in make_zsl_splits(data, args.novel, args.splits, seed):
-            train = split.train_dataset(data)
-            if args.protocol == "test":
-                yield (seed, split, train, data.samples[split.novel_test_idx],
-                       split.novel_labels(data, split.novel_test_idx), split.novel_attributes(data))
-                continue
-            folds = validation_folds(train, 1, args.val_objects / train.n_classes, seed * 1000 + split.index)
-            fit_classes, val_classes = folds[0]
-            remap = np.full(train.n_classes, -1)
-            remap[val_classes] = np.arange(len(val_classes))
-            is_val = np.isin(train.labels, val_classes)
-            yield (seed, split, train.select_classes(fit_classes), train.samples[is_val],
-                   remap[train.labels[is_val]], train.class_attributes[val_classes])
+    for seed, split in splits(data, args, development_only=True):
+        train = split.train_dataset(data)
+        if args.protocol == "test":
+            yield (seed, split, train, data.samples[split.novel_test_idx],
+                   split.novel_labels(data, split.novel_test_idx), split.novel_attributes(data))
+            continue
+        folds = validation_folds(train, 1, args.val_objects / train.n_classes, seed * 1000 + split.index)
+        fit_classes, val_classes = folds[0]
+        remap = np.full(train.n_classes, -1)
+        remap[val_classes] = np.arange(len(val_classes))
+        is_val = np.isin(train.labels, val_classes)
+        yield (seed, split, train.select_classes(fit_classes), train.samples[is_val],
+               remap[train.labels[is_val]], train.class_attributes[val_classes])
 
 
 def parse_variants(spec: str, base: dict) -> list[tuple[str, dict]]:
@@ -281,10 +279,7 @@ def summary(rows: list[dict], key: str, ref: str = "dap") -> dict:
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--data", default=str(ROOT / ".." / "shared" / "data" / "phac2"))
-    p.add_argument("--seeds", default="1,2", help="development split seeds (never 0, the reported one)")
-    p.add_argument("--novel", type=int, default=6)
-    p.add_argument("--splits", type=int, default=7)
+    add_split_arguments(p)
     p.add_argument("--protocol", choices=("test", "val"), default="test")
     p.add_argument("--val-objects", type=int, default=6, help="validation objects for --protocol val")
     p.add_argument("--variants", default="base", help="';'-separated hyper-parameter overrides")

@@ -23,46 +23,43 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from dev_splits import add_split_arguments, splits  # noqa: E402
+
 from app.data.phac2 import load_phac2  # noqa: E402
 from app.evaluation import metrics  # noqa: E402
 from app.evaluation.protocol import make_recognizer  # noqa: E402
-from app.evaluation.splits import make_zsl_splits  # noqa: E402
 
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--data", default=str(ROOT / ".." / "shared" / "data" / "phac2"))
-    p.add_argument("--seeds", default="1,2", help="development split seeds (never 0)")
-    p.add_argument("--novel", type=int, default=6)
-    p.add_argument("--splits", type=int, default=7)
+    add_split_arguments(p)
     p.add_argument("--temperatures", default="0,0.01,0.02,0.05,0.1,0.2,0.5")
     args = p.parse_args()
     temps = [float(t) for t in args.temperatures.split(",")]
     data = load_phac2(args.data)
     per_t: dict[float, list[tuple[float, float, float]]] = {t: [] for t in temps}
-    for seed in (int(s) for s in args.seeds.split(",")):
-        for split in make_zsl_splits(data, args.novel, args.splits, seed):
-            train = split.train_dataset(data)
-            model = make_recognizer("best", None, 0).fit(train).add_novel_classes(
-                list(split.novel_names), split.novel_attributes(data), allow_known_vectors=True)
-            xk, xn = data.samples[split.known_test_idx], data.samples[split.novel_test_idx]
-            names_k, names_n = list(train.class_names), list(split.novel_names)
-            true = ([names_k[j] for j in split.known_labels(data, split.known_test_idx)]
-                    + [names_n[j] for j in split.novel_labels(data, split.novel_test_idx)])
-            is_known = np.r_[np.ones(len(xk), bool), np.zeros(len(xn), bool)]
-            score, p_known, p_novel = model._all_scores(model.validate_samples(np.concatenate([xk, xn])))
-            known_pick = np.asarray(names_k, object)[p_known.argmax(1)]
-            novel_pick = np.asarray(names_n, object)[p_novel.argmax(1)]
-            for t in temps:
-                if t == 0:
-                    novel = score > model.novelty_threshold
-                else:
-                    q = 1.0 / (1.0 + np.exp(-np.clip((score - model.novelty_threshold) / t, -50, 50)))
-                    novel = q * p_novel.max(1) > (1 - q) * p_known.max(1)
-                pred = np.where(novel, novel_pick, known_pick)
-                f = metrics.gzsl_figures(true, list(pred), is_known)
-                per_t[t].append((f["gzsl_seen"], f["gzsl_unseen"], f["gzsl_h"]))
-            print(f"seed {seed} split {split.index + 1} done", file=sys.stderr, flush=True)
+    for seed, split in splits(data, args):
+        train = split.train_dataset(data)
+        model = make_recognizer("best", None, 0).fit(train).add_novel_classes(
+            list(split.novel_names), split.novel_attributes(data), allow_known_vectors=True)
+        xk, xn = data.samples[split.known_test_idx], data.samples[split.novel_test_idx]
+        names_k, names_n = list(train.class_names), list(split.novel_names)
+        true = ([names_k[j] for j in split.known_labels(data, split.known_test_idx)]
+                + [names_n[j] for j in split.novel_labels(data, split.novel_test_idx)])
+        is_known = np.r_[np.ones(len(xk), bool), np.zeros(len(xn), bool)]
+        score, p_known, p_novel = model._all_scores(model.validate_samples(np.concatenate([xk, xn])))
+        known_pick = np.asarray(names_k, object)[p_known.argmax(1)]
+        novel_pick = np.asarray(names_n, object)[p_novel.argmax(1)]
+        for t in temps:
+            if t == 0:
+                novel = score > model.novelty_threshold
+            else:
+                q = 1.0 / (1.0 + np.exp(-np.clip((score - model.novelty_threshold) / t, -50, 50)))
+                novel = q * p_novel.max(1) > (1 - q) * p_known.max(1)
+            pred = np.where(novel, novel_pick, known_pick)
+            f = metrics.gzsl_figures(true, list(pred), is_known)
+            per_t[t].append((f["gzsl_seen"], f["gzsl_unseen"], f["gzsl_h"]))
+        print(f"seed {seed} split {split.index + 1} done", file=sys.stderr, flush=True)
     out = {str(t): dict(zip(("gzsl_seen", "gzsl_unseen", "gzsl_h"),
                             np.round(np.mean(v, axis=0), 3).tolist(), strict=True))
            for t, v in per_t.items()}

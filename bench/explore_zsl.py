@@ -31,9 +31,10 @@ from torch import nn
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from dev_splits import add_split_arguments, splits  # noqa: E402
+
 from app.data.phac2 import load_phac2  # noqa: E402
 from app.evaluation.protocol import make_recognizer  # noqa: E402
-from app.evaluation.splits import make_zsl_splits  # noqa: E402
 from app.methods.known import flatten  # noqa: E402
 
 
@@ -110,11 +111,8 @@ def fclswgan(z, y, class_attributes, novel_attributes, seed: int, args) -> nn.Li
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--data", default=str(ROOT / ".." / "shared" / "data" / "phac2"))
-    p.add_argument("--seeds", default="1,2", help="development split seeds (never 0, the reported one)")
-    p.add_argument("--novel", type=int, default=6)
+    add_split_arguments(p)
     p.add_argument("--approaches", default="fclswgan", help="fclswgan and/or eszsl")
-    p.add_argument("--splits", type=int, default=7)
     p.add_argument("--iters", type=int, default=2000, help="generator steps")
     p.add_argument("--beta", type=float, default=0.01, help="weight of the classification loss")
     p.add_argument("--hidden", type=int, default=256)
@@ -125,35 +123,34 @@ def main() -> int:
     torch.set_num_threads(1)
     data = load_phac2(args.data)
     rows = []
-    for seed in (int(s) for s in args.seeds.split(",")):
-        for split in make_zsl_splits(data, args.novel, args.splits, seed):
-            t = time.perf_counter()
-            train = split.train_dataset(data)
-            best = make_recognizer("best", None, 0).fit(train)
-            xn = data.samples[split.novel_test_idx]
-            yn = split.novel_labels(data, split.novel_test_idx)
-            vectors = split.novel_attributes(data)
-            p_dap = best.add_novel_classes(list(split.novel_names), vectors,
-                                           allow_known_vectors=True).novel_proba(xn)
-            row = {"seed": seed, "split": split.index + 1, "dap": float((p_dap.argmax(1) == yn).mean())}
-            for approach in args.approaches.split(","):
-                if approach == "fclswgan":
-                    cues = best.known_.cues_model
-                    clf = fclswgan(cues.scaled(flatten(train.samples)), train.labels,
-                                   train.class_attributes, vectors, seed * 100 + split.index, args)
-                    with torch.no_grad():
-                        p = F.softmax(clf(torch.tensor(cues.scaled(flatten(xn)))), 1).numpy()
-                elif approach == "eszsl":
-                    p = make_recognizer("eszsl", None, 0).fit(train).add_novel_classes(
-                        list(split.novel_names), vectors, allow_known_vectors=True).novel_proba(xn)
-                else:
-                    raise SystemExit(f"unknown approach {approach!r}")
-                product = np.log(p_dap + 1e-12) + np.log(p + 1e-12)
-                row[approach] = float((p.argmax(1) == yn).mean())
-                row[f"dap*{approach}"] = float((product.argmax(1) == yn).mean())
-            row["seconds"] = round(time.perf_counter() - t, 1)
-            rows.append(row)
-            print(json.dumps(row), file=sys.stderr, flush=True)
+    for seed, split in splits(data, args):
+        t = time.perf_counter()
+        train = split.train_dataset(data)
+        best = make_recognizer("best", None, 0).fit(train)
+        xn = data.samples[split.novel_test_idx]
+        yn = split.novel_labels(data, split.novel_test_idx)
+        vectors = split.novel_attributes(data)
+        p_dap = best.add_novel_classes(list(split.novel_names), vectors,
+                                       allow_known_vectors=True).novel_proba(xn)
+        row = {"seed": seed, "split": split.index + 1, "dap": float((p_dap.argmax(1) == yn).mean())}
+        for approach in args.approaches.split(","):
+            if approach == "fclswgan":
+                cues = best.known_.cues_model
+                clf = fclswgan(cues.scaled(flatten(train.samples)), train.labels,
+                               train.class_attributes, vectors, seed * 100 + split.index, args)
+                with torch.no_grad():
+                    p = F.softmax(clf(torch.tensor(cues.scaled(flatten(xn)))), 1).numpy()
+            elif approach == "eszsl":
+                p = make_recognizer("eszsl", None, 0).fit(train).add_novel_classes(
+                    list(split.novel_names), vectors, allow_known_vectors=True).novel_proba(xn)
+            else:
+                raise SystemExit(f"unknown approach {approach!r}")
+            product = np.log(p_dap + 1e-12) + np.log(p + 1e-12)
+            row[approach] = float((p.argmax(1) == yn).mean())
+            row[f"dap*{approach}"] = float((product.argmax(1) == yn).mean())
+        row["seconds"] = round(time.perf_counter() - t, 1)
+        rows.append(row)
+        print(json.dumps(row), file=sys.stderr, flush=True)
     mean = {k: round(float(np.mean([r[k] for r in rows])), 3) for k in rows[0]
             if k not in ("seed", "split", "seconds")}
     print(json.dumps({"zsl_mean": mean, "splits": len(rows), **vars(args)}, indent=2))

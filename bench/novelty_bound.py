@@ -23,11 +23,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from app.data.phac2 import load_phac2  # noqa: E402
-from app.evaluation.splits import make_zsl_splits  # noqa: E402
-from app.framework.registry import DEFAULT_METHOD, make_method  # noqa: E402
+from dev_splits import add_split_arguments, splits  # noqa: E402
 
-DEFAULT_DATA = ROOT / ".." / "shared" / "data" / "phac2"
+from app.data.phac2 import load_phac2  # noqa: E402
+from app.framework.registry import DEFAULT_METHOD, make_method  # noqa: E402
 
 
 def oracle_balance(known: np.ndarray, novel: np.ndarray) -> float:
@@ -40,26 +39,22 @@ def oracle_balance(known: np.ndarray, novel: np.ndarray) -> float:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
     ap.add_argument("--method", default=DEFAULT_METHOD)
-    ap.add_argument("--seeds", default="1,2", help="comma-separated split seeds (development: 1,2)")
-    ap.add_argument("--novel", type=int, default=6)
-    ap.add_argument("--splits", type=int, default=7)
+    add_split_arguments(ap)
     args = ap.parse_args()
 
     dataset = load_phac2(args.data)
     rows = []
     print(f"{args.method}, {args.novel} novel objects, seeds {args.seeds}")
     print("seed split  kept  detected  oracle")
-    for seed in (int(s) for s in args.seeds.split(",")):
-        for split in make_zsl_splits(dataset, args.novel, args.splits, seed):
-            model = make_method(args.method, seed=0).fit(split.train_dataset(dataset))
-            known = model.novelty_score(dataset.samples[split.known_test_idx])
-            novel = model.novelty_score(dataset.samples[split.novel_test_idx])
-            threshold = model.novelty_threshold
-            row = (np.mean(known <= threshold), np.mean(novel > threshold), oracle_balance(known, novel))
-            rows.append(row)
-            print(f"{seed:4d} {split.index + 1:5d}  {row[0]:.3f}  {row[1]:.3f}     {row[2]:.3f}", flush=True)
+    for seed, split in splits(dataset, args):
+        model = make_method(args.method, seed=0).fit(split.train_dataset(dataset))
+        known = model.novelty_score(dataset.samples[split.known_test_idx])
+        novel = model.novelty_score(dataset.samples[split.novel_test_idx])
+        threshold = model.novelty_threshold
+        row = (np.mean(known <= threshold), np.mean(novel > threshold), oracle_balance(known, novel))
+        rows.append(row)
+        print(f"{seed:4d} {split.index + 1:5d}  {row[0]:.3f}  {row[1]:.3f}     {row[2]:.3f}", flush=True)
     mean = np.mean(rows, axis=0)
     print(f"mean        {mean[0]:.3f}  {mean[1]:.3f}     {mean[2]:.3f}")
     return 0
