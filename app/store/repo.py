@@ -178,7 +178,7 @@ def bundle_data(session: Session, sha256: str) -> bytes | None:
         )
         for start in range(0, size, BUNDLE_READ_BYTES)
     ]
-    data = b"".join(bytes(p) for p in parts)
+    data = b"".join(parts)  # LargeBinary gives bytes on every driver
     if len(data) != size or hashlib.sha256(data).hexdigest() != sha256:
         raise BundleError(f"stored bundle {sha256[:12]}… reads back as {len(data)} bytes of "
                           f"{size} with another hash: the store is damaged")
