@@ -24,7 +24,7 @@ from app.config import Settings
 from app.framework import bundle
 from app.framework.recognizer import TactileRecognizer
 from app.service.bootstrap import extract_features, model_classes
-from app.store import leases, repo
+from app.store import bundles, leases, repo
 from app.store.models import Job, ObjectClass, Sample, utcnow
 from worker.retrain import Plan, build, known_dataset, make_plan
 
@@ -43,6 +43,7 @@ class Worker:
         self.id = leases.new_holder_id()
         self.on_activate = on_activate
         self._cache: tuple[int, TactileRecognizer] | None = None  # last model built or loaded
+        self._encoder = bundle.PartEncoder()  # parts unchanged since the last version are not encoded again
 
     # ------------------------------------------------------------------ rounds
     def run_once(self) -> int:
@@ -126,7 +127,7 @@ class Worker:
                 "full retrain" if plan.full_retrain else "incremental",
             )
             new = build(plan, model, self.settings, known)
-            data = bundle.to_bytes(new)
+            split = self._encoder.split(new)  # serialised before the transaction opens
         ok = [j for j in job_ids if j not in plan.rejected]
         with self.sessions.begin() as s:
             for job_id, reason in plan.rejected.items():
@@ -134,19 +135,19 @@ class Worker:
             if not plan.changes_model:  # already in the active model (e.g. a re-run)
                 repo.finish_jobs(s, ok, "succeeded", version=base.version)
                 return
-            version = self._commit(s, base.version, new, data, plan, ok)
+            version = self._commit(s, base.version, new, split, plan, ok)
         self._cache = (version, new)
         log.info("model version %d is active", version)
         if self.on_activate:
             self.on_activate(version)
 
     def _commit(
-        self, s: Session, base_version: int, new: TactileRecognizer, data: bytes, plan: Plan,
-        job_ids: list[int],
+        self, s: Session, base_version: int, new: TactileRecognizer, split: bundles.Split,
+        plan: Plan, job_ids: list[int],
     ) -> int:
         row = repo.add_version(
             s, method=new.method, reason="promotion" if plan.full_retrain else "update",
-            base_version=base_version, bundle_sha256=repo.store_bundle(s, data),
+            base_version=base_version, bundle_sha256=bundles.store_model(s, split),
             input_shape=list(new.input_shape), metrics=repo.jsonable(new.metrics),
             classes=model_classes(new), sample_ids=plan.sample_ids,
         )
@@ -182,7 +183,7 @@ class Worker:
 
     def _load(self, s: Session, version: int, sha256: str) -> TactileRecognizer:
         if self._cache is None or self._cache[0] != version:
-            self._cache = (version, bundle.from_bytes(repo.bundle_data(s, sha256)))
+            self._cache = (version, bundles.load_model(s, sha256))
         return self._cache[1]
 
 

@@ -5,6 +5,13 @@ shape, attribute vocabulary, classes with their kind, novelty threshold and its
 tuning, training config, metrics) and ``arrays.npz`` (weights and other
 arrays). No pickle: loading a bundle never executes code from the file.
 Written to a temporary file in the target folder, then renamed into place.
+
+A store that keeps many versions of one model writes them ``split``: the large
+arrays go into parts of their own, named by the SHA-256 of their bytes and
+listed in the manifest's ``parts``, and the rest is a small head bundle. An
+enrollment changes the class registry, not the forest or the encoder, so
+successive versions share those parts, and a process that already holds them
+loads a new version by reading the head alone.
 """
 
 from __future__ import annotations
@@ -16,6 +23,7 @@ import os
 import tempfile
 import zipfile
 import zlib
+from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -33,10 +41,70 @@ _REG = "registry/"  # prefix of the registry's arrays inside arrays.npz
 # an array is deflated when its first 64 kB shrink below 80 % at level 1
 _PROBE_BYTES = 64 * 1024
 _WORTH_IT = 0.8
+_NPY_MAGIC = b"\x93NUMPY"
+# arrays of this size or more become parts of their own in a split bundle
+PART_MIN_BYTES = 16 * 1024
 
 
 def to_bytes(model: TactileRecognizer) -> bytes:
-    """Serialise a fitted recognizer to bundle bytes."""
+    """Serialise a fitted recognizer to bundle bytes (one self-contained file)."""
+    manifest, arrays = _contents(model)
+    return _zip(manifest, arrays)
+
+
+def split(model: TactileRecognizer, min_bytes: int = PART_MIN_BYTES) -> tuple[bytes, dict[str, bytes]]:
+    """The bundle as a head and its parts: ``(head bytes, {sha256: part bytes})``.
+
+    Every array of ``min_bytes`` or more becomes a part (its ``.npy`` bytes, zlib-deflated
+    when that pays), and the head's manifest maps the array's name to the part's SHA-256.
+    ``from_bytes(head, part=...)`` loads it.
+    """
+    return PartEncoder(min_bytes).split(model)
+
+
+class PartEncoder:
+    """``split`` for a process that writes one version after another: arrays that are
+    byte for byte those of its previous split keep their encoded part instead of being
+    deflated again (an enrollment changes kilobytes; deflating the forest took ~60 ms)."""
+
+    def __init__(self, min_bytes: int = PART_MIN_BYTES) -> None:
+        self.min_bytes = min_bytes
+        self._previous: dict[bytes, tuple[str, bytes]] = {}  # digest of .npy bytes -> part
+
+    def split(self, model: TactileRecognizer) -> tuple[bytes, dict[str, bytes]]:
+        manifest, arrays = _contents(model)
+        parts: dict[str, bytes] = {}
+        refs: dict[str, str] = {}
+        encoded: dict[bytes, tuple[str, bytes]] = {}
+        for name in [n for n, a in arrays.items() if np.asanyarray(a).nbytes >= self.min_bytes]:
+            data = _npy(arrays.pop(name))
+            key = hashlib.sha256(data).digest()
+            if key not in encoded:
+                encoded[key] = self._previous.get(key) or _encode_npy(data)
+            sha, blob = encoded[key]
+            parts[sha] = blob
+            refs[name] = sha
+        self._previous = encoded  # only the latest model's parts are kept
+        manifest["parts"] = refs
+        return _zip(manifest, arrays), parts
+
+
+def _encode_npy(data: bytes) -> tuple[str, bytes]:
+    blob = zlib.compress(data, 1) if _compressible(data) else data
+    return hashlib.sha256(blob).hexdigest(), blob
+
+
+def decode_part(blob: bytes) -> np.ndarray:
+    """The array of a part written by ``split``; BundleError if it is not one."""
+    try:
+        data = blob if blob[:len(_NPY_MAGIC)] == _NPY_MAGIC else zlib.decompress(blob)
+        return np.lib.format.read_array(io.BytesIO(data), allow_pickle=False)
+    except (zlib.error, ValueError, OSError, EOFError) as exc:
+        raise BundleError(f"not a readable bundle part: {exc}") from None
+
+
+def _contents(model: TactileRecognizer) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """The manifest and every array of a fitted recognizer."""
     model._require_fitted()
     meta, arrays = model.get_state()
     reg = model.registry
@@ -59,6 +127,10 @@ def to_bytes(model: TactileRecognizer) -> bytes:
     all_arrays[_REG + "novel_attributes"] = reg.novel_attributes
     for i, (_name, samples) in enumerate(reg.novel_samples.items()):
         all_arrays[f"{_REG}novel_samples/{i}"] = samples
+    return manifest, all_arrays
+
+
+def _zip(manifest: dict[str, Any], all_arrays: dict[str, np.ndarray]) -> bytes:
     out = io.BytesIO()
     with zipfile.ZipFile(out, "w") as zf:
         zf.writestr(_MANIFEST, json.dumps(manifest, default=_json_default),
@@ -75,18 +147,29 @@ def _npz(arrays: dict[str, np.ndarray]) -> bytes:
     out = io.BytesIO()
     with zipfile.ZipFile(out, "w") as zf:
         for name, array in arrays.items():
-            buf = io.BytesIO()
-            np.lib.format.write_array(buf, np.asanyarray(array), allow_pickle=False)
-            data = buf.getvalue()
-            probe = data[:_PROBE_BYTES]
-            compressible = len(zlib.compress(probe, 1)) < _WORTH_IT * len(probe)
-            zf.writestr(name + ".npy", data, compress_type=zipfile.ZIP_DEFLATED if compressible
+            data = _npy(array)
+            zf.writestr(name + ".npy", data, compress_type=zipfile.ZIP_DEFLATED if _compressible(data)
                         else zipfile.ZIP_STORED, compresslevel=1)
     return out.getvalue()
 
 
-def from_bytes(data: bytes) -> TactileRecognizer:
-    """Rebuild a recognizer from bundle bytes; BundleError says what is wrong."""
+def _npy(array: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    np.lib.format.write_array(buf, np.asanyarray(array), allow_pickle=False)
+    return buf.getvalue()
+
+
+def _compressible(data: bytes) -> bool:
+    probe = data[:_PROBE_BYTES]
+    return len(zlib.compress(probe, 1)) < _WORTH_IT * len(probe)
+
+
+def from_bytes(data: bytes, part: Callable[[str], np.ndarray] | None = None) -> TactileRecognizer:
+    """Rebuild a recognizer from bundle bytes; BundleError says what is wrong.
+
+    A split bundle's head needs ``part``, which returns the array of a part given its
+    SHA-256 (raising BundleError when it cannot).
+    """
     try:
         with zipfile.ZipFile(io.BytesIO(data)) as zf:
             manifest = json.loads(zf.read(_MANIFEST))
@@ -102,6 +185,11 @@ def from_bytes(data: bytes) -> TactileRecognizer:
     try:
         with np.load(io.BytesIO(npz_bytes), allow_pickle=False) as npz:
             arrays = {k: npz[k] for k in npz.files}
+        refs = manifest.get("parts") or {}
+        if refs and part is None:
+            raise BundleError(f"this bundle keeps {len(refs)} arrays in parts of a model store; "
+                              "load it through the store")
+        arrays.update({name: part(sha) for name, sha in refs.items()})
         cls = method_class(manifest["method"])
         model = cls()
         model.input_shape = tuple(int(s) for s in manifest["input_shape"])

@@ -360,7 +360,8 @@ class PaperRecognizer(TactileRecognizer):
             if module is None:
                 continue
             prefix = name.rstrip("_") + "/"
-            state = {k[len(prefix):]: torch.as_tensor(v) for k, v in arrays.items() if k.startswith(prefix)}
+            # a copy: the arrays may be read-only parts shared with another loaded version
+            state = {k[len(prefix):]: torch.tensor(v) for k, v in arrays.items() if k.startswith(prefix)}
             module.load_state_dict(state)
             module.eval()
         self.scaler_.set_state({k[7:]: v for k, v in arrays.items() if k.startswith("scaler/")})

@@ -20,7 +20,7 @@ from app.data.dataset import TactileDataset
 from app.framework import bundle
 from app.framework.recognizer import TactileRecognizer
 from app.framework.registry import make_method
-from app.store import leases, migrate, repo
+from app.store import bundles, leases, migrate, repo
 
 LEASE = "bootstrap"
 Trainer = Callable[[], tuple[TactileRecognizer, TactileDataset]]
@@ -84,10 +84,9 @@ def store_base_model(s: Session, model: TactileRecognizer, dataset: TactileDatas
     ids = []
     for name, vector in zip(dataset.class_names, dataset.class_attributes, strict=True):
         ids.append(repo.add_class(s, name, repo.vector_key(vector), "known", "dataset").id)
-    data = bundle.to_bytes(model)
     row = repo.add_version(
         s, method=model.method, reason="bootstrap", base_version=None,
-        bundle_sha256=repo.store_bundle(s, data), input_shape=list(model.input_shape),
+        bundle_sha256=bundles.store_model(s, bundle.split(model)), input_shape=list(model.input_shape),
         metrics=repo.jsonable(model.metrics), classes=model_classes(model), sample_ids=[],
     )
     repo.activate(s, row.version)

@@ -4,7 +4,7 @@ Requests read ``holder.current`` once and use that snapshot to the end, so a swa
 in the middle of a request changes nothing for it; the swap itself is a single
 attribute assignment, which is atomic in Python. A background thread polls the
 active version number (one indexed row) and loads a new bundle off the request
-path.
+path, reading only the parts of its bundle this process does not hold yet.
 """
 
 from __future__ import annotations
@@ -16,11 +16,10 @@ from dataclasses import dataclass
 import numpy as np
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.framework import bundle
 from app.framework.recognizer import TactileRecognizer
 from app.service.metrics import Metrics
 from app.service.polling import Poller
-from app.store import repo
+from app.store import bundles, repo
 
 log = logging.getLogger(__name__)
 
@@ -45,6 +44,7 @@ class ModelHolder(Poller):
         self._metrics = metrics
         self._current: LoadedModel | None = None
         self._load_lock = threading.Lock()  # one load at a time; readers never take it
+        self._parts = bundles.PartCache()
 
     @property
     def current(self) -> LoadedModel | None:
@@ -59,9 +59,9 @@ class ModelHolder(Poller):
                 if version is None or (current is not None and current.version == version):
                     return False
                 row = repo.get_version(s, version)
-                data = repo.bundle_data(s, row.bundle_sha256)
+                # parts the served model shares with the new one are not read again
+                recognizer = bundles.load_model(s, row.bundle_sha256, self._parts)
                 class_ids = repo.class_ids_by_name(s)
-            recognizer = bundle.from_bytes(data)
             # One sample through the model before it is served: the compiled forest walk
             # is built (or read from numba's cache) now, not on the first robot's request.
             recognizer.recognize(np.zeros((1, *recognizer.input_shape), np.float32))

@@ -185,10 +185,12 @@ def bundle_data(session: Session, sha256: str) -> bytes | None:
     return data
 
 
-def store_bundle(session: Session, data: bytes) -> str:
-    """Content-addressed: identical bundles are stored once."""
-    sha = hashlib.sha256(data).hexdigest()
-    if session.get(Bundle, sha) is None:
+def store_bundle(session: Session, data: bytes, sha256: str | None = None) -> str:
+    """Content-addressed: identical bundles (and bundle parts) are stored once. ``sha256``,
+    when the caller has it already, must be the SHA-256 of ``data``."""
+    sha = sha256 or hashlib.sha256(data).hexdigest()
+    # only the key: session.get would read the whole stored bundle back
+    if session.scalar(select(Bundle.sha256).where(Bundle.sha256 == sha)) is None:
         session.add(Bundle(sha256=sha, size=len(data), data=data))
         session.flush()
     return sha

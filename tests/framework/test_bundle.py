@@ -128,3 +128,33 @@ def test_bundles_written_as_one_deflated_npz_still_load(fitted):
     x = np.zeros((3, *fitted.input_shape), np.float32)
     again = bundle.from_bytes(old.getvalue())
     assert np.array_equal(again.known_proba(x), fitted.known_proba(x))
+
+
+def test_a_split_bundle_round_trips_through_its_parts(fitted):
+    head, parts = bundle.split(fitted, min_bytes=1024)
+    assert parts and len(head) < len(bundle.to_bytes(fitted))
+    loaded = bundle.from_bytes(head, part=lambda sha: bundle.decode_part(parts[sha]))
+    x = np.zeros((3, *fitted.input_shape), np.float32)
+    np.testing.assert_allclose(loaded.known_proba(x), fitted.known_proba(x), atol=1e-6)
+
+
+def test_a_split_head_alone_is_a_clear_error(fitted):
+    head, _ = bundle.split(fitted, min_bytes=1024)
+    with pytest.raises(BundleError, match="parts of a model store"):
+        bundle.from_bytes(head)
+
+
+def test_a_part_that_is_no_array_is_a_clear_error():
+    with pytest.raises(BundleError, match="not a readable bundle part"):
+        bundle.decode_part(b"garbage")
+
+
+def test_the_part_encoder_does_not_encode_unchanged_arrays_again(with_novel, sim_split):
+    encoder = bundle.PartEncoder(min_bytes=1024)
+    _, before = encoder.split(with_novel)
+    grown = with_novel.add_one_shot(sim_split["novel"].class_names[0], sim_split["novel"].samples[:1])
+    _, after = encoder.split(grown)
+    shared = before.keys() & after.keys()
+    assert shared  # the encoder, the known-class classifier, ... are unchanged
+    assert all(after[sha] is before[sha] for sha in shared)  # the same bytes, not encoded again
+    assert after.keys() == bundle.split(grown, min_bytes=1024)[1].keys()  # as a fresh split

@@ -7,9 +7,8 @@ import threading
 import numpy as np
 from sqlalchemy import func, select
 
-from app.framework import bundle
 from app.service.bootstrap import ensure_ready
-from app.store import repo
+from app.store import bundles, repo
 from app.store.db import make_engine, make_sessionmaker
 from app.store.models import ObjectClass, Sample
 
@@ -33,7 +32,7 @@ def test_bootstrap_stores_model_classes_and_every_sample(store, base_model):
             assert all(r.features is not None and r.features_version == 1 for r in rows)
         v1 = repo.active_version(s)
         assert v1.version == 1 and v1.reason == "bootstrap"
-        loaded = bundle.from_bytes(repo.bundle_data(s, v1.bundle_sha256))
+        loaded = bundles.load_model(s, v1.bundle_sha256)
         assert loaded.registry.known_names == list(dataset.class_names)
 
 

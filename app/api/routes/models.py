@@ -4,8 +4,8 @@ from app.api import problems
 from app.api.deps import AdminAccess, HolderDep, ReadAccess, RowId, SessionDep
 from app.api.problems import Problem, not_found
 from app.api.schemas import ModelList, ModelOut
-from app.framework import bundle
-from app.store import repo
+from app.framework.errors import BundleError
+from app.store import bundles, repo
 
 router = APIRouter(prefix="/v1/models", tags=["models"], responses=problems.responses(401, 403, 422, 429))
 
@@ -38,8 +38,8 @@ def activate_model(version: RowId, session: SessionDep, holder: HolderDep) -> Mo
     if row is None:
         raise not_found("model version", "version", version)
     try:  # never activate a bundle that cannot be loaded
-        bundle.from_bytes(repo.bundle_data(session, row.bundle_sha256))
-    except bundle.BundleError as exc:
+        bundles.load_model(session, row.bundle_sha256)
+    except BundleError as exc:
         raise Problem(409, f"version {version} cannot be loaded: {exc}", "version") from None
     repo.activate(session, version)
     session.commit()

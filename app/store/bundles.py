@@ -1,0 +1,76 @@
+"""Model bundles in the store: each version's small head, and its large arrays as
+content-addressed parts that versions share (``bundle.split``).
+
+An enrollment writes a few kilobytes instead of a whole bundle, and an API process that
+serves one version loads the next by reading its head and only the parts it lacks.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from sqlalchemy.orm import Session
+
+from app.framework import bundle
+from app.framework.errors import BundleError
+from app.framework.recognizer import TactileRecognizer
+from app.store import repo
+
+Split = tuple[bytes, dict[str, bytes]]  # what bundle.split returns
+
+
+def store_model(session: Session, split: Split) -> str:
+    """Store a split bundle (parts first, each once); returns the head's SHA-256, which a
+    model version names as its bundle."""
+    head, parts = split
+    for sha, blob in parts.items():
+        repo.store_bundle(session, blob, sha256=sha)
+    return repo.store_bundle(session, head)
+
+
+class PartCache:
+    """The decoded parts of the model a process serves, by SHA-256, read-only so that
+    models sharing them cannot change each other's arrays."""
+
+    def __init__(self) -> None:
+        self._arrays: dict[str, np.ndarray] = {}
+
+    def get(self, session: Session, sha256: str) -> np.ndarray:
+        array = self._arrays.get(sha256)
+        if array is None:
+            array = read_part(session, sha256)
+            array.flags.writeable = False
+            self._arrays[sha256] = array
+        return array
+
+    def keep_only(self, shas: set[str]) -> None:
+        self._arrays = {sha: a for sha, a in self._arrays.items() if sha in shas}
+
+    def __len__(self) -> int:
+        return len(self._arrays)
+
+
+def read_part(session: Session, sha256: str) -> np.ndarray:
+    data = repo.bundle_data(session, sha256)
+    if data is None:
+        raise BundleError(f"bundle part {sha256[:12]}… is missing from the store: the store is damaged")
+    return bundle.decode_part(data)
+
+
+def load_model(session: Session, sha256: str, cache: PartCache | None = None) -> TactileRecognizer:
+    """The recognizer whose bundle (whole, or a split head) is ``sha256``; BundleError when
+    it is missing, damaged or unreadable. With ``cache``, parts it holds are not read
+    again, and afterwards it holds this model's parts only."""
+    data = repo.bundle_data(session, sha256)
+    if data is None:
+        raise BundleError(f"model bundle {sha256[:12]}… is missing from the store")
+    if cache is None:
+        return bundle.from_bytes(data, part=lambda sha: read_part(session, sha))
+    used: set[str] = set()
+
+    def part(sha: str) -> np.ndarray:
+        used.add(sha)
+        return cache.get(session, sha)
+
+    model = bundle.from_bytes(data, part=part)
+    cache.keep_only(used)
+    return model

@@ -1,0 +1,79 @@
+"""Split bundles in the store: versions share their large parts, a process that holds a
+part does not read it again, and a missing or damaged part is an error that says so."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from sqlalchemy import delete, func, select, update
+
+from app.framework import bundle
+from app.framework.errors import BundleError
+from app.store import bundles, repo
+from app.store.models import Bundle
+from tests.service_fixtures import unused_vectors
+
+
+@pytest.fixture
+def two_versions(store, base_model):
+    """(sessions, v1 head, v2 head, v1's split) of the base model and the base model
+    with one more novel class, stored the way the worker stores them."""
+    _, sessions = store
+    model, dataset = base_model
+    newer = model.add_novel_classes(["mug"], np.asarray(unused_vectors(dataset, 1), np.float32))
+    encoder = bundle.PartEncoder()
+    first = encoder.split(model)
+    with sessions.begin() as s:
+        v1 = bundles.store_model(s, first)
+        rows = s.scalar(select(func.count()).select_from(Bundle))
+        v2 = bundles.store_model(s, encoder.split(newer))
+        # the enrollment changed the class registry only: one new row, the head
+        assert s.scalar(select(func.count()).select_from(Bundle)) == rows + 1
+    return sessions, v1, v2, first
+
+
+def test_a_split_version_loads_back_whole(two_versions, base_model):
+    sessions, _, v2, _ = two_versions
+    model, dataset = base_model
+    with sessions() as s:
+        loaded = bundles.load_model(s, v2)
+    assert loaded.registry.novel_names == ["mug"]
+    x = dataset.samples[:6]
+    np.testing.assert_allclose(loaded.known_proba(x), model.known_proba(x), atol=1e-6)
+
+
+def test_parts_a_process_holds_are_not_read_again(two_versions):
+    """With v1's parts cached, v2 loads although every one of them is now damaged in the
+    store; without the cache the damage is found."""
+    sessions, v1, v2, (_, parts) = two_versions
+    cache = bundles.PartCache()
+    with sessions() as s:
+        bundles.load_model(s, v1, cache)
+    assert len(cache) == len(parts) > 0
+    with sessions.begin() as s:
+        s.execute(update(Bundle).where(Bundle.sha256.in_(parts)).values(data=b"damaged"))
+    with sessions() as s:
+        assert bundles.load_model(s, v2, cache).registry.novel_names == ["mug"]
+        with pytest.raises(BundleError, match="damaged"):
+            bundles.load_model(s, v2)
+
+
+def test_a_missing_part_is_an_error_that_names_it(two_versions):
+    sessions, _, v2, (_, parts) = two_versions
+    sha = next(iter(parts))
+    with sessions.begin() as s:
+        s.execute(delete(Bundle).where(Bundle.sha256 == sha))
+    with sessions() as s, pytest.raises(BundleError, match=f"part {sha[:12]}.*missing"):
+        bundles.load_model(s, v2, bundles.PartCache())
+
+
+def test_the_cache_keeps_only_the_served_models_parts(two_versions, base_model):
+    sessions, v1, _, _ = two_versions
+    with sessions.begin() as s:  # a bundle written whole, as before bundles were split
+        whole = repo.store_bundle(s, bundle.to_bytes(base_model[0]))
+    cache = bundles.PartCache()
+    with sessions() as s:
+        bundles.load_model(s, v1, cache)
+        assert len(cache) > 0
+        bundles.load_model(s, whole, cache)
+    assert len(cache) == 0
