@@ -204,7 +204,7 @@ def worker(app, client):
     from worker import Worker
 
     holder = app.state.holder
-    return Worker(app.state.settings, app.state.sessions, on_activate=lambda _v: holder.refresh())
+    return Worker(app.state.settings, app.state.sessions, on_activate=holder.serve)
 
 
 @pytest.fixture

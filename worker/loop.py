@@ -34,9 +34,12 @@ LEASE = "retrain"  # one retrain of the model lineage at a time
 
 
 class Worker:
+    """``on_activate(version, model)`` is called after each version it activates, with the
+    model itself; no build modifies a model afterwards (each one copies its base)."""
+
     def __init__(
         self, settings: Settings, sessions: sessionmaker[Session],
-        on_activate: Callable[[int], None] | None = None,
+        on_activate: Callable[[int, TactileRecognizer], None] | None = None,
     ) -> None:
         self.settings = settings
         self.sessions = sessions
@@ -139,7 +142,7 @@ class Worker:
         self._cache = (version, new)
         log.info("model version %d is active", version)
         if self.on_activate:
-            self.on_activate(version)
+            self.on_activate(version, new)
 
     def _commit(
         self, s: Session, base_version: int, new: TactileRecognizer, split: bundles.Split,

@@ -61,7 +61,8 @@ def create_app(settings: Settings | None = None, trainer: Trainer | None = None)
         if settings.embedded_worker:
             from worker import Worker, start_in_thread
 
-            worker = Worker(settings, sessions, on_activate=lambda _v: holder.refresh())
+            # the worker hands each model it builds to this process's holder: no reload
+            worker = Worker(settings, sessions, on_activate=holder.serve)
             embedded = start_in_thread(worker)
         try:
             yield

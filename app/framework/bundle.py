@@ -94,6 +94,15 @@ def _encode_npy(data: bytes) -> tuple[str, bytes]:
     return hashlib.sha256(blob).hexdigest(), blob
 
 
+def part_refs(data: bytes) -> dict[str, str]:
+    """``{array name: part SHA-256}`` of a split bundle's head; empty for a whole bundle."""
+    try:
+        with zipfile.ZipFile(io.BytesIO(data)) as zf:
+            return dict(json.loads(zf.read(_MANIFEST)).get("parts") or {})
+    except (zipfile.BadZipFile, KeyError, json.JSONDecodeError, OSError, EOFError) as exc:
+        raise BundleError(f"not a readable model bundle: {exc}") from None
+
+
 def decode_part(blob: bytes) -> np.ndarray:
     """The array of a part written by ``split``; BundleError if it is not one."""
     try:

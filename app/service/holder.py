@@ -62,11 +62,27 @@ class ModelHolder(Poller):
                 # parts the served model shares with the new one are not read again
                 recognizer = bundles.load_model(s, row.bundle_sha256, self._parts)
                 class_ids = repo.class_ids_by_name(s)
-            # One sample through the model before it is served: the compiled forest walk
-            # is built (or read from numba's cache) now, not on the first robot's request.
-            recognizer.recognize(np.zeros((1, *recognizer.input_shape), np.float32))
-            self._current = LoadedModel(version, recognizer, class_ids)
+            self._swap(version, recognizer, class_ids)
+        return True
+
+    def serve(self, version: int, recognizer: TactileRecognizer) -> bool:
+        """Serve a model this process has built (the embedded worker's) as ``version``
+        without reading it back from the store, if that is still the active version;
+        otherwise load the active one. True when swapped."""
+        with self._load_lock:
+            with self._sessions() as s:
+                current = repo.active_version_number(s) == version
+                class_ids = repo.class_ids_by_name(s) if current else {}
+            if current:
+                self._swap(version, recognizer, class_ids)
+                return True
+        return self.refresh()  # activated again meanwhile (a rollback)
+
+    def _swap(self, version: int, recognizer: TactileRecognizer, class_ids: dict[str, int]) -> None:
+        # One sample through the model before it is served: the compiled forest walk
+        # is built (or read from numba's cache) now, not on the first robot's request.
+        recognizer.recognize(np.zeros((1, *recognizer.input_shape), np.float32))
+        self._current = LoadedModel(version, recognizer, class_ids)
         if self._metrics:
             self._metrics.active_version.set(version)
         log.info("serving model version %s", version)
-        return True

@@ -62,3 +62,22 @@ def test_other_processes_pick_up_a_new_version_by_polling(client, app, worker, d
     while app.state.holder.current.version != 2 and time.monotonic() < deadline:
         time.sleep(0.02)
     assert client.post("/v1/recognize", json={"samples": [sample]}).json()["model_version"] == 2
+
+
+def test_a_model_handed_over_by_an_embedded_worker_is_served_only_while_active(
+    client, app, worker, dataset, sample
+):
+    """The embedded worker hands its new model to the holder (no reload from the store);
+    a version that was rolled back meanwhile is not served: the active one is."""
+    holder = app.state.holder
+    enroll_and_retrain(client, worker, dataset)
+    built = holder.current.recognizer
+    assert client.post("/v1/recognize", json={"samples": [sample]}).json()["model_version"] == 2
+
+    client.post("/v1/models/1/activate")
+    assert holder.serve(2, built) is False  # it serves the active version 1 already
+    assert holder.current.version == 1 and holder.current.recognizer is not built
+    assert client.post("/v1/recognize", json={"samples": [sample]}).json()["model_version"] == 1
+
+    client.post("/v1/models/2/activate")
+    assert holder.serve(2, built) is True and holder.current.recognizer is built

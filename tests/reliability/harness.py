@@ -156,9 +156,11 @@ class Cluster:
 
 def store_check(url: str) -> list[str]:
     """Integrity of the store: SQLite's integrity_check, or PostgreSQL consistency queries
-    (one active version, no dangling references, every bundle's hash matches)."""
+    (one active version, no dangling references, every bundle's hash matches, every version's
+    bundle parts stored)."""
     import hashlib
 
+    from app.framework import bundle
     from app.store.db import make_engine
 
     engine = make_engine(url)
@@ -192,6 +194,11 @@ def store_check(url: str) -> list[str]:
             for sha, data in conn.execute(text("SELECT sha256, data FROM bundles")):
                 if hashlib.sha256(bytes(data)).hexdigest() != sha:
                     problems.append(f"bundle {sha[:12]} does not match its hash")
+            stored = set(conn.execute(text("SELECT sha256 FROM bundles")).scalars())
+            heads = "SELECT v.version, b.data FROM model_versions v JOIN bundles b ON b.sha256 = v.bundle_sha256"
+            for version, data in conn.execute(text(heads)):
+                if set(bundle.part_refs(bytes(data)).values()) - stored:
+                    problems.append(f"version {version} refers to bundle parts that are not stored")
     finally:
         engine.dispose()
     return problems
