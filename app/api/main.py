@@ -86,6 +86,7 @@ def create_app(settings: Settings | None = None, trainer: Trainer | None = None)
     )
     app.state.settings = settings
     app.state.sessions = sessions
+    app.state.local_store = engine.dialect.name == "sqlite"  # no network round trips
     app.state.holder = holder
     app.state.metrics = metrics
     app.state.recognition = RecognitionService(metrics, settings.top_k, settings.batch_limit)

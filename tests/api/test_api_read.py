@@ -123,3 +123,15 @@ def test_readiness_fails_without_a_store_or_a_model(client, app, monkeypatch):
     assert r.status_code == 503 and r.headers["retry-after"] == "5"
     r = client.post("/v1/recognize", json={"samples": [[0.0]]})
     assert r.status_code == 503 and r.json()["errors"][0]["field"] == "model"
+
+
+def test_every_request_gives_its_database_connection_back(client, app):
+    """Sessions are opened and closed on the event loop (closing goes to a worker thread
+    where giving a connection back is a network round trip): none may stay checked out,
+    after answers and after errors alike."""
+    pool = app.state.sessions.kw["bind"].pool
+    for _ in range(5):
+        assert client.get("/v1/classes").status_code == 200
+        assert client.get("/v1/jobs/999999").status_code == 404
+        assert client.post("/v1/classes", json={"name": "", "attributes": ["nope"]}).status_code == 422
+    assert pool.checkedout() == 0
