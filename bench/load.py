@@ -12,7 +12,8 @@ recognitions with that model version), idle and while the single-sample load run
 time the hypervisor gave to other guests meanwhile (on a shared VM, a phase with high steal
 measured the neighbours, not the service), and ``cpu_us_per_request``, the CPU time each
 process (every API, the worker, this load generator) spent per answered request: where a
-2-core budget goes. ``--phases single,batch`` skips the enrollment phases.
+2-core budget goes. ``--phases single,batch`` skips the enrollment phases; ``--phases enroll,reads``
+also measures the read endpoints that clients poll (jobs, active model, readiness).
 Only 127.0.0.1 is ever targeted.
 """
 
@@ -234,6 +235,21 @@ def child_dataset(name: str):
     return load_dataset(name)
 
 
+READ_PATHS = ("/readyz", "/v1/attributes", "/v1/classes/1", "/v1/models/active", "/v1/jobs/1")
+
+
+async def reads(urls, seconds: float, pids: dict[str, int], clients: int = 8) -> dict:
+    """The read endpoints robots and dashboards poll, one after another, each from
+    ``clients`` connections: their requests/s, latency and CPU per request."""
+    out = {}
+    for path in READ_PATHS:
+        request = Connection.prepare("GET", path, b"", "application/json")
+        if (await Connection(urls[0]).fetch(request))[0] != 200:
+            continue  # /v1/jobs/1 exists once an enrolment ran
+        out[path] = await hammer(urls, seconds, clients, request, pids=pids)
+    return out
+
+
 async def run(cluster: Cluster, seconds: float, clients: int, batch: int, dataset,
               dataset_name: str, phases: set[str], poll: float) -> dict:
     urls = cluster.urls
@@ -253,8 +269,17 @@ async def run(cluster: Cluster, seconds: float, clients: int, batch: int, datase
         b = await hammer(urls, seconds, 4, npy, pids=pids)
         b["samples_per_s"] = round(b["rps"] * batch, 1)
         out[f"npy_batch_{batch}"] = b
-    if "enroll" not in phases:
-        return out
+    if "enroll" in phases:
+        out.update(await enrollment_phases(urls, clients, single, dataset_name, poll, pids))
+    if "reads" in phases:  # last: after an enrolment there is a job to poll
+        out["reads"] = await reads(urls, seconds, pids)
+    return out
+
+
+async def enrollment_phases(urls, clients: int, single: bytes, dataset_name: str, poll: float,
+                            pids: dict[str, int]) -> dict:
+    """Enrollment to live, idle and under the single-sample load, and that load's figures."""
+    out = {}
     loop = asyncio.get_running_loop()
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as child:
         idle = await loop.run_in_executor(child, enroll_in_child, urls, dataset_name, 3, 0, poll)
@@ -291,11 +316,13 @@ def main() -> int:
     p.add_argument("--poll-seconds", type=float, default=0.02,
                    help="how often the enrolling client polls its job and the APIs' active model")
     p.add_argument("--phases", default="single,batch,enroll",
-                   help="which phases to run, comma-separated (default: all three)")
+                   help="which phases to run, comma-separated (default: the three of the goals; "
+                   "'reads' adds the polled read endpoints, 8 clients each)")
     args = p.parse_args()
     phases = set(args.phases.split(","))
-    if not phases <= {"single", "batch", "enroll"}:
-        p.error(f"--phases: unknown phase(s) {sorted(phases - {'single', 'batch', 'enroll'})}")
+    known = {"single", "batch", "enroll", "reads"}
+    if not phases <= known:
+        p.error(f"--phases: unknown phase(s) {sorted(phases - known)}")
     dataset = load_dataset(args.dataset)
     # the deployed model, not the tests' quick one; no rate limit: this measures capacity
     env = {"TACTILE_DATASET": args.dataset, "TACTILE_METHOD": args.method,
