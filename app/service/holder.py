@@ -75,6 +75,7 @@ class ModelHolder(Poller):
                 class_ids = repo.class_ids_by_name(s) if current else {}
             if current:
                 self._swap(version, recognizer, class_ids)
+                self._parts.keep_only(set())  # the cached parts belong to no served model now
                 return True
         return self.refresh()  # activated again meanwhile (a rollback)
 
