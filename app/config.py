@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -10,6 +11,9 @@ from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from app.framework.registry import DEFAULT_METHOD
+
+# each API process holds its own interpreter, torch and model (~0.5 GB resident)
+MAX_DEFAULT_PROCESSES = 4
 
 
 class Settings(BaseSettings):
@@ -23,6 +27,11 @@ class Settings(BaseSettings):
     )
     host: str = "127.0.0.1"
     port: int = Field(8000, ge=0, le=65535)
+    processes: int | None = Field(
+        None, ge=1, description="API processes `serve` runs on its port, each with its own "
+        "interpreter so that recognition uses every core; default one per available CPU core, "
+        f"at most {MAX_DEFAULT_PROCESSES}."
+    )
     access_log: bool = Field(
         False, description="Log every request (uvicorn's access log); off by default because at "
         "robot request rates it costs about a tenth of the API's CPU. /metrics counts requests."
@@ -100,6 +109,14 @@ class Settings(BaseSettings):
         if isinstance(value, str):
             return json.loads(value) if value.strip() else {}
         return value
+
+    @property
+    def api_processes(self) -> int:
+        """``processes``, or its default for this machine."""
+        if self.processes is not None:
+            return self.processes
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+        return max(1, min(cores or 1, MAX_DEFAULT_PROCESSES))
 
     @property
     def sqlalchemy_url(self) -> str:

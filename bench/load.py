@@ -41,6 +41,7 @@ import uvloop
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from app.config import Settings  # noqa: E402
 from app.data.sources import load_dataset  # noqa: E402
 from app.framework.registry import DEFAULT_METHOD  # noqa: E402
 from tests.reliability.harness import Cluster  # noqa: E402
@@ -65,14 +66,21 @@ def steal_pct(before: list[int] | None, after: list[int] | None) -> float | None
     return round(100 * delta[7] / sum(delta), 1) if sum(delta) else 0.0
 
 
-def process_cpu_s(pid: int) -> float | None:
-    """CPU seconds (user + system) a process has used so far, or None off Linux."""
+def process_cpu_s(pid: int, children: bool = True) -> float | None:
+    """CPU seconds (user + system) a process has used so far, with its children's (the API
+    processes of a multi-process `serve`) unless ``children`` is False; None off Linux."""
     try:
         with open(f"/proc/{pid}/stat") as f:
             fields = f.read().rpartition(")")[2].split()
+        kids = []
+        if children:
+            for tid in os.listdir(f"/proc/{pid}/task"):
+                with open(f"/proc/{pid}/task/{tid}/children") as f:
+                    kids += [int(c) for c in f.read().split()]
     except OSError:
         return None
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    own = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    return own + sum(process_cpu_s(k) or 0.0 for k in kids)
 
 
 def cpu_per_request(pids: dict[str, int], before: dict, after: dict, requests: int) -> dict:
@@ -166,11 +174,15 @@ async def hammer(urls, seconds, clients, request: bytes, stop: asyncio.Event | N
             conn.close()
 
     pids = {**(pids or {}), "load_generator": os.getpid()}
+
+    def cpu() -> dict:  # the load generator's children are the service's processes
+        return {name: process_cpu_s(pid, children=name != "load_generator") for name, pid in pids.items()}
+
     start, jiffies = time.monotonic(), cpu_jiffies()
-    cpu_before = {name: process_cpu_s(pid) for name, pid in pids.items()}
+    cpu_before = cpu()
     await asyncio.gather(*(one(i) for i in range(clients)))
     elapsed = time.monotonic() - start
-    cpu_after = {name: process_cpu_s(pid) for name, pid in pids.items()}
+    cpu_after = cpu()
     return {"requests": len(latencies), "errors": errors, "rps": round(len(latencies) / elapsed, 1),
             "p50_ms": round(pct(latencies, 50), 2), "p99_ms": round(pct(latencies, 99), 2),
             "cpu_steal_pct": steal_pct(jiffies, cpu_jiffies()),
@@ -306,7 +318,8 @@ def main() -> int:
     p.add_argument("--clients", type=int, default=32)
     p.add_argument("--batch", type=int, default=1024)
     p.add_argument("--embedded", action="store_true",
-                   help="one plain `tactile-zsl serve` (worker thread inside) instead of 2 APIs + 1 worker")
+                   help="one plain `tactile-zsl serve` (its default number of processes, each with "
+                   "a worker thread) instead of 2 single-process APIs + 1 worker")
     p.add_argument("--env", action="append", default=[], metavar="TACTILE_X=V",
                    help="extra service setting for every process (repeatable)")
     p.add_argument("--dataset", default="simulated",
@@ -329,8 +342,9 @@ def main() -> int:
            "TACTILE_METHOD_PARAMS": "{}", "TACTILE_RATE_LIMIT": "0", **dict(a.split("=", 1) for a in args.env)}
     with tempfile.TemporaryDirectory() as tmp, contextlib.ExitStack() as stack:
         url = stack.enter_context(fresh_postgres_database(args.postgres)) if args.postgres else ""
-        shape = {"n_api": 1, "n_workers": 0, "embedded_worker": True} if args.embedded else \
-            {"n_api": 2, "n_workers": 1}
+        # --embedded: plain `serve`, with as many processes as it starts on this machine
+        shape = {"n_api": 1, "n_workers": 0, "embedded_worker": True,
+                 "processes": Settings().api_processes} if args.embedded else {"n_api": 2, "n_workers": 1}
         cluster = Cluster(Path(tmp) / "data", url, extra_env=env, **shape)
         try:
             cluster.start()
@@ -340,7 +354,8 @@ def main() -> int:
         finally:
             cluster.stop()
     report.update(store="postgresql" if args.postgres else "sqlite", clients=args.clients,
-                  processes="1 API, embedded worker" if args.embedded else "2 APIs + 1 worker",
+                  processes=f"plain serve: {shape['processes']} API process(es) on one port, worker "
+                  "thread in each" if args.embedded else "2 APIs + 1 worker",
                   dataset=args.dataset, method=args.method)
     print(json.dumps(report, indent=2))
     return 0

@@ -25,7 +25,7 @@ from app.config import Settings
 from app.service.bootstrap import Trainer, ensure_ready
 from app.service.holder import ModelHolder
 from app.service.keys import KeyRing, RateLimiter
-from app.service.metrics import Metrics
+from app.service.metrics import JobMetricsPoller, Metrics
 from app.service.recognition import RecognitionService
 from app.store.db import make_engine, make_sessionmaker
 
@@ -36,14 +36,19 @@ and novel objects an operator registered by their attributes (zero-shot), refine
 real samples (one-shot). Every error is an RFC 9457 `application/problem+json` body."""
 
 
-def create_app(settings: Settings | None = None, trainer: Trainer | None = None) -> FastAPI:
-    """``trainer`` replaces the bootstrap training (tests hand in a trained model)."""
+def create_app(
+    settings: Settings | None = None, trainer: Trainer | None = None, process_index: int | None = None,
+) -> FastAPI:
+    """``trainer`` replaces the bootstrap training (tests hand in a trained model);
+    ``process_index`` is this process's number when ``serve`` runs several (process 0
+    then reads the job figures for ``/metrics`` for all of them)."""
     settings = settings or Settings()
     engine = make_engine(settings.sqlalchemy_url, settings.db_timeout_seconds)
     sessions = make_sessionmaker(engine)
     metrics = Metrics()
     holder = ModelHolder(sessions, settings.model_poll_seconds, metrics)
     keys = KeyRing(sessions, settings.api_keys, settings.api_key_refresh_seconds)
+    job_metrics = JobMetricsPoller(metrics, sessions) if process_index == 0 else None
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -57,6 +62,8 @@ def create_app(settings: Settings | None = None, trainer: Trainer | None = None)
         gc.freeze()
         holder.start()
         keys.start()
+        if job_metrics is not None:
+            job_metrics.start()
         embedded = None
         if settings.embedded_worker:
             from worker import Worker, start_in_thread
@@ -71,6 +78,8 @@ def create_app(settings: Settings | None = None, trainer: Trainer | None = None)
                 thread, stop = embedded
                 stop.set()
                 thread.join(timeout=30)
+            if job_metrics is not None:
+                job_metrics.stop()
             keys.stop()
             holder.stop()
             engine.dispose()
@@ -89,6 +98,7 @@ def create_app(settings: Settings | None = None, trainer: Trainer | None = None)
     app.state.local_store = engine.dialect.name == "sqlite"  # no network round trips
     app.state.holder = holder
     app.state.metrics = metrics
+    app.state.job_metrics_at_scrape = process_index is None
     app.state.recognition = RecognitionService(metrics, settings.top_k, settings.batch_limit)
     app.state.keys = keys
     app.state.limiter = RateLimiter(settings.rate_limit, settings.rate_burst)

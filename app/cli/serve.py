@@ -15,6 +15,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--host", help="interface to listen on (TACTILE_HOST, default 127.0.0.1)")
     p.add_argument("--port", type=int, help="port to listen on (TACTILE_PORT, default 8000)")
+    p.add_argument("--processes", type=int,
+                   help="API processes on the port (TACTILE_PROCESSES; default one per CPU core, "
+                   "at most 4)")
     p.add_argument("--dataset", help="bootstrap data: simulated, simulated:N or phac2:PATH "
                    "(TACTILE_DATASET, default simulated)")
     p.add_argument("--data-dir", help="folder for the SQLite store (TACTILE_DATA_DIR)")
@@ -28,6 +31,7 @@ def run(args: argparse.Namespace) -> int:
 
     import uvicorn
 
+    from app.api import processes
     from app.api.http_protocol import CoalescingHttpToolsProtocol
     from app.api.main import create_app
     from app.config import Settings
@@ -35,12 +39,12 @@ def run(args: argparse.Namespace) -> int:
     from app.store.db import make_engine, make_sessionmaker
 
     overrides = {
-        "host": args.host, "port": args.port, "dataset": args.dataset, "data_dir": args.data_dir,
+        "host": args.host, "port": args.port, "processes": args.processes, "dataset": args.dataset,
+        "data_dir": args.data_dir, "embedded_worker": False if args.no_worker else None,
     }
-    settings = Settings(**{k: v for k, v in overrides.items() if v is not None})
-    if args.no_worker:
-        settings = settings.model_copy(update={"embedded_worker": False})
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    overrides = {k: v for k, v in overrides.items() if v is not None}
+    settings = Settings(**overrides)
+    logging.basicConfig(level=logging.INFO, format=processes.LOG_FORMAT)
     # migrate and bootstrap before the server starts, so a bad dataset or an unreachable
     # database is a one-line error here rather than a failed ASGI startup
     engine = make_engine(settings.sqlalchemy_url, settings.db_timeout_seconds)
@@ -48,6 +52,12 @@ def run(args: argparse.Namespace) -> int:
         ensure_ready(settings, engine, make_sessionmaker(engine))
     finally:
         engine.dispose()
-    uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level="info",
-                access_log=settings.access_log, http=CoalescingHttpToolsProtocol)
-    return 0
+    server = {"log_level": "info", "access_log": settings.access_log, "http": CoalescingHttpToolsProtocol}
+    n = settings.api_processes
+    if n == 1 or not processes.supported():
+        uvicorn.run(create_app(settings), host=settings.host, port=settings.port, **server)
+        return 0
+    port = settings.port or processes.free_port(settings.host)  # one port for all of them
+    logging.getLogger("tactile").info("serving on http://%s:%d with %d API processes",
+                                      settings.host, port, n)
+    return processes.serve({**overrides, "port": port}, n, server)

@@ -1,12 +1,29 @@
-"""Prometheus metrics, one registry per app so tests can build many apps."""
+"""Prometheus metrics, one registry per app so tests can build many apps.
+
+Under ``serve`` with several processes, prometheus_client's multiprocess mode keeps
+every process's values in files (``PROMETHEUS_MULTIPROC_DIR``, set by the supervisor
+before the processes start) and ``exposition`` sums them, whichever process is asked.
+"""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterable
 from datetime import datetime, timedelta
 
-from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
+from prometheus_client import (
+    CONTENT_TYPE_LATEST,
+    CollectorRegistry,
+    Counter,
+    Gauge,
+    Histogram,
+    generate_latest,
+)
+from prometheus_client.multiprocess import MultiProcessCollector
+from sqlalchemy.orm import Session, sessionmaker
 
+from app.service.polling import Poller
+from app.store import repo
 from app.store.models import utcnow
 
 JOB_BUCKETS = (0.1, 0.25, 0.5, 1, 2, 3, 5, 10, 30, 60, 300, 1800)
@@ -41,14 +58,34 @@ class Metrics:
             "tactile_enrollment_to_live_seconds", "From an enrollment's 202 to its job's end.",
             ["status"], buckets=JOB_BUCKETS, registry=r,
         )
-        self.jobs = Gauge("tactile_jobs", "Jobs in the store by status.", ["status"], registry=r)
-        self.active_version = Gauge(
-            "tactile_active_model_version", "Model version this process serves.", registry=r
+        # read from the store: with several processes, the newest reading is the figure
+        self.jobs = Gauge("tactile_jobs", "Jobs in the store by status.", ["status"], registry=r,
+                          multiprocess_mode="mostrecent")
+        self.active_version = Gauge(  # with several processes, one series per process (pid)
+            "tactile_active_model_version", "Model version this process serves.", registry=r,
+            multiprocess_mode="liveall",
         )
 
         # jobs are finished by workers in any process; each API process reads them from the store
         self.jobs_seen_since: datetime = utcnow()
         self._seen: dict[int, datetime] = {}
+
+    def exposition(self) -> tuple[bytes, str]:
+        """The Prometheus text and its content type: this process's figures, or those of
+        every process of a multi-process ``serve``."""
+        if "PROMETHEUS_MULTIPROC_DIR" not in os.environ:
+            return generate_latest(self.registry), CONTENT_TYPE_LATEST
+        registry = CollectorRegistry()
+        MultiProcessCollector(registry)
+        return generate_latest(registry), CONTENT_TYPE_LATEST
+
+    def read_jobs(self, session: Session) -> None:
+        """Job counts and the durations of jobs finished since the last reading, from the
+        store (workers in any process finish jobs)."""
+        counts = repo.jobs_by_status(session)
+        for status in ("queued", "running", "succeeded", "failed"):
+            self.jobs.labels(status).set(counts.get(status, 0))
+        self.observe_finished_jobs(repo.jobs_finished_since(session, self.jobs_seen_since))
 
     def observe_finished_jobs(
         self, jobs: Iterable[tuple[int, str, datetime, datetime | None, datetime]]
@@ -64,3 +101,21 @@ class Metrics:
         horizon = utcnow() - _LOOKBACK
         self.jobs_seen_since = max(self.jobs_seen_since, horizon)
         self._seen = {k: t for k, t in self._seen.items() if t >= horizon}
+
+
+class JobMetricsPoller(Poller):
+    """Reads the job figures every ``poll_seconds`` in one process of a multi-process
+    ``serve``: read at each scrape by whichever process answers, every process would
+    count each finished job once more."""
+
+    _thread_name = "job-metrics"
+    _failure = "metrics: could not read the jobs from the store"
+
+    def __init__(self, metrics: Metrics, sessions: sessionmaker[Session], poll_seconds: float = 5.0) -> None:
+        super().__init__(poll_seconds)
+        self._metrics = metrics
+        self._sessions = sessions
+
+    def refresh(self) -> None:
+        with self._sessions() as s:
+            self._metrics.read_jobs(s)

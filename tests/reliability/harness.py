@@ -56,6 +56,8 @@ class Cluster:
     n_workers: int = 1
     extra_env: dict[str, str] = field(default_factory=dict)
     embedded_worker: bool = False  # API processes run the worker as a thread (plain `serve`)
+    # processes behind each API port; 1, so that a SIGKILL stops all of an API's work
+    processes: int = 1
     procs: list[Proc] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -75,7 +77,8 @@ class Cluster:
         }
         for i in range(self.n_api):
             port = free_port()
-            serve = ["serve", "--port", str(port)] + ([] if self.embedded_worker else ["--no-worker"])
+            serve = ["serve", "--port", str(port), "--processes", str(self.processes)]
+            serve += [] if self.embedded_worker else ["--no-worker"]
             self.procs.append(Proc(f"api-{i}", serve, port))
         for i in range(self.n_workers):
             self.procs.append(Proc(f"worker-{i}", ["worker"]))

@@ -1,7 +1,7 @@
 import logging
 
-from fastapi import APIRouter, Response
-from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
+from fastapi import APIRouter, Request, Response
+from prometheus_client import CONTENT_TYPE_LATEST
 from sqlalchemy import text
 from sqlalchemy.exc import SQLAlchemyError
 
@@ -9,7 +9,6 @@ from app.api import problems
 from app.api.deps import HolderDep, MetricsDep, SessionDep
 from app.api.problems import Problem
 from app.api.schemas import Health
-from app.store import repo
 
 log = logging.getLogger(__name__)
 
@@ -39,13 +38,13 @@ def readyz(session: SessionDep, holder: HolderDep) -> Health:
     "/metrics", response_class=Response,
     responses={200: {"content": {CONTENT_TYPE_LATEST: {}}, "description": "Prometheus text format"}},
 )
-def metrics(session: SessionDep, metrics: MetricsDep) -> Response:
-    """Prometheus metrics: requests, latencies, recognitions, enrollments, jobs, model version."""
-    try:
-        counts = repo.jobs_by_status(session)
-        for status in ("queued", "running", "succeeded", "failed"):
-            metrics.jobs.labels(status).set(counts.get(status, 0))
-        metrics.observe_finished_jobs(repo.jobs_finished_since(session, metrics.jobs_seen_since))
-    except SQLAlchemyError:  # the process's own metrics are still worth a scrape
-        log.warning("metrics: the store is not reachable; job figures left as they were")
-    return Response(generate_latest(metrics.registry), media_type=CONTENT_TYPE_LATEST)
+def metrics(request: Request, session: SessionDep, metrics: MetricsDep) -> Response:
+    """Prometheus metrics: requests, latencies, recognitions, enrollments, jobs, model version
+    (of every process when `serve` runs several)."""
+    if request.app.state.job_metrics_at_scrape:  # else one process reads them on a timer
+        try:
+            metrics.read_jobs(session)
+        except SQLAlchemyError:  # the process's own metrics are still worth a scrape
+            log.warning("metrics: the store is not reachable; job figures left as they were")
+    body, content_type = metrics.exposition()
+    return Response(body, media_type=content_type)

@@ -1,0 +1,113 @@
+"""``tactile-zsl serve`` with several API processes on one port.
+
+Each process binds a socket of its own with ``SO_REUSEPORT``, so the kernel spreads new
+connections over the processes by address hash; with one shared listening socket (what
+uvicorn's ``workers`` does) a burst of connections went to whichever process woke first.
+The parent only supervises: it starts a process again when one dies, gives up when one
+dies before it served (it would again: a port taken, a bad setting), and stops them all
+on SIGTERM or SIGINT.
+Prometheus metrics live in files the processes share (prometheus_client's multiprocess
+mode), so ``/metrics`` answers for all of them whichever process is asked.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import os
+import shutil
+import signal
+import socket
+import tempfile
+import threading
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
+
+
+def supported() -> bool:
+    return hasattr(socket, "SO_REUSEPORT")
+
+
+def free_port(host: str) -> int:
+    with socket.socket(_family(host)) as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
+def serve(overrides: dict[str, Any], n: int, server: dict[str, Any]) -> int:
+    """Run ``n`` API processes (``Settings(**overrides)`` each, uvicorn options ``server``)
+    until SIGTERM or SIGINT; the exit status."""
+    metrics_dir = tempfile.mkdtemp(prefix="tactile-metrics-")
+    os.environ["PROMETHEUS_MULTIPROC_DIR"] = metrics_dir  # the spawned processes inherit it
+    context = multiprocessing.get_context("spawn")  # fresh interpreters: no forked threads or locks
+    stop = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+    procs: dict[int, tuple[multiprocessing.Process, Any]] = {}  # index -> (process, its "serving" event)
+
+    def start(index: int) -> None:
+        serving = context.Event()
+        proc = context.Process(target=_run_one, args=(overrides, server, index, serving),
+                               name=f"tactile-api-{index}")
+        proc.start()
+        procs[index] = (proc, serving)
+
+    status = 0
+    try:
+        for index in range(n):
+            start(index)
+        while not stop.wait(0.5):
+            for index, (proc, serving) in list(procs.items()):
+                if proc.is_alive():
+                    continue
+                if not serving.is_set():
+                    log.error("API process %d exited (%s) before it served; stopping", index, proc.exitcode)
+                    status = 1
+                    stop.set()
+                    break
+                log.warning("API process %d (pid %s) exited (%s); starting it again", index, proc.pid,
+                            proc.exitcode)
+                from prometheus_client import multiprocess
+
+                multiprocess.mark_process_dead(proc.pid)
+                start(index)
+    finally:
+        for proc, _ in procs.values():
+            if proc.is_alive():
+                proc.terminate()  # SIGTERM: uvicorn finishes the requests in flight
+        for proc, _ in procs.values():
+            proc.join(30)
+            if proc.is_alive():
+                proc.kill()
+                proc.join()
+        shutil.rmtree(metrics_dir, ignore_errors=True)
+    return status
+
+
+def _family(host: str) -> socket.AddressFamily:
+    return socket.AF_INET6 if ":" in host else socket.AF_INET
+
+
+def _run_one(overrides: dict[str, Any], server: dict[str, Any], index: int, serving: Any) -> None:
+    import uvicorn
+
+    class Server(uvicorn.Server):
+        async def startup(self, sockets: list[socket.socket] | None = None) -> None:
+            await super().startup(sockets)
+            if self.started:
+                serving.set()
+
+    from app.api.main import create_app
+    from app.config import Settings
+
+    logging.basicConfig(level=logging.INFO, format=LOG_FORMAT)
+    settings = Settings(**overrides)
+    sock = socket.socket(_family(settings.host), socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
+    sock.bind((settings.host, settings.port))
+    app = create_app(settings, process_index=index)
+    Server(uvicorn.Config(app, **server)).run(sockets=[sock])

@@ -1,0 +1,102 @@
+"""``tactile-zsl serve --processes 2``: several API processes on one port. Both serve,
+``/metrics`` speaks for all of them, a process that dies is started again, SIGTERM
+stops every one, and a process that cannot start stops the service with an error."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+
+from app.config import MAX_DEFAULT_PROCESSES, Settings
+from tests.reliability.harness import STARTUP_TIMEOUT, free_port, tactile_zsl
+from tests.service_fixtures import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS
+
+pytestmark = pytest.mark.slow
+
+
+def start(data_dir: Path, port: int) -> subprocess.Popen:
+    env = {**os.environ, "TACTILE_DATA_DIR": str(data_dir), "TACTILE_DATASET": QUICK_DATASET,
+           "TACTILE_METHOD": QUICK_METHOD, "TACTILE_METHOD_PARAMS": json.dumps(QUICK_PARAMS),
+           "TACTILE_RATE_LIMIT": "0"}
+    data_dir.mkdir(parents=True, exist_ok=True)
+    log = open(data_dir / "serve.log", "wb")  # noqa: SIM115 - the process writes it
+    return subprocess.Popen([*tactile_zsl(), "serve", "--processes", "2", "--no-worker", "--port", str(port)],
+                            env=env, stdout=log, stderr=subprocess.STDOUT)
+
+
+def serving_pids(url: str) -> set[int]:
+    """The processes behind the port, from the per-process model-version gauge."""
+    text = httpx.get(f"{url}/metrics", timeout=10).text
+    return {int(p) for p in re.findall(r'^tactile_active_model_version\{pid="(\d+)"\}', text, re.M)}
+
+
+def wait_for(condition, timeout: float, what: str):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            if value := condition():
+                return value
+        except httpx.TransportError:
+            pass
+        time.sleep(0.2)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def test_processes_serve_together_restart_and_stop_together(tmp_path):
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    proc = start(tmp_path / "data", port)
+    try:
+        pids = wait_for(lambda: len(p := serving_pids(url)) == 2 and p, STARTUP_TIMEOUT, "2 processes")
+
+        for _ in range(30):  # a new connection each: the kernel spreads them over the processes
+            assert httpx.get(f"{url}/healthz").status_code == 200
+        counted = re.findall(r'^tactile_http_requests_total\{[^}]*route="/healthz"[^}]*\} (\S+)',
+                             httpx.get(f"{url}/metrics").text, re.M)
+        assert sum(float(c) for c in counted) == 30  # summed over both processes
+
+        victim = min(pids)
+        os.kill(victim, signal.SIGKILL)
+        again = wait_for(lambda: len(p := serving_pids(url)) == 2 and victim not in p and p, 120,
+                         "the killed process to be replaced")
+        assert httpx.get(f"{url}/readyz").status_code == 200
+
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(60) == 0
+        for pid in again:
+            with pytest.raises(ProcessLookupError):
+                os.kill(pid, 0)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def test_a_process_that_cannot_start_stops_the_service(tmp_path):
+    with socket.socket() as taken:  # listening without SO_REUSEPORT: nobody else may bind
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        proc = start(tmp_path / "data", taken.getsockname()[1])
+        try:
+            assert proc.wait(STARTUP_TIMEOUT) == 1
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    assert "before it served" in (tmp_path / "data" / "serve.log").read_text()
+
+
+def test_the_default_is_one_process_per_core_within_bounds():
+    default = Settings().api_processes
+    assert 1 <= default <= MAX_DEFAULT_PROCESSES
+    assert default <= (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count())
+    assert Settings(processes=3).api_processes == 3
