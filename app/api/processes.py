@@ -22,6 +22,8 @@ import tempfile
 import threading
 from typing import Any
 
+from prometheus_client import multiprocess
+
 log = logging.getLogger(__name__)
 
 LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
@@ -70,9 +72,7 @@ def serve(overrides: dict[str, Any], n: int, server: dict[str, Any]) -> int:
                     break
                 log.warning("API process %d (pid %s) exited (%s); starting it again", index, proc.pid,
                             proc.exitcode)
-                from prometheus_client import multiprocess
-
-                multiprocess.mark_process_dead(proc.pid)
+                multiprocess.mark_process_dead(proc.pid)  # drop its per-process gauges
                 start(index)
     finally:
         for proc, _ in procs.values():
