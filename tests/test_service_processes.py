@@ -100,3 +100,28 @@ def test_the_default_is_one_process_per_core_within_bounds():
     assert 1 <= default <= MAX_DEFAULT_PROCESSES
     assert default <= (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count())
     assert Settings(processes=3).api_processes == 3
+
+
+def test_the_processes_stop_when_the_supervisor_is_killed(tmp_path):
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    proc = start(tmp_path / "data", port)
+    try:
+        pids = wait_for(lambda: len(p := serving_pids(url)) == 2 and p, STARTUP_TIMEOUT, "2 processes")
+        proc.kill()  # SIGKILL: the supervisor cannot stop them itself
+        proc.wait()
+
+        def gone() -> bool:
+            for pid in pids:
+                try:
+                    os.kill(pid, 0)
+                    return False
+                except ProcessLookupError:
+                    pass
+            return True
+
+        wait_for(gone, 60, "the API processes to stop")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

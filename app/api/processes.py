@@ -12,6 +12,7 @@ mode), so ``/metrics`` answers for all of them whichever process is asked.
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import multiprocessing
 import os
@@ -27,6 +28,7 @@ from prometheus_client import multiprocess
 log = logging.getLogger(__name__)
 
 LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
 
 def supported() -> bool:
@@ -91,6 +93,19 @@ def _family(host: str) -> socket.AddressFamily:
     return socket.AF_INET6 if ":" in host else socket.AF_INET
 
 
+def _stop_with_parent() -> None:
+    """Ask Linux for SIGTERM when the supervisor dies, even by SIGKILL: an API process left
+    behind would keep the port and serve with nobody to restart or stop it."""
+    parent = os.getppid()
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    except (OSError, AttributeError):  # not Linux: the supervisor's SIGTERM is what stops us
+        return
+    if os.getppid() != parent:  # it died before we asked
+        os.kill(os.getpid(), signal.SIGTERM)
+
+
 def _run_one(overrides: dict[str, Any], server: dict[str, Any], index: int, serving: Any) -> None:
     import uvicorn
 
@@ -104,6 +119,7 @@ def _run_one(overrides: dict[str, Any], server: dict[str, Any], index: int, serv
     from app.config import Settings
 
     logging.basicConfig(level=logging.INFO, format=LOG_FORMAT)
+    _stop_with_parent()
     settings = Settings(**overrides)
     sock = socket.socket(_family(settings.host), socket.SOCK_STREAM)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
