@@ -4,6 +4,7 @@ stops every one, and a process that cannot start stops the service with an error
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -11,6 +12,7 @@ import signal
 import socket
 import subprocess
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import httpx
@@ -21,6 +23,24 @@ from tests.reliability.harness import STARTUP_TIMEOUT, free_port, tactile_zsl
 from tests.service_fixtures import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS
 
 pytestmark = pytest.mark.slow
+
+
+@contextlib.contextmanager
+def serving(data_dir: Path, port: int) -> Iterator[subprocess.Popen]:
+    """``serve --processes 2`` on ``port``; killed afterwards if a test left it running."""
+    proc = start(data_dir, port)
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def two_serving(url: str, timeout: float = STARTUP_TIMEOUT, without: int | None = None) -> set[int]:
+    """Wait until two processes (neither of them ``without``) serve; their pids."""
+    return wait_for(lambda: len(p := serving_pids(url)) == 2 and without not in p and p, timeout,
+                    "2 serving processes")
 
 
 def start(data_dir: Path, port: int) -> subprocess.Popen:
@@ -54,9 +74,8 @@ def wait_for(condition, timeout: float, what: str):
 def test_processes_serve_together_restart_and_stop_together(tmp_path):
     port = free_port()
     url = f"http://127.0.0.1:{port}"
-    proc = start(tmp_path / "data", port)
-    try:
-        pids = wait_for(lambda: len(p := serving_pids(url)) == 2 and p, STARTUP_TIMEOUT, "2 processes")
+    with serving(tmp_path / "data", port) as proc:
+        pids = two_serving(url)
 
         for _ in range(30):  # a new connection each: the kernel spreads them over the processes
             assert httpx.get(f"{url}/healthz").status_code == 200
@@ -66,8 +85,7 @@ def test_processes_serve_together_restart_and_stop_together(tmp_path):
 
         victim = min(pids)
         os.kill(victim, signal.SIGKILL)
-        again = wait_for(lambda: len(p := serving_pids(url)) == 2 and victim not in p and p, 120,
-                         "the killed process to be replaced")
+        again = two_serving(url, 120, without=victim)  # the killed process is replaced
         assert httpx.get(f"{url}/readyz").status_code == 200
 
         proc.send_signal(signal.SIGTERM)
@@ -75,23 +93,14 @@ def test_processes_serve_together_restart_and_stop_together(tmp_path):
         for pid in again:
             with pytest.raises(ProcessLookupError):
                 os.kill(pid, 0)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
 
 
 def test_a_process_that_cannot_start_stops_the_service(tmp_path):
     with socket.socket() as taken:  # listening without SO_REUSEPORT: nobody else may bind
         taken.bind(("127.0.0.1", 0))
         taken.listen()
-        proc = start(tmp_path / "data", taken.getsockname()[1])
-        try:
+        with serving(tmp_path / "data", taken.getsockname()[1]) as proc:
             assert proc.wait(STARTUP_TIMEOUT) == 1
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
     assert "before it served" in (tmp_path / "data" / "serve.log").read_text()
 
 
@@ -104,10 +113,8 @@ def test_the_default_is_one_process_per_core_within_bounds():
 
 def test_the_processes_stop_when_the_supervisor_is_killed(tmp_path):
     port = free_port()
-    url = f"http://127.0.0.1:{port}"
-    proc = start(tmp_path / "data", port)
-    try:
-        pids = wait_for(lambda: len(p := serving_pids(url)) == 2 and p, STARTUP_TIMEOUT, "2 processes")
+    with serving(tmp_path / "data", port) as proc:
+        pids = two_serving(f"http://127.0.0.1:{port}")
         proc.kill()  # SIGKILL: the supervisor cannot stop them itself
         proc.wait()
 
@@ -121,7 +128,3 @@ def test_the_processes_stop_when_the_supervisor_is_killed(tmp_path):
             return True
 
         wait_for(gone, 60, "the API processes to stop")
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
