@@ -1,0 +1,187 @@
+"""Exploration bench (issue 5, session 6): zero-shot alternatives to DAP, dev seeds only.
+
+DAP multiplies per-attribute probabilities as if the attribute classifiers erred
+independently and were calibrated on unseen objects. Neither holds: "soft",
+"squishy" and "compressible" err together, and a classifier's scores on objects it
+never saw are less extreme than on its training objects. The first two approaches
+model both, learning from the known objects only; the last two change DAP's inputs:
+
+- ``asg`` (attribute-score Gaussian): out-of-object attribute logits of the known
+  training samples (group k-fold over objects, so each object is scored by
+  classifiers that never saw it) are regressed on the objects' attribute vectors,
+  s ≈ W a + b, and their residuals give a full covariance Σ (Ledoit-Wolf). A novel
+  class z scores log N(s(x); W a^z + b, Σ). ``asg-diag``: the same with a diagonal Σ.
+- ``flg`` (feature linear Gaussian): in the training samples' top principal
+  subspace, class means are ridge-regressed on attribute vectors; a novel class is
+  N(W a^z + b, Σ_within + Σ_mean), Σ_mean from the leave-one-class-out residuals of
+  the regression (how far a predicted class mean misses a real one).
+- ``twins<s>``: a novel class is scored by the forest's posterior on the known objects
+  whose attribute vectors are close to its own (Hamming kernel of sharpness s).
+- ``svm<C>``: DAP with one RBF-kernel SVM per attribute (Platt-scaled), as Lampert et al.
+
+Each is reported alone and as a product with DAP (``best``'s zero-shot), on the
+novel objects' held-out trials of development split seeds (never seed 0):
+
+    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6
+    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches twins0.5,twins1,twins2,twins4
+    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches svm0.3,svm1,svm3,svm10,svm30
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from sklearn.covariance import LedoitWolf
+from sklearn.model_selection import GroupKFold
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from dev_splits import add_split_arguments, splits  # noqa: E402
+
+from app.data.phac2 import load_phac2  # noqa: E402
+from app.evaluation.protocol import make_recognizer  # noqa: E402
+from app.methods.attributes import LinearAttributeModel  # noqa: E402
+from app.methods.known import flatten  # noqa: E402
+
+
+def logits(p: np.ndarray, clip: float) -> np.ndarray:
+    p = np.clip(p, clip, 1 - clip)
+    return np.log(p) - np.log1p(-p)
+
+
+def gaussian_scores(s: np.ndarray, means: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """(N, L) log N(s; means_l, cov) up to a shared constant."""
+    prec = np.linalg.pinv(cov)
+    d = s[:, None, :] - means[None, :, :]
+    return -0.5 * np.einsum("nld,de,nle->nl", d, prec, d)
+
+
+def ridge(a: np.ndarray, t: np.ndarray, alpha: float) -> tuple[np.ndarray, np.ndarray]:
+    """t ≈ a @ W + b, ridge on centred data."""
+    am, tm = a.mean(0), t.mean(0)
+    ac = a - am
+    w = np.linalg.solve(ac.T @ ac + alpha * np.eye(a.shape[1]), ac.T @ (t - tm))
+    return w, tm - am @ w
+
+
+def out_of_object_logits(z, y, targets, C, folds, clip):
+    s = np.zeros(targets.shape)
+    for fit, held in GroupKFold(folds).split(z, groups=y):
+        model = LinearAttributeModel.fit(z[fit], targets[fit], C)
+        s[held] = logits(model.predict_proba(z[held]), clip)
+    return s
+
+
+def asg(z, y, attrs, z_test, vectors, args, diagonal: bool):
+    targets = attrs[y]
+    s = out_of_object_logits(z, y, targets, args.C, args.folds, args.clip)
+    keep = s.std(0) > 1e-6
+    w, b = ridge(targets, s[:, keep], args.alpha)
+    resid = s[:, keep] - (targets @ w + b)
+    cov = np.diag(resid.var(0)) if diagonal else LedoitWolf().fit(resid).covariance_
+    full = LinearAttributeModel.fit(z, targets, args.C)
+    st = logits(full.predict_proba(z_test), args.clip)[:, keep]
+    return gaussian_scores(st, vectors @ w + b, cov)
+
+
+def flg(z, y, attrs, z_test, vectors, args):
+    mean = z.mean(0)
+    _, _, vt = np.linalg.svd(z - mean, full_matrices=False)
+    basis = vt[: args.components].T
+    p, pt = (z - mean) @ basis, (z_test - mean) @ basis
+    k = attrs.shape[0]
+    class_means = np.stack([p[y == c].mean(0) for c in range(k)])
+    within = LedoitWolf().fit(p - class_means[y]).covariance_
+    loo = np.zeros_like(class_means)
+    for c in range(k):  # leave one class out: how far a predicted mean misses a real one
+        others = np.arange(k) != c
+        w, b = ridge(attrs[others], class_means[others], args.alpha)
+        loo[c] = class_means[c] - (attrs[c] @ w + b)
+    w, b = ridge(attrs, class_means, args.alpha)
+    between = LedoitWolf().fit(loo).covariance_
+    return gaussian_scores(pt, vectors @ w + b, within + between)
+
+
+def svm_dap(z, y, attrs, z_test, vectors, C, args):
+    """DAP as Lampert et al. ran it: one RBF-kernel SVM per attribute, Platt-scaled."""
+    from sklearn.svm import SVC
+
+    from app.methods.attributes import dap_log_scores
+    targets = attrs[y] > 0.5
+    p = np.tile(attrs.mean(0), (len(z_test), 1))
+    for m in range(attrs.shape[1]):
+        if targets[:, m].all() or not targets[:, m].any():
+            continue
+        svc = SVC(C=C, gamma="scale", probability=True, random_state=0).fit(z, targets[:, m])
+        p[:, m] = svc.predict_proba(z_test)[:, 1]
+    return dap_log_scores(p, vectors, attrs.mean(0), args.clip)
+
+
+def twins(known_p: np.ndarray, attrs: np.ndarray, vectors: np.ndarray, sharpness: float) -> np.ndarray:
+    """log Σ_k p(k | x) exp(-sharpness · hamming(a^z, a^k)): a novel class feels like the
+    known objects that people describe alike."""
+    hamming = np.abs(vectors[:, None, :] - attrs[None, :, :]).sum(2)  # (L, K)
+    kernel = np.exp(-sharpness * hamming)
+    kernel /= kernel.sum(1, keepdims=True)
+    return np.log(known_p @ kernel.T + 1e-12)
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    add_split_arguments(p)
+    p.add_argument("--approaches", default="asg,asg-diag,flg")
+    p.add_argument("--C", type=float, default=0.1, help="attribute classifiers' C (best's)")
+    p.add_argument("--clip", type=float, default=0.02, help="probability clip (best's)")
+    p.add_argument("--folds", type=int, default=9, help="object folds for out-of-object logits")
+    p.add_argument("--alpha", type=float, default=1.0, help="ridge penalty")
+    p.add_argument("--components", type=int, default=32, help="flg: principal components")
+    args = p.parse_args()
+    data = load_phac2(args.data)
+    rows = []
+    for seed, split in splits(data, args, development_only=True):
+        t = time.perf_counter()
+        train = split.train_dataset(data)
+        best = make_recognizer("best", None, 0).fit(train)
+        xn = data.samples[split.novel_test_idx]
+        yn = split.novel_labels(data, split.novel_test_idx)
+        vectors = split.novel_attributes(data).astype(np.float64)
+        p_dap = best.add_novel_classes(list(split.novel_names), vectors,
+                                       allow_known_vectors=True).novel_proba(xn)
+        log_dap = np.log(p_dap + 1e-12)
+        row = {"seed": seed, "split": split.index + 1, "dap": float((p_dap.argmax(1) == yn).mean())}
+        cues = best.known_.cues_model
+        z, zt = cues.scaled(flatten(train.samples)), cues.scaled(flatten(xn))
+        attrs = train.class_attributes.astype(np.float64)
+        for approach in args.approaches.split(","):
+            if approach in ("asg", "asg-diag"):
+                scores = asg(z, train.labels, attrs, zt, vectors, args, approach == "asg-diag")
+            elif approach == "flg":
+                scores = flg(z, train.labels, attrs, zt, vectors, args)
+            elif approach.startswith("svm"):
+                scores = svm_dap(z, train.labels, attrs, zt, vectors, float(approach[3:] or 1), args)
+            elif approach.startswith("twins"):
+                scores = twins(cues.proba(zt), attrs, vectors, float(approach[5:] or 2))
+            else:
+                raise SystemExit(f"unknown approach {approach!r}")
+            scores = scores - scores.max(1, keepdims=True)
+            log_p = scores - np.log(np.exp(scores).sum(1, keepdims=True))
+            row[approach] = float((scores.argmax(1) == yn).mean())
+            row[f"dap*{approach}"] = float(((log_dap + log_p).argmax(1) == yn).mean())
+        row["seconds"] = round(time.perf_counter() - t, 1)
+        rows.append(row)
+        print(json.dumps(row), file=sys.stderr, flush=True)
+    mean = {k: round(float(np.mean([r[k] for r in rows])), 3) for k in rows[0]
+            if k not in ("seed", "split", "seconds")}
+    print(json.dumps({"zsl_mean": mean, "splits": len(rows), **{k: str(v) for k, v in vars(args).items()}},
+                     indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
