@@ -73,6 +73,12 @@ class Settings(BaseSettings):
     promotion_threshold: int = Field(
         10, ge=1, description="Real samples after which a novel class becomes a known class."
     )
+    keep_versions: int = Field(
+        100, ge=0,
+        description="Model versions kept for listing and rollback: the newest ones, plus the active and "
+        "the bootstrap version; the worker deletes older ones and the bundle data only they use. "
+        "0 keeps every version.",
+    )
     dataset: str = Field(
         "simulated", description="Bootstrap data: simulated, simulated:N or phac2:PATH."
     )
@@ -101,6 +107,14 @@ class Settings(BaseSettings):
     def _split_keys(cls, value: Any) -> Any:
         if isinstance(value, str):
             return [k.strip() for k in value.split(",") if k.strip()]
+        return value
+
+    @field_validator("keep_versions")
+    @classmethod
+    def _enough_versions(cls, value: int) -> int:
+        # with one, the version an API process is still loading could be deleted under it
+        if value == 1:
+            raise ValueError("keep at least 2 versions, or 0 to keep every version")
         return value
 
     @field_validator("method_params", mode="before")

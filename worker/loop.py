@@ -24,7 +24,7 @@ from app.config import Settings
 from app.framework import bundle
 from app.framework.recognizer import TactileRecognizer
 from app.service.bootstrap import extract_features, model_classes
-from app.store import bundles, leases, repo
+from app.store import bundles, leases, repo, retention
 from app.store.models import Job, ObjectClass, Sample, utcnow
 from worker.retrain import Plan, build, known_dataset, make_plan
 
@@ -68,6 +68,7 @@ class Worker:
                     jobs = repo.claim_queued_jobs(s, self.id)
                 if jobs:
                     self._process([j.id for j in jobs])
+                    self._prune()
                 return len(jobs)
         finally:
             with self.sessions() as s:
@@ -100,6 +101,23 @@ class Worker:
                 return
             model = self._load(s, base.version, base.bundle_sha256)
         model.recognize(np.zeros((1, *model.input_shape), np.float32))
+
+    def _prune(self) -> None:
+        """Old versions go in batches of a tenth of those kept, since finding the
+        bundle parts nobody uses reads every kept version's head."""
+        keep = self.settings.keep_versions
+        if not keep:
+            return
+        try:
+            with self.sessions.begin() as s:
+                pruned = retention.prune(s, keep, slack=keep // 10)
+        except Exception:  # the versions stay until the next round; the jobs are done
+            log.exception("could not prune old model versions")
+            return
+        if pruned:
+            log.info("pruned %d model versions (%d to %d), %d bundle rows (%d bytes)",
+                     len(pruned.versions), pruned.versions[0], pruned.versions[-1],
+                     pruned.bundles, pruned.bytes)
 
     # -------------------------------------------------------------------- jobs
     def _process(self, job_ids: list[int]) -> None:

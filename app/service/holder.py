@@ -59,6 +59,8 @@ class ModelHolder(Poller):
                 if version is None or (current is not None and current.version == version):
                     return False
                 row = repo.get_version(s, version)
+                if row is None:  # activated and pruned since the line above; poll again
+                    return False
                 # parts the served model shares with the new one are not read again
                 recognizer = bundles.load_model(s, row.bundle_sha256, self._parts)
                 class_ids = repo.class_ids_by_name(s)

@@ -203,13 +203,16 @@ def add_version(session: Session, **fields) -> ModelVersion:
     return row
 
 
-def activate(session: Session, version: int) -> None:
+def activate(session: Session, version: int) -> bool:
+    """Make ``version`` the active one; False, and the caller must roll back, if there is
+    no such version (pruned since it was read), as no version is active then."""
     # clear first: the partial unique index allows one active row at any instant
     session.execute(
         update(ModelVersion).where(ModelVersion.active, ModelVersion.version != version)
         .values(active=False)
     )
-    session.execute(update(ModelVersion).where(ModelVersion.version == version).values(active=True))
+    done = session.execute(update(ModelVersion).where(ModelVersion.version == version).values(active=True))
+    return done.rowcount == 1
 
 
 # ---------------------------------------------------------------------- jobs

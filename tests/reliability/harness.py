@@ -22,6 +22,9 @@ from tests.service_fixtures import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS
 STARTUP_TIMEOUT = 420  # the first start trains the (small) base model
 
 
+KEEP_VERSIONS = 3
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -73,6 +76,8 @@ class Cluster:
             "TACTILE_WORKER_POLL_SECONDS": "0.1",
             "TACTILE_LEASE_SECONDS": "10",
             "TACTILE_RATE_LIMIT": "0",
+            # the worker prunes old versions every round, so crashes and swaps meet pruning
+            "TACTILE_KEEP_VERSIONS": str(KEEP_VERSIONS),
             **self.extra_env,
         }
         for i in range(self.n_api):

@@ -247,5 +247,7 @@ def hot_swap(cluster: Cluster, versions: int = 20, load_threads: int = 4) -> dic
     return {
         "versions_activated": last - first, "recognitions_ok": ok[0], "failed": len(failed),
         "failures": failed[:5], "versions_served": len(seen),
+        "versions_stored": len(httpx.get(f"{urls[0]}/v1/models").json()["models"]),
+        "integrity_problems": store_check(cluster.sqlalchemy_url),
         "seconds": round(time.monotonic() - started, 1),
     }

@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 from tests.reliability import scenarios
-from tests.reliability.harness import Cluster
+from tests.reliability.harness import KEEP_VERSIONS, Cluster
 from tests.service_fixtures import fresh_postgres_database, postgres_url
 
 pytestmark = pytest.mark.slow
@@ -79,3 +79,5 @@ def test_hot_swap_drops_no_recognition(tmp_path):
     print(report)
     assert report["versions_activated"] == CI_VERSIONS
     assert report["failed"] == 0 and report["recognitions_ok"] > 0, report
+    # pruned while served: the harness keeps 3 versions, plus the bootstrap one
+    assert report["versions_stored"] <= KEEP_VERSIONS + 1 and report["integrity_problems"] == [], report

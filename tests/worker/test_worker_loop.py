@@ -291,3 +291,24 @@ def test_job_timings_reach_the_metrics_of_every_api_process(client, worker, data
     assert 'tactile_enrollments_total{kind="class"} 1.0' in text
     text = client.get("/metrics").text  # a second scrape does not count the job again
     assert 'tactile_enrollment_to_live_seconds_count{status="succeeded"} 1.0' in text
+
+
+def test_old_versions_are_pruned_and_the_kept_ones_still_roll_back(client, app, dataset, sample):
+    """keep_versions=2: after four enrollments the store holds the bootstrap version and
+    the two newest; a pruned version cannot be activated, a kept one can."""
+    from tests.reliability.harness import store_check
+    from worker import Worker
+
+    settings = app.state.settings.model_copy(update={"keep_versions": 2})
+    worker = Worker(settings, app.state.sessions, on_activate=app.state.holder.serve)
+    for i, name in enumerate(["a", "b", "c", "d"]):
+        register(client, dataset, name, i)
+        assert worker.run_once() == 1
+    versions = [m["version"] for m in client.get("/v1/models").json()["models"]]
+    assert versions == [1, 4, 5]
+    assert client.post("/v1/recognize", json={"samples": [sample]}).json()["model_version"] == 5
+    r = client.post("/v1/models/3/activate")
+    assert r.status_code == 404 and r.json()["errors"][0]["field"] == "version"
+    assert client.post("/v1/models/4/activate").status_code == 200
+    assert client.post("/v1/recognize", json={"samples": [sample]}).json()["model_version"] == 4
+    assert store_check(settings.sqlalchemy_url) == []

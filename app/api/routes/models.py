@@ -33,15 +33,20 @@ def active_model(session: SessionDep) -> ModelOut:
 )
 def activate_model(version: RowId, session: SessionDep, holder: HolderDep) -> ModelOut:
     """Make ``version`` the active model in every API process (activating an earlier
-    version is the rollback). Later enrollments are folded in again by the next retrain."""
+    version is the rollback). Later enrollments are folded in again by the next retrain.
+    Only the versions the store keeps can be activated (``TACTILE_KEEP_VERSIONS``)."""
     row = repo.get_version(session, version)
     if row is None:
         raise not_found("model version", "version", version)
     try:  # never activate a bundle that cannot be loaded
         bundles.load_model(session, row.bundle_sha256)
     except BundleError as exc:
+        if repo.get_version(session, version) is None:  # pruned by the worker meanwhile
+            raise not_found("model version", "version", version) from None
         raise Problem(409, f"version {version} cannot be loaded: {exc}", "version") from None
-    repo.activate(session, version)
+    if not repo.activate(session, version):  # pruned by the worker meanwhile
+        session.rollback()
+        raise not_found("model version", "version", version)
     session.commit()
     session.refresh(row)
     holder.refresh()  # this process answers with it at once; others poll
