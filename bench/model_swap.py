@@ -10,6 +10,10 @@ split bundles) against the split one (a head plus shared parts): its size, writi
 (``bundle.split`` from scratch, and the worker's ``PartEncoder`` after the previous
 version), and loading it (whole, against the head with the previous version's parts
 cached, as an API process does), each load followed by the one-sample warm-up.
+Last, the worker's pruning at the default retention (``TACTILE_KEEP_VERSIONS`` 100, so
+it runs when 11 versions are over): one prune of 11 versions from a store of 111 (each
+an enrolment's head), with the worker's memory of the heads it read at the previous
+prune: each prune reads the 11 heads stored since, to find the parts still used.
 """
 
 from __future__ import annotations
@@ -28,7 +32,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from app.data.sources import load_dataset  # noqa: E402
 from app.framework import bundle  # noqa: E402
 from app.framework.registry import DEFAULT_METHOD, make_method  # noqa: E402
-from app.store import bundles, repo  # noqa: E402
+from app.service.bootstrap import model_classes  # noqa: E402
+from app.store import bundles, repo, retention  # noqa: E402
 from app.store.db import make_engine, make_sessionmaker  # noqa: E402
 from app.store.models import Base  # noqa: E402
 from tests.service_fixtures import unused_vectors  # noqa: E402
@@ -41,7 +46,31 @@ def cpu_ms(fn, repeats: int) -> float:
         start = time.process_time()
         fn()
         times.append(time.process_time() - start)
-    return round(1000 * float(np.median(times)), 1)
+    return round(1000 * float(np.median(times[1:])), 1)
+
+
+def prune_ms(sessions, base, dataset, repeats: int, keep: int = 100) -> float:
+    """Median CPU milliseconds of one prune at the worker's slack (``keep // 10``); the
+    first prune, which reads every kept head, is not counted."""
+    vector = np.asarray(unused_vectors(dataset, 1), np.float32)
+    encoder = bundle.PartEncoder()
+    times, n, refs = [], 0, {}
+    for _ in range(repeats + 1):
+        with sessions.begin() as s:
+            while len(retention.prunable(s, keep)) <= keep // 10:
+                n += 1
+                model = base.add_novel_classes([f"enrolled-{n}"], vector)
+                row = repo.add_version(
+                    s, method=model.method, reason="update", base_version=None,
+                    bundle_sha256=bundles.store_model(s, encoder.split(model)),
+                    input_shape=list(model.input_shape), metrics={}, classes=model_classes(model))
+                repo.activate(s, row.version)
+        start = time.process_time()
+        with sessions.begin() as s:
+            pruned = retention.prune(s, keep, slack=keep // 10, part_refs=refs)
+            assert len(pruned.versions) == keep // 10 + 1
+        times.append(time.process_time() - start)
+    return round(1000 * float(np.median(times[1:])), 1)
 
 
 def main() -> int:
@@ -89,6 +118,7 @@ def main() -> int:
                 lambda: (encoder.split(enrolled), encoder.split(base)), args.repeats) / 2, 1),
             "load_whole_ms": cpu_ms(lambda: load(whole, None), args.repeats),
             "load_split_parts_cached_ms": round(1000 * float(np.median(cached)), 1),
+            "prune_11_of_111_versions_ms": prune_ms(sessions, base, dataset, min(args.repeats, 5)),
         }
         engine.dispose()
     print(json.dumps(report, indent=2))

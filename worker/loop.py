@@ -47,6 +47,7 @@ class Worker:
         self.on_activate = on_activate
         self._cache: tuple[int, TactileRecognizer] | None = None  # last model built or loaded
         self._encoder = bundle.PartEncoder()  # parts unchanged since the last version are not encoded again
+        self._part_refs: dict[str, set[str]] = {}  # kept heads' parts, so pruning reads new heads only
 
     # ------------------------------------------------------------------ rounds
     def run_once(self) -> int:
@@ -104,13 +105,13 @@ class Worker:
 
     def _prune(self) -> None:
         """Old versions go in batches of a tenth of those kept, since finding the
-        bundle parts nobody uses reads every kept version's head."""
+        bundle parts nobody uses reads every kept version's head (once per worker)."""
         keep = self.settings.keep_versions
         if not keep:
             return
         try:
             with self.sessions.begin() as s:
-                pruned = retention.prune(s, keep, slack=keep // 10)
+                pruned = retention.prune(s, keep, slack=keep // 10, part_refs=self._part_refs)
         except Exception:  # the versions stay until the next round; the jobs are done
             log.exception("could not prune old model versions")
             return

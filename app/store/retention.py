@@ -47,11 +47,13 @@ def prunable(session: Session, keep: int) -> list[int]:
                   if i >= keep and not active and reason != "bootstrap")
 
 
-def prune(session: Session, keep: int, slack: int = 0) -> Pruned:
+def prune(session: Session, keep: int, slack: int = 0, part_refs: dict[str, set[str]] | None = None) -> Pruned:
     """Delete the versions beyond the ``keep`` newest (see the module docstring) and
     the bundle rows only they used; nothing while at most ``slack`` versions are over.
 
-    The slack spreads the work: finding unused parts reads every kept head.
+    The slack spreads the work: finding unused parts reads every kept head. So does
+    ``part_refs``, {head SHA-256: its parts}, kept by the caller between prunes: heads
+    never change, so only those stored since the last prune are read.
     """
     doomed = prunable(session, keep)
     if len(doomed) <= slack:
@@ -64,10 +66,13 @@ def prune(session: Session, keep: int, slack: int = 0) -> Pruned:
     if not deleted:
         return NOTHING
     heads = set(session.scalars(select(ModelVersion.bundle_sha256).distinct()))
-    used = set(heads)
-    for head in heads:
+    refs = {} if part_refs is None else part_refs
+    for head in heads - refs.keys():
         # a damaged head raises: its parts are unknown, so none may go (the caller rolls back)
-        used.update(bundle.part_refs(repo.bundle_data(session, head)).values())
+        refs[head] = set(bundle.part_refs(repo.bundle_data(session, head)).values())
+    for head in refs.keys() - heads:
+        del refs[head]
+    used = heads.union(*(refs[h] for h in heads))
     unused = [sha for sha in session.scalars(select(Bundle.sha256)) if sha not in used]
     size = 0
     for chunk in _chunks(unused):

@@ -106,3 +106,24 @@ def test_activating_a_version_that_is_gone_activates_nothing(six_versions):
         assert repo.activate(s, 3) is False  # the caller rolls back
         s.rollback()
         assert repo.active_version_number(s) == 6
+
+
+def test_remembered_heads_give_the_same_result(six_versions, base_model):
+    """The worker keeps each head's parts between prunes; a later prune with that memory
+    deletes exactly the rows a prune without it would."""
+    sessions = six_versions
+    model, dataset = base_model
+    refs: dict[str, set[str]] = {}
+    with sessions.begin() as s:
+        assert retention.prune(s, keep=4, part_refs=refs).versions == [2]
+        assert set(refs) == set(s.scalars(select(ModelVersion.bundle_sha256)))
+        newer = model.add_novel_classes(["x"], np.asarray(unused_vectors(dataset, 1), np.float32))
+        row = repo.add_version(
+            s, method=newer.method, reason="update", base_version=6,
+            bundle_sha256=bundles.store_model(s, bundle.split(newer, SMALL_PARTS)),
+            input_shape=list(newer.input_shape), metrics={}, classes=model_classes(newer),
+        )
+        repo.activate(s, row.version)
+        assert retention.prune(s, keep=2, part_refs=refs).versions == [3, 4, 5]
+        assert set(s.scalars(select(Bundle.sha256))) == used_bundles(s)
+        assert set(refs) == set(s.scalars(select(ModelVersion.bundle_sha256)))  # forgets pruned heads
