@@ -101,6 +101,19 @@ def quick_settings(data_dir, **overrides) -> Settings:
     return Settings(**{**values, **overrides})
 
 
+def list_all(client, path: str, key: str) -> list[dict]:
+    """Every row of a paged list endpoint (``/v1/classes``, ``/v1/models``), following
+    ``next_after``; ``client`` is an httpx client or a TestClient."""
+    rows, params = [], {"limit": 1000}
+    while True:
+        r = client.get(path, params=params)
+        assert r.status_code == 200, r.text
+        rows += r.json()[key]
+        if r.json()["next_after"] is None:
+            return rows
+        params = {"limit": 1000, "after": r.json()["next_after"]}
+
+
 def wait_for_job(client: TestClient, job_id: int, timeout: float = 60) -> dict:
     deadline = time.monotonic() + timeout
     while True:

@@ -16,7 +16,13 @@ import numpy as np
 import pytest
 
 from tests.reliability.harness import STARTUP_TIMEOUT, free_port, tactile_zsl
-from tests.service_fixtures import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS, quick_dataset
+from tests.service_fixtures import (
+    QUICK_DATASET,
+    QUICK_METHOD,
+    QUICK_PARAMS,
+    list_all,
+    quick_dataset,
+)
 
 pytestmark = pytest.mark.slow
 
@@ -94,8 +100,8 @@ def wait_job(client: httpx.Client, job_id: int, service: Service) -> dict:
 
 def snapshot(client: httpx.Client) -> dict:
     return {
-        "classes": client.get("/v1/classes").json()["classes"],
-        "models": client.get("/v1/models").json()["models"],
+        "classes": list_all(client, "/v1/classes", "classes"),
+        "models": list_all(client, "/v1/models", "models"),
         "attributes": client.get("/v1/attributes").json()["attributes"],
     }
 
@@ -116,7 +122,7 @@ def test_robot_session_survives_a_restart(tmp_path):
 
             # an operator registers a never-touched object by its attributes
             attributes = client.get("/v1/attributes").json()["attributes"]
-            taken = {tuple(c["attributes"]) for c in client.get("/v1/classes").json()["classes"]}
+            taken = {tuple(c["attributes"]) for c in list_all(client, "/v1/classes", "classes")}
             names = next(
                 [a, b] for a, b in itertools.combinations(attributes, 2) if (a, b) not in taken
             )

@@ -8,7 +8,7 @@ import json
 from collections.abc import AsyncIterator
 from typing import Annotated, NamedTuple
 
-from fastapi import Depends, Header, Path, Request, Security
+from fastapi import Depends, Header, Path, Query, Request, Security
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 from fastapi.security import APIKeyHeader
@@ -195,6 +195,23 @@ async def get_idempotency(
 
 # ids fit a 32-bit INTEGER column on every backend; beyond that is a 422, not a database error
 RowId = Annotated[int, Path(ge=1, le=2_147_483_647)]
+PAGE_DEFAULT, PAGE_MAX = 100, 1000
+
+
+class Page(NamedTuple):
+    after: int | None
+    limit: int
+
+
+async def get_page(
+    after: Annotated[int | None, Query(
+        ge=0, le=2_147_483_647, description="Return the rows after this one: the `next_after` of the previous page.",
+    )] = None,
+    limit: Annotated[int, Query(ge=1, le=PAGE_MAX, description="Most rows in the page.")] = PAGE_DEFAULT,
+) -> Page:
+    return Page(after, limit)
+
+
 
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 SessionDep = Annotated[Session, Depends(get_session)]
@@ -206,3 +223,4 @@ ReadAccess = Depends(require_read)
 EnrollAccess = Depends(require_enroll)
 AdminAccess = Depends(require_admin)
 IdempotencyDep = Annotated[Idempotency, Depends(get_idempotency)]
+PageDep = Annotated[Page, Depends(get_page)]

@@ -56,8 +56,14 @@ class ClassOut(BaseModel):
     in_active_model: bool = Field(description="Whether the model now serving covers the class.")
 
 
+NEXT_AFTER = Field(
+    None, description="Pass as `after` to get the next page; null on the last page."
+)
+
+
 class ClassList(BaseModel):
     classes: list[ClassOut]
+    next_after: int | None = NEXT_AFTER
 
 
 # ------------------------------------------------------------------------ jobs
@@ -141,6 +147,7 @@ class ModelOut(BaseModel):
 
 class ModelList(BaseModel):
     models: list[ModelOut]
+    next_after: int | None = NEXT_AFTER
 
 
 # ---------------------------------------------------------------------- health

@@ -79,8 +79,10 @@ def class_by_key(session: Session, key: str) -> ObjectClass | None:
     return session.scalar(select(ObjectClass).where(ObjectClass.attribute_key == key).limit(1))
 
 
-def list_classes(session: Session) -> list[ObjectClass]:
-    return list(session.scalars(select(ObjectClass).order_by(ObjectClass.id)))
+def list_classes(session: Session, after: int | None = None, limit: int | None = None) -> list[ObjectClass]:
+    """Classes by id; with ``after``, those after it; at most ``limit``."""
+    stmt = select(ObjectClass).order_by(ObjectClass.id).limit(limit)
+    return list(session.scalars(stmt if after is None else stmt.where(ObjectClass.id > after)))
 
 
 def sample_counts(session: Session, class_ids: Sequence[int] | None = None) -> dict[int, int]:
@@ -155,8 +157,10 @@ def get_version(session: Session, version: int) -> ModelVersion | None:
     return session.get(ModelVersion, version)
 
 
-def list_versions(session: Session) -> list[ModelVersion]:
-    return list(session.scalars(select(ModelVersion).order_by(ModelVersion.version)))
+def list_versions(session: Session, after: int | None = None, limit: int | None = None) -> list[ModelVersion]:
+    """Versions, oldest first; with ``after``, those after it; at most ``limit``."""
+    stmt = select(ModelVersion).order_by(ModelVersion.version).limit(limit)
+    return list(session.scalars(stmt if after is None else stmt.where(ModelVersion.version > after)))
 
 
 # Bundles are read in slices: a database driver converts a whole value while it holds the

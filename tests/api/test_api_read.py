@@ -135,3 +135,36 @@ def test_every_request_gives_its_database_connection_back(client, app):
         assert client.get("/v1/jobs/999999").status_code == 404
         assert client.post("/v1/classes", json={"name": "", "attributes": ["nope"]}).status_code == 422
     assert pool.checkedout() == 0
+
+
+def test_classes_come_a_page_at_a_time(client, dataset):
+    everything = client.get("/v1/classes", params={"limit": 1000}).json()
+    assert everything["next_after"] is None and len(everything["classes"]) == dataset.n_classes
+    pages, params = [], {"limit": 7}
+    while True:
+        body = client.get("/v1/classes", params=params).json()
+        assert len(body["classes"]) <= 7
+        pages.append(body["classes"])
+        if body["next_after"] is None:
+            break
+        assert body["next_after"] == body["classes"][-1]["id"]
+        params = {"limit": 7, "after": body["next_after"]}
+    assert len(pages) == -(-dataset.n_classes // 7)
+    assert [c for page in pages for c in page] == everything["classes"]
+    last = everything["classes"][-1]["id"]
+    assert client.get("/v1/classes", params={"after": last}).json() == {"classes": [], "next_after": None}
+
+
+def test_models_come_a_page_at_a_time(client):
+    body = client.get("/v1/models", params={"limit": 1}).json()
+    assert [m["version"] for m in body["models"]] == [1] and body["next_after"] is None
+    assert client.get("/v1/models", params={"after": 1}).json() == {"models": [], "next_after": None}
+
+
+def test_bad_page_parameters_are_named_422(client):
+    for path in ("/v1/classes", "/v1/models"):
+        for params, field in (({"limit": 0}, "limit"), ({"limit": 1001}, "limit"),
+                              ({"after": -1}, "after"), ({"after": "x"}, "after")):
+            r = client.get(path, params=params)
+            assert r.status_code == 422 and r.headers["content-type"] == PROBLEM, (path, params)
+            assert r.json()["errors"][0]["field"] == field

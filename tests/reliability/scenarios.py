@@ -13,7 +13,7 @@ from concurrent.futures import ThreadPoolExecutor
 import httpx
 
 from tests.reliability.harness import Cluster, store_check, wait_jobs_settled
-from tests.service_fixtures import quick_dataset
+from tests.service_fixtures import list_all, quick_dataset
 
 
 def _vectors(n: int) -> list[list[int]]:
@@ -100,7 +100,8 @@ def verify(cluster: Cluster, classes: dict[int, str], sample_ids: list[int], tim
     url = cluster.urls[0]
     active = httpx.get(f"{url}/v1/models/active", timeout=30).json()
     model_names = {c["name"] for c in active["classes"]}
-    stored = {c["id"]: c for c in httpx.get(f"{url}/v1/classes", timeout=30).json()["classes"]}
+    with httpx.Client(base_url=url, timeout=30) as client:
+        stored = {c["id"]: c for c in list_all(client, "/v1/classes", "classes")}
     from app.store import repo
     from app.store.db import make_engine, make_sessionmaker
 
@@ -244,10 +245,12 @@ def hot_swap(cluster: Cluster, versions: int = 20, load_threads: int = 4) -> dic
     for t in threads:
         t.join(60)
     last = httpx.get(f"{urls[0]}/v1/models/active").json()["version"]
+    with httpx.Client(base_url=urls[0], timeout=30) as client:
+        stored = list_all(client, "/v1/models", "models")
     return {
         "versions_activated": last - first, "recognitions_ok": ok[0], "failed": len(failed),
         "failures": failed[:5], "versions_served": len(seen),
-        "versions_stored": len(httpx.get(f"{urls[0]}/v1/models").json()["models"]),
+        "versions_stored": len(stored),
         "integrity_problems": store_check(cluster.sqlalchemy_url),
         "seconds": round(time.monotonic() - started, 1),
     }

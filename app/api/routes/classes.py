@@ -11,6 +11,7 @@ from app.api.deps import (
     IdempotencyDep,
     MetricsDep,
     ModelDep,
+    PageDep,
     ReadAccess,
     RowId,
     SessionDep,
@@ -38,13 +39,17 @@ def class_out(
 
 
 @router.get("", response_model=ClassList, dependencies=[ReadAccess])
-def list_classes(session: SessionDep, model: ModelDep) -> ClassList:
-    """Known and novel classes, and whether the model now serving covers each."""
+def list_classes(session: SessionDep, model: ModelDep, page: PageDep) -> ClassList:
+    """Known and novel classes by id, a page at a time, and whether the model now
+    serving covers each."""
+    rows = repo.list_classes(session, page.after, page.limit + 1)  # one more: is there a next page?
+    rows, more = rows[:page.limit], len(rows) > page.limit
     vocab = repo.attribute_names(session)
-    counts = repo.sample_counts(session)
-    return ClassList(classes=[
-        class_out(c, vocab, counts.get(c.id, 0), model) for c in repo.list_classes(session)
-    ])
+    counts = repo.sample_counts(session, [c.id for c in rows])
+    return ClassList(
+        classes=[class_out(c, vocab, counts.get(c.id, 0), model) for c in rows],
+        next_after=rows[-1].id if more else None,
+    )
 
 
 @router.get(

@@ -1,7 +1,7 @@
 from fastapi import APIRouter
 
 from app.api import problems
-from app.api.deps import AdminAccess, HolderDep, ReadAccess, RowId, SessionDep
+from app.api.deps import AdminAccess, HolderDep, PageDep, ReadAccess, RowId, SessionDep
 from app.api.problems import Problem, not_found
 from app.api.schemas import ModelList, ModelOut
 from app.framework.errors import BundleError
@@ -11,9 +11,13 @@ router = APIRouter(prefix="/v1/models", tags=["models"], responses=problems.resp
 
 
 @router.get("", response_model=ModelList, dependencies=[ReadAccess])
-def list_models(session: SessionDep) -> ModelList:
-    """Every model version, oldest first."""
-    return ModelList(models=[ModelOut.model_validate(v) for v in repo.list_versions(session)])
+def list_models(session: SessionDep, page: PageDep) -> ModelList:
+    """The model versions the store keeps (``TACTILE_KEEP_VERSIONS``), oldest first, a
+    page at a time."""
+    rows = repo.list_versions(session, page.after, page.limit + 1)  # one more: is there a next page?
+    rows, more = rows[:page.limit], len(rows) > page.limit
+    return ModelList(models=[ModelOut.model_validate(v) for v in rows],
+                     next_after=rows[-1].version if more else None)
 
 
 @router.get(
