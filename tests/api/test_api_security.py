@@ -205,7 +205,7 @@ def test_cors_opens_only_to_configured_origins(settings, base_model):
     RuntimeError('Traceback (most recent call last): File "repo.py" SELECT * FROM classes'),
 ])
 def test_no_stack_trace_or_sql_in_any_response(app, monkeypatch, error):
-    def broken(_session):
+    def broken(*_args):
         raise error
 
     with TestClient(app, raise_server_exceptions=False) as c:
