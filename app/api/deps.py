@@ -202,6 +202,12 @@ class Page(NamedTuple):
     after: int | None
     limit: int
 
+    def cut(self, rows: list, key) -> tuple[list, int | None]:
+        """``rows`` read with a limit of ``limit + 1``: this page's rows, and the
+        ``next_after`` cursor (None when the extra row did not come: the last page)."""
+        page = rows[:self.limit]
+        return page, (key(page[-1]) if len(rows) > self.limit else None)
+
 
 async def get_page(
     after: Annotated[int | None, Query(

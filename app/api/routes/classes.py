@@ -42,14 +42,11 @@ def class_out(
 def list_classes(session: SessionDep, model: ModelDep, page: PageDep) -> ClassList:
     """Known and novel classes by id, a page at a time, and whether the model now
     serving covers each."""
-    rows = repo.list_classes(session, page.after, page.limit + 1)  # one more: is there a next page?
-    rows, more = rows[:page.limit], len(rows) > page.limit
+    rows, next_after = page.cut(repo.list_classes(session, page.after, page.limit + 1), lambda c: c.id)
     vocab = repo.attribute_names(session)
     counts = repo.sample_counts(session, [c.id for c in rows])
-    return ClassList(
-        classes=[class_out(c, vocab, counts.get(c.id, 0), model) for c in rows],
-        next_after=rows[-1].id if more else None,
-    )
+    return ClassList(classes=[class_out(c, vocab, counts.get(c.id, 0), model) for c in rows],
+                     next_after=next_after)
 
 
 @router.get(

@@ -14,10 +14,8 @@ router = APIRouter(prefix="/v1/models", tags=["models"], responses=problems.resp
 def list_models(session: SessionDep, page: PageDep) -> ModelList:
     """The model versions the store keeps (``TACTILE_KEEP_VERSIONS``), oldest first, a
     page at a time."""
-    rows = repo.list_versions(session, page.after, page.limit + 1)  # one more: is there a next page?
-    rows, more = rows[:page.limit], len(rows) > page.limit
-    return ModelList(models=[ModelOut.model_validate(v) for v in rows],
-                     next_after=rows[-1].version if more else None)
+    rows, next_after = page.cut(repo.list_versions(session, page.after, page.limit + 1), lambda v: v.version)
+    return ModelList(models=[ModelOut.model_validate(v) for v in rows], next_after=next_after)
 
 
 @router.get(
