@@ -194,7 +194,8 @@ async def get_idempotency(
 
 
 # ids fit a 32-bit INTEGER column on every backend; beyond that is a 422, not a database error
-RowId = Annotated[int, Path(ge=1, le=2_147_483_647)]
+MAX_ROW_ID = 2_147_483_647
+RowId = Annotated[int, Path(ge=1, le=MAX_ROW_ID)]
 PAGE_DEFAULT, PAGE_MAX = 100, 1000
 
 
@@ -211,12 +212,11 @@ class Page(NamedTuple):
 
 async def get_page(
     after: Annotated[int | None, Query(
-        ge=0, le=2_147_483_647, description="Return the rows after this one: the `next_after` of the previous page.",
+        ge=0, le=MAX_ROW_ID, description="Return the rows after this one: the `next_after` of the previous page.",
     )] = None,
     limit: Annotated[int, Query(ge=1, le=PAGE_MAX, description="Most rows in the page.")] = PAGE_DEFAULT,
 ) -> Page:
     return Page(after, limit)
-
 
 
 SettingsDep = Annotated[Settings, Depends(get_settings)]
