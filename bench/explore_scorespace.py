@@ -18,6 +18,8 @@ model both, learning from the known objects only; the last two change DAP's inpu
 - ``twins<s>``: a novel class is scored by the forest's posterior on the known objects
   whose attribute vectors are close to its own (Hamming kernel of sharpness s).
 - ``svm<C>``: DAP with one RBF-kernel SVM per attribute (Platt-scaled), as Lampert et al.
+- ``znorm`` / ``zmean`` (session 7): DAP scores minus each novel class's mean score (and
+  divided by its spread) over known training samples scored out of object (hubness).
 
 Each is reported alone and as a product with DAP (``best``'s zero-shot), on the
 novel objects' held-out trials of development split seeds (never seed 0):
@@ -25,6 +27,7 @@ novel objects' held-out trials of development split seeds (never seed 0):
     .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6
     .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches twins0.5,twins1,twins2,twins4
     .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches svm0.3,svm1,svm3,svm10,svm30
+    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches znorm,zmean
 """
 
 from __future__ import annotations
@@ -123,6 +126,22 @@ def svm_dap(z, y, attrs, z_test, vectors, C, args):
     return dap_log_scores(p, vectors, attrs.mean(0), args.clip)
 
 
+def class_norm(z, y, attrs, z_test, vectors, args, scale: bool):
+    """DAP scores standardised per novel class by their spread on known objects the
+    attribute classifiers never saw: some attribute vectors match many objects (hubs)."""
+    from app.methods.attributes import dap_log_scores
+    targets = attrs[y]
+    prior = attrs.mean(0)
+    held_scores = np.zeros((len(z), len(vectors)))
+    for fit, held in GroupKFold(args.folds).split(z, groups=y):
+        model = LinearAttributeModel.fit(z[fit], targets[fit], args.C)
+        held_scores[held] = dap_log_scores(model.predict_proba(z[held]), vectors, prior, args.clip)
+    full = LinearAttributeModel.fit(z, targets, args.C)
+    scores = dap_log_scores(full.predict_proba(z_test), vectors, prior, args.clip)
+    scores = scores - held_scores.mean(0)
+    return scores / held_scores.std(0) if scale else scores
+
+
 def twins(known_p: np.ndarray, attrs: np.ndarray, vectors: np.ndarray, sharpness: float) -> np.ndarray:
     """log Σ_k p(k | x) exp(-sharpness · hamming(a^z, a^k)): a novel class feels like the
     known objects that people describe alike."""
@@ -163,6 +182,8 @@ def main() -> int:
                 scores = asg(z, train.labels, attrs, zt, vectors, args, approach == "asg-diag")
             elif approach == "flg":
                 scores = flg(z, train.labels, attrs, zt, vectors, args)
+            elif approach in ("znorm", "zmean"):
+                scores = class_norm(z, train.labels, attrs, zt, vectors, args, approach == "znorm")
             elif approach.startswith("svm"):
                 scores = svm_dap(z, train.labels, attrs, zt, vectors, float(approach[3:] or 1), args)
             elif approach.startswith("twins"):
