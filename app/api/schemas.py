@@ -130,7 +130,9 @@ class ModelClass(BaseModel):
     kind: Literal["known", "novel"]
 
 
-class ModelOut(BaseModel):
+class ModelSummary(BaseModel):
+    """A model version without its class list (``GET /v1/models/{version}`` has it)."""
+
     model_config = ConfigDict(from_attributes=True, protected_namespaces=())
 
     version: int
@@ -142,11 +144,15 @@ class ModelOut(BaseModel):
     sha256: str = Field(validation_alias="bundle_sha256")
     input_shape: list[int]
     metrics: dict[str, Any]
+    class_count: int = Field(description="Classes the version recognises, known and novel.")
+
+
+class ModelOut(ModelSummary):
     classes: list[ModelClass]
 
 
 class ModelList(BaseModel):
-    models: list[ModelOut]
+    models: list[ModelSummary]
     next_after: int | None = NEXT_AFTER
 
 

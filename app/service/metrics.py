@@ -61,6 +61,14 @@ class Metrics:
         # read from the store: with several processes, the newest reading is the figure
         self.jobs = Gauge("tactile_jobs", "Jobs in the store by status.", ["status"], registry=r,
                           multiprocess_mode="mostrecent")
+        self.versions_stored = Gauge(
+            "tactile_model_versions_stored", "Model versions in the store (TACTILE_KEEP_VERSIONS bounds them).",
+            registry=r, multiprocess_mode="mostrecent",
+        )
+        self.bundle_bytes = Gauge(
+            "tactile_model_bundle_bytes", "Bytes of model bundles in the store.", registry=r,
+            multiprocess_mode="mostrecent",
+        )
         self.active_version = Gauge(  # with several processes, one series per process (pid)
             "tactile_active_model_version", "Model version this process serves.", registry=r,
             multiprocess_mode="liveall",
@@ -79,12 +87,16 @@ class Metrics:
         MultiProcessCollector(registry)
         return generate_latest(registry), CONTENT_TYPE_LATEST
 
-    def read_jobs(self, session: Session) -> None:
-        """Job counts and the durations of jobs finished since the last reading, from the
-        store (workers in any process finish jobs)."""
+    def read_store(self, session: Session) -> None:
+        """Job counts, the durations of jobs finished since the last reading and what the
+        stored model versions take, from the store (workers in any process finish jobs and
+        prune versions)."""
         counts = repo.jobs_by_status(session)
         for status in ("queued", "running", "succeeded", "failed"):
             self.jobs.labels(status).set(counts.get(status, 0))
+        versions, size = repo.stored_model_figures(session)
+        self.versions_stored.set(versions)
+        self.bundle_bytes.set(size)
         self.observe_finished_jobs(repo.jobs_finished_since(session, self.jobs_seen_since))
 
     def observe_finished_jobs(
@@ -118,4 +130,4 @@ class JobMetricsPoller(Poller):
 
     def refresh(self) -> None:
         with self._sessions() as s:
-            self._metrics.read_jobs(s)
+            self._metrics.read_store(s)

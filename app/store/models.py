@@ -23,7 +23,7 @@ from sqlalchemy import (
     TypeDecorator,
     text,
 )
-from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, query_expression
 
 # Stable constraint names so Alembic migrations (and SQLite batch mode) can refer to them.
 NAMING = {
@@ -137,6 +137,12 @@ class ModelVersion(Base):
     classes: Mapped[list[dict[str, Any]]] = mapped_column(JSON)  # [{"name", "kind"}]
     sample_ids: Mapped[list[int]] = mapped_column(JSON, default=list)  # enrolled samples inside
     active: Mapped[bool] = mapped_column(Boolean, default=False)
+    # filled by repo.list_version_summaries, which leaves the class list itself unread
+    counted_classes: Mapped[int | None] = query_expression()
+
+    @property
+    def class_count(self) -> int:
+        return self.counted_classes if self.counted_classes is not None else len(self.classes)
 
     __table_args__ = (
         # at most one active version, enforced by the database itself

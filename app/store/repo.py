@@ -13,7 +13,7 @@ from datetime import datetime
 
 import numpy as np
 from sqlalchemy import LargeBinary, delete, func, insert, select, update
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, defer, with_expression
 
 from app.framework.errors import BundleError
 from app.store.models import (
@@ -163,6 +163,19 @@ def list_versions(session: Session, after: int | None = None, limit: int | None 
     return list(session.scalars(stmt if after is None else stmt.where(ModelVersion.version > after)))
 
 
+def list_version_summaries(session: Session, after: int | None = None,
+                           limit: int | None = None) -> list[ModelVersion]:
+    """As ``list_versions``, without reading the class and sample lists (thousands of
+    entries per version in a long-running fleet): the database counts the classes."""
+    stmt = (
+        select(ModelVersion)
+        .options(defer(ModelVersion.classes), defer(ModelVersion.sample_ids),
+                 with_expression(ModelVersion.counted_classes, func.json_array_length(ModelVersion.classes)))
+        .order_by(ModelVersion.version).limit(limit)
+    )
+    return list(session.scalars(stmt if after is None else stmt.where(ModelVersion.version > after)))
+
+
 # Bundles are read in slices: a database driver converts a whole value while it holds the
 # GIL, so reading a 3.3 MB bundle through psycopg2 held an API process's event loop (and
 # every request in it) for up to 9 ms each time it loaded a new model version; in 256 kB
@@ -296,6 +309,13 @@ def jobs_finished_since(session: Session, since) -> list[tuple]:
 
 def jobs_by_status(session: Session) -> dict[str, int]:
     return dict(session.execute(select(Job.status, func.count()).group_by(Job.status)).all())
+
+
+def stored_model_figures(session: Session) -> tuple[int, int]:
+    """(model versions, bytes of bundle rows) the store holds: what retention bounds."""
+    versions = session.scalar(select(func.count()).select_from(ModelVersion))
+    size = session.scalar(select(func.coalesce(func.sum(Bundle.size), 0)))
+    return int(versions), int(size)
 
 
 # ------------------------------------------------------------------ API keys

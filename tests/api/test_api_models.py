@@ -31,6 +31,14 @@ def test_rollback_and_forward_again(client, worker, dataset, sample):
     assert client.get(f"/v1/classes/{cid}").json()["in_active_model"] is True
 
 
+def test_each_version_lists_its_own_class_count(client, worker, dataset):
+    enroll_and_retrain(client, worker, dataset)
+    summaries = client.get("/v1/models").json()["models"]
+    assert [m["class_count"] for m in summaries] == [dataset.n_classes, dataset.n_classes + 1]
+    v2 = client.get("/v1/models/2").json()
+    assert v2["class_count"] == len(v2["classes"]) and {"name": "cup", "kind": "novel"} in v2["classes"]
+
+
 def test_activate_unknown_version_is_404(client):
     r = client.post("/v1/models/99/activate")
     assert r.status_code == 404 and r.headers["content-type"] == PROBLEM

@@ -2,6 +2,12 @@
 
 from __future__ import annotations
 
+import re
+
+from sqlalchemy import func, select
+
+from app.store.models import Bundle
+
 PROBLEM = "application/problem+json"
 
 
@@ -55,12 +61,21 @@ def test_unknown_job_id_is_a_named_404(client):
 def test_models_and_active_model(client, dataset):
     models = client.get("/v1/models").json()["models"]
     assert len(models) == 1
-    v1 = models[0]
-    assert v1["version"] == 1 and v1["active"] is True and v1["reason"] == "bootstrap"
-    assert v1["input_shape"] == list(dataset.input_shape)
+    summary = models[0]
+    assert summary["version"] == 1 and summary["active"] is True and summary["reason"] == "bootstrap"
+    assert summary["input_shape"] == list(dataset.input_shape)
+    assert summary["class_count"] == dataset.n_classes and "classes" not in summary
+    assert len(summary["sha256"]) == 64 and isinstance(summary["metrics"], dict)
+    v1 = client.get("/v1/models/1").json()
     assert {c["name"] for c in v1["classes"]} == set(dataset.class_names)
-    assert len(v1["sha256"]) == 64 and isinstance(v1["metrics"], dict)
+    assert {k: v for k, v in v1.items() if k != "classes"} == summary
     assert client.get("/v1/models/active").json() == v1
+
+
+def test_unknown_model_version_is_a_named_404(client):
+    r = client.get("/v1/models/77")
+    assert r.status_code == 404 and r.headers["content-type"] == PROBLEM
+    assert r.json()["errors"] == [{"field": "version", "reason": "no model version with version 77"}]
 
 
 def test_health_and_readiness(client):
@@ -68,7 +83,7 @@ def test_health_and_readiness(client):
     assert client.get("/readyz").json() == {"status": "ready", "model_version": 1}
 
 
-def test_metrics_are_prometheus_text(client, sample):
+def test_metrics_are_prometheus_text(client, app, sample):
     client.post("/v1/recognize", json={"samples": [sample]})
     r = client.get("/metrics")
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/plain")
@@ -78,6 +93,10 @@ def test_metrics_are_prometheus_text(client, sample):
     assert "tactile_recognitions_total" in text
     assert "tactile_active_model_version 1.0" in text
     assert 'tactile_jobs{status="queued"} 0.0' in text
+    assert "tactile_model_versions_stored 1.0" in text
+    stored = float(re.search(r"^tactile_model_bundle_bytes (\S+)$", text, re.M).group(1))
+    with app.state.sessions() as s:
+        assert stored == s.scalar(select(func.sum(Bundle.size))) > 0
 
 
 def test_docs_page_needs_no_internet(client):
@@ -130,6 +149,7 @@ def test_every_request_gives_its_database_connection_back(client, app):
     where giving a connection back is a network round trip): none may stay checked out,
     after answers and after errors alike."""
     pool = app.state.sessions.kw["bind"].pool
+    app.state.holder.stop()  # its poll for new model versions checks a connection out too
     for _ in range(5):
         assert client.get("/v1/classes").status_code == 200
         assert client.get("/v1/jobs/999999").status_code == 404

@@ -306,6 +306,7 @@ def test_old_versions_are_pruned_and_the_kept_ones_still_roll_back(client, app, 
         assert worker.run_once() == 1
     versions = [m["version"] for m in client.get("/v1/models").json()["models"]]
     assert versions == [1, 4, 5]
+    assert "tactile_model_versions_stored 3.0" in client.get("/metrics").text
     assert client.post("/v1/recognize", json={"samples": [sample]}).json()["model_version"] == 5
     r = client.post("/v1/models/3/activate")
     assert r.status_code == 404 and r.json()["errors"][0]["field"] == "version"

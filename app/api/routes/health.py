@@ -43,7 +43,7 @@ def metrics(request: Request, session: SessionDep, metrics: MetricsDep) -> Respo
     (of every process when `serve` runs several)."""
     if request.app.state.job_metrics_at_scrape:  # else one process reads them on a timer
         try:
-            metrics.read_jobs(session)
+            metrics.read_store(session)
         except SQLAlchemyError:  # the process's own metrics are still worth a scrape
             log.warning("metrics: the store is not reachable; job figures left as they were")
     body, content_type = metrics.exposition()

@@ -3,7 +3,7 @@ from fastapi import APIRouter
 from app.api import problems
 from app.api.deps import AdminAccess, HolderDep, PageDep, ReadAccess, RowId, SessionDep
 from app.api.problems import Problem, not_found
-from app.api.schemas import ModelList, ModelOut
+from app.api.schemas import ModelList, ModelOut, ModelSummary
 from app.framework.errors import BundleError
 from app.store import bundles, repo
 
@@ -13,9 +13,10 @@ router = APIRouter(prefix="/v1/models", tags=["models"], responses=problems.resp
 @router.get("", response_model=ModelList, dependencies=[ReadAccess])
 def list_models(session: SessionDep, page: PageDep) -> ModelList:
     """The model versions the store keeps (``TACTILE_KEEP_VERSIONS``), oldest first, a
-    page at a time."""
-    rows, next_after = page.cut(repo.list_versions(session, page.after, page.limit + 1), lambda v: v.version)
-    return ModelList(models=[ModelOut.model_validate(v) for v in rows], next_after=next_after)
+    page at a time, each without its class list (``GET /v1/models/{version}`` has it)."""
+    rows, next_after = page.cut(repo.list_version_summaries(session, page.after, page.limit + 1),
+                                lambda v: v.version)
+    return ModelList(models=[ModelSummary.model_validate(v) for v in rows], next_after=next_after)
 
 
 @router.get(
@@ -26,6 +27,18 @@ def active_model(session: SessionDep) -> ModelOut:
     row = repo.active_version(session)
     if row is None:
         raise Problem(404, "no model version is active yet", "version")
+    return ModelOut.model_validate(row)
+
+
+@router.get(
+    "/{version}", response_model=ModelOut, dependencies=[ReadAccess],
+    responses=problems.responses(404),
+)
+def get_model(version: RowId, session: SessionDep) -> ModelOut:
+    """One stored model version with the classes it recognises."""
+    row = repo.get_version(session, version)
+    if row is None:
+        raise not_found("model version", "version", version)
     return ModelOut.model_validate(row)
 
 
