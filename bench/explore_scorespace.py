@@ -20,6 +20,7 @@ model both, learning from the known objects only; the last two change DAP's inpu
 - ``svm<C>``: DAP with one RBF-kernel SVM per attribute (Platt-scaled), as Lampert et al.
 - ``znorm`` / ``zmean`` (session 7): DAP scores minus each novel class's mean score (and
   divided by its spread) over known training samples scored out of object (hubness).
+- ``lda<C>`` (session 7): DAP on the shrinkage-LDA subspace of the known objects.
 
 Each is reported alone and as a product with DAP (``best``'s zero-shot), on the
 novel objects' held-out trials of development split seeds (never seed 0):
@@ -28,6 +29,7 @@ novel objects' held-out trials of development split seeds (never seed 0):
     .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches twins0.5,twins1,twins2,twins4
     .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches svm0.3,svm1,svm3,svm10,svm30
     .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches znorm,zmean
+    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches lda0.01,lda0.1,lda1
 """
 
 from __future__ import annotations
@@ -142,6 +144,19 @@ def class_norm(z, y, attrs, z_test, vectors, args, scale: bool):
     return scores / held_scores.std(0) if scale else scores
 
 
+def lda_dap(z, y, attrs, z_test, vectors, C, args):
+    """DAP on the known objects' discriminant subspace (shrinkage LDA): attribute
+    classifiers see only directions that tell objects apart, not trial-to-trial noise."""
+    from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
+
+    from app.methods.attributes import dap_log_scores
+    lda = LinearDiscriminantAnalysis(solver="eigen", shrinkage="auto").fit(z, y)
+    p, pt = lda.transform(z), lda.transform(z_test)
+    scale = p.std(0)
+    model = LinearAttributeModel.fit(p / scale, attrs[y], C)
+    return dap_log_scores(model.predict_proba(pt / scale), vectors, attrs.mean(0), args.clip)
+
+
 def twins(known_p: np.ndarray, attrs: np.ndarray, vectors: np.ndarray, sharpness: float) -> np.ndarray:
     """log Σ_k p(k | x) exp(-sharpness · hamming(a^z, a^k)): a novel class feels like the
     known objects that people describe alike."""
@@ -184,6 +199,8 @@ def main() -> int:
                 scores = flg(z, train.labels, attrs, zt, vectors, args)
             elif approach in ("znorm", "zmean"):
                 scores = class_norm(z, train.labels, attrs, zt, vectors, args, approach == "znorm")
+            elif approach.startswith("lda"):
+                scores = lda_dap(z, train.labels, attrs, zt, vectors, float(approach[3:] or 0.1), args)
             elif approach.startswith("svm"):
                 scores = svm_dap(z, train.labels, attrs, zt, vectors, float(approach[3:] or 1), args)
             elif approach.startswith("twins"):
