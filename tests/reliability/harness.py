@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import httpx
-from sqlalchemy import text
 
 from tests.service_fixtures import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS
 
@@ -160,56 +159,6 @@ class Cluster:
     @property
     def sqlalchemy_url(self) -> str:
         return self.database_url or f"sqlite:///{(self.data_dir / 'tactile.db').resolve()}"
-
-
-def store_check(url: str) -> list[str]:
-    """Integrity of the store: SQLite's integrity_check, or PostgreSQL consistency queries
-    (one active version, no dangling references, every bundle's hash matches, every version's
-    bundle parts stored)."""
-    import hashlib
-
-    from app.framework import bundle
-    from app.store.db import make_engine
-
-    engine = make_engine(url)
-    problems = []
-    try:
-        with engine.connect() as conn:
-            if conn.dialect.name == "sqlite":
-                result = conn.exec_driver_sql("PRAGMA integrity_check").scalar()
-                if result != "ok":
-                    problems.append(f"integrity_check: {result}")
-                if conn.exec_driver_sql("PRAGMA foreign_key_check").first() is not None:
-                    problems.append("foreign_key_check found dangling rows")
-            checks = {
-                "active versions != 1": "SELECT COUNT(*) <> 1 FROM model_versions WHERE active",
-                "samples of missing classes":
-                    "SELECT COUNT(*) > 0 FROM samples s LEFT JOIN classes c ON c.id = s.class_id "
-                    "WHERE c.id IS NULL",
-                "jobs of missing samples":
-                    "SELECT COUNT(*) > 0 FROM jobs j LEFT JOIN samples s ON s.id = j.sample_id "
-                    "WHERE j.sample_id IS NOT NULL AND s.id IS NULL",
-                "versions without bundle":
-                    "SELECT COUNT(*) > 0 FROM model_versions v LEFT JOIN bundles b "
-                    "ON b.sha256 = v.bundle_sha256 WHERE b.sha256 IS NULL",
-                "succeeded jobs without version":
-                    "SELECT COUNT(*) > 0 FROM jobs WHERE status = 'succeeded' "
-                    "AND model_version IS NULL",
-            }
-            for name, sql in checks.items():
-                if conn.execute(text(sql)).scalar():
-                    problems.append(name)
-            for sha, data in conn.execute(text("SELECT sha256, data FROM bundles")):
-                if hashlib.sha256(bytes(data)).hexdigest() != sha:
-                    problems.append(f"bundle {sha[:12]} does not match its hash")
-            stored = set(conn.execute(text("SELECT sha256 FROM bundles")).scalars())
-            heads = "SELECT v.version, b.data FROM model_versions v JOIN bundles b ON b.sha256 = v.bundle_sha256"
-            for version, data in conn.execute(text(heads)):
-                if set(bundle.part_refs(bytes(data)).values()) - stored:
-                    problems.append(f"version {version} refers to bundle parts that are not stored")
-    finally:
-        engine.dispose()
-    return problems
 
 
 def wait_jobs_settled(url: str, timeout: float) -> dict[str, int]:

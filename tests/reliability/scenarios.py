@@ -12,7 +12,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import httpx
 
-from tests.reliability.harness import Cluster, store_check, wait_jobs_settled
+from app.store.integrity import check_store
+from tests.reliability.harness import Cluster, wait_jobs_settled
 from tests.service_fixtures import list_all, quick_dataset
 
 
@@ -123,7 +124,7 @@ def verify(cluster: Cluster, classes: dict[int, str], sample_ids: list[int], tim
         "samples_missing": sorted(set(sample_ids) - present),
         "samples_not_in_model": sorted(set(sample_ids) - in_model),
         "active_version": active["version"],
-        "integrity_problems": store_check(cluster.sqlalchemy_url),
+        "integrity_problems": check_store(cluster.sqlalchemy_url),
     }
 
 
@@ -251,6 +252,6 @@ def hot_swap(cluster: Cluster, versions: int = 20, load_threads: int = 4) -> dic
         "versions_activated": last - first, "recognitions_ok": ok[0], "failed": len(failed),
         "failures": failed[:5], "versions_served": len(seen),
         "versions_stored": len(stored),
-        "integrity_problems": store_check(cluster.sqlalchemy_url),
+        "integrity_problems": check_store(cluster.sqlalchemy_url),
         "seconds": round(time.monotonic() - started, 1),
     }

@@ -80,11 +80,11 @@ def test_the_cache_keeps_only_the_served_models_parts(two_versions, base_model):
 
 
 def test_the_reliability_check_finds_a_version_whose_parts_are_gone(store, settings):
-    from tests.reliability.harness import store_check
+    from app.store.integrity import check_store
 
     _, sessions = store
-    assert store_check(settings.sqlalchemy_url) == []
+    assert check_store(settings.sqlalchemy_url) == []
     with sessions.begin() as s:
         head = repo.bundle_data(s, repo.active_version(s).bundle_sha256)
         s.execute(delete(Bundle).where(Bundle.sha256 == next(iter(bundle.part_refs(head).values()))))
-    assert store_check(settings.sqlalchemy_url) == ["version 1 refers to bundle parts that are not stored"]
+    assert check_store(settings.sqlalchemy_url) == ["version 1 refers to bundle parts that are not stored"]

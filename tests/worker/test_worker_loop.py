@@ -296,7 +296,7 @@ def test_job_timings_reach_the_metrics_of_every_api_process(client, worker, data
 def test_old_versions_are_pruned_and_the_kept_ones_still_roll_back(client, app, dataset, sample):
     """keep_versions=2: after four enrollments the store holds the bootstrap version and
     the two newest; a pruned version cannot be activated, a kept one can."""
-    from tests.reliability.harness import store_check
+    from app.store.integrity import check_store
     from worker import Worker
 
     settings = app.state.settings.model_copy(update={"keep_versions": 2})
@@ -312,4 +312,4 @@ def test_old_versions_are_pruned_and_the_kept_ones_still_roll_back(client, app, 
     assert r.status_code == 404 and r.json()["errors"][0]["field"] == "version"
     assert client.post("/v1/models/4/activate").status_code == 200
     assert client.post("/v1/recognize", json={"samples": [sample]}).json()["model_version"] == 4
-    assert store_check(settings.sqlalchemy_url) == []
+    assert check_store(settings.sqlalchemy_url) == []
