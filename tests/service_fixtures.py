@@ -117,10 +117,10 @@ def list_all(client, path: str, key: str) -> list[dict]:
 def wait_for_job(client: TestClient, job_id: int, timeout: float = 60) -> dict:
     deadline = time.monotonic() + timeout
     while True:
-        job = client.get(f"/v1/jobs/{job_id}").json()
+        wait = min(20.0, max(0.0, deadline - time.monotonic()))
+        job = client.get(f"/v1/jobs/{job_id}", params={"wait": round(wait, 3)}).json()
         if job["status"] in ("succeeded", "failed") or time.monotonic() > deadline:
             return job
-        time.sleep(0.05)
 
 
 # -------------------------------------------------------------------- fixtures

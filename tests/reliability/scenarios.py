@@ -239,8 +239,8 @@ def hot_swap(cluster: Cluster, versions: int = 20, load_threads: int = 4) -> dic
         for i in range(versions):  # one enrollment at a time: one new version each
             r = c.post("/v1/classes", json={"name": f"swap-{i}", "attribute_vector": vectors[i]})
             job_id = r.json()["job"]["id"]
-            while c.get(f"/v1/jobs/{job_id}").json()["status"] not in ("succeeded", "failed"):
-                time.sleep(0.05)
+            while c.get(f"/v1/jobs/{job_id}", params={"wait": 10}).json()["status"] not in ("succeeded", "failed"):
+                pass
     time.sleep(1.0)  # every process has polled the last one
     stop.set()
     for t in threads:

@@ -1,26 +1,56 @@
-from fastapi import APIRouter
+import asyncio
+import time
+from typing import Annotated
+
+from fastapi import APIRouter, Query
+from fastapi.concurrency import run_in_threadpool
+from sqlalchemy.orm import Session
 
 from app.api import problems
 from app.api.deps import HolderDep, ReadAccess, RowId, SessionDep
 from app.api.problems import not_found
 from app.api.schemas import JobOut
 from app.store import repo
+from app.store.models import Job
 
 router = APIRouter(
     prefix="/v1/jobs", tags=["jobs"], dependencies=[ReadAccess],
     responses=problems.responses(401, 403, 404, 422, 429),
 )
 
+MAX_WAIT_SECONDS = 20  # a waiting request delays a graceful shutdown by at most this
+WAIT_POLL_SECONDS = 0.2
+FINISHED = ("succeeded", "failed")
+
+WaitSeconds = Annotated[float, Query(
+    ge=0, le=MAX_WAIT_SECONDS,
+    description="Seconds to wait for the job to finish before answering (long polling): the "
+    "answer comes as soon as it has succeeded or failed, or after this long with its status then. "
+    "One waiting request replaces many polls.",
+)]
+
+
+def _read_job(session: Session, job_id: int) -> Job | None:
+    job = repo.get_job(session, job_id)
+    session.close()  # give the connection back: a waiting request must not hold one
+    return job
+
 
 @router.get("/{job_id}", response_model=JobOut)
-def get_job(job_id: RowId, session: SessionDep, holder: HolderDep) -> JobOut:
+async def get_job(job_id: RowId, session: SessionDep, holder: HolderDep, wait: WaitSeconds = 0) -> JobOut:
     """An enrollment's progress: queued, running, succeeded (with the model version
     that includes it) or failed (with the error)."""
-    job = repo.get_job(session, job_id)
-    if job is None:
-        raise not_found("job", "job_id", job_id)
+    deadline = time.monotonic() + wait
+    while True:
+        job = await run_in_threadpool(_read_job, session, job_id)
+        if job is None:
+            raise not_found("job", "job_id", job_id)
+        left = deadline - time.monotonic()
+        if job.status in FINISHED or left <= 0:
+            break
+        await asyncio.sleep(min(WAIT_POLL_SECONDS, left))
     served = holder.current
     if job.model_version is not None and served is not None and served.version < job.model_version:
         # whoever sees "succeeded" here gets the new model from this process next
-        holder.refresh()
+        await run_in_threadpool(holder.refresh)
     return JobOut.model_validate(job)

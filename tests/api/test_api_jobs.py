@@ -1,0 +1,55 @@
+"""GET /v1/jobs/{id}: a job's progress, and waiting for it to finish (long polling)."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+from tests.service_fixtures import unused_vectors
+
+PROBLEM = "application/problem+json"
+
+
+def register(client, dataset) -> int:
+    r = client.post("/v1/classes", json={"name": "cup", "attribute_vector": unused_vectors(dataset, 1)[0]})
+    assert r.status_code == 202
+    return r.json()["job"]["id"]
+
+
+def test_a_waiting_request_answers_when_the_job_succeeds(client, app, worker, dataset):
+    job_id = register(client, dataset)
+    # the retrain starts once the request below is waiting: without the wait it would read "queued"
+    retrain = threading.Thread(target=lambda: (time.sleep(0.5), worker.run_once()))
+    retrain.start()
+    try:
+        job = client.get(f"/v1/jobs/{job_id}", params={"wait": 20}).json()
+    finally:
+        retrain.join()
+    assert job["status"] == "succeeded" and job["model_version"] == 2
+    # the process that said "succeeded" serves the version that includes the class
+    assert app.state.holder.current.version == 2
+
+
+def test_without_a_worker_the_wait_ends_with_the_status_then(client, app, dataset):
+    app.state.holder.stop()  # its poll checks a connection out too
+    job_id = register(client, dataset)
+    job = client.get(f"/v1/jobs/{job_id}", params={"wait": 0.5}).json()
+    assert job["status"] == "queued" and job["finished_at"] is None
+    assert app.state.sessions.kw["bind"].pool.checkedout() == 0  # none kept while waiting
+    assert client.get(f"/v1/jobs/{job_id}").json() == job  # no wait: the status at once
+
+
+def test_a_finished_job_is_answered_at_once_and_an_unknown_one_is_404(client, worker, dataset):
+    job_id = register(client, dataset)
+    worker.run_once()
+    assert client.get(f"/v1/jobs/{job_id}", params={"wait": 20}).json()["status"] == "succeeded"
+    r = client.get("/v1/jobs/424242", params={"wait": 5})
+    assert r.status_code == 404 and r.json()["errors"][0]["field"] == "job_id"
+
+
+def test_bad_waits_are_named_422(client, dataset):
+    job_id = register(client, dataset)
+    for wait in (-1, 21, "soon"):
+        r = client.get(f"/v1/jobs/{job_id}", params={"wait": wait})
+        assert r.status_code == 422 and r.headers["content-type"] == PROBLEM, wait
+        assert r.json()["errors"][0]["field"] == "wait"
