@@ -18,6 +18,7 @@ from sqlalchemy.orm import Session
 from app.api.problems import Problem
 from app.config import Settings
 from app.service.holder import LoadedModel, ModelHolder
+from app.service.job_watch import JobWatch
 from app.service.keys import Principal, retry_after
 from app.service.metrics import Metrics
 from app.service.recognition import RecognitionService
@@ -32,6 +33,10 @@ async def get_settings(request: Request) -> Settings:
 
 async def get_holder(request: Request) -> ModelHolder:
     return request.app.state.holder
+
+
+async def get_job_watch(request: Request) -> JobWatch:
+    return request.app.state.job_watch
 
 
 async def get_metrics(request: Request) -> Metrics:
@@ -223,6 +228,7 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 SessionDep = Annotated[Session, Depends(get_session)]
 HolderDep = Annotated[ModelHolder, Depends(get_holder)]
 MetricsDep = Annotated[Metrics, Depends(get_metrics)]
+JobWatchDep = Annotated[JobWatch, Depends(get_job_watch)]
 RecognizingDep = Annotated[Recognizing, Depends(get_recognizing)]
 ModelDep = Annotated[LoadedModel, Depends(get_model)]
 ReadAccess = Depends(require_read)

@@ -24,6 +24,7 @@ from app.api.routes import attributes, classes, health, jobs, models, recognize,
 from app.config import Settings
 from app.service.bootstrap import Trainer, ensure_ready
 from app.service.holder import ModelHolder
+from app.service.job_watch import JobWatch
 from app.service.keys import KeyRing, RateLimiter
 from app.service.metrics import JobMetricsPoller, Metrics
 from app.service.recognition import RecognitionService
@@ -49,6 +50,7 @@ def create_app(
     holder = ModelHolder(sessions, settings.model_poll_seconds, metrics)
     keys = KeyRing(sessions, settings.api_keys, settings.api_key_refresh_seconds)
     job_metrics = JobMetricsPoller(metrics, sessions) if process_index == 0 else None
+    job_watch = JobWatch(sessions)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -78,6 +80,7 @@ def create_app(
                 thread, stop = embedded
                 stop.set()
                 thread.join(timeout=30)
+            await job_watch.close()
             if job_metrics is not None:
                 job_metrics.stop()
             keys.stop()
@@ -101,6 +104,7 @@ def create_app(
     app.state.job_metrics_at_scrape = process_index is None
     app.state.recognition = RecognitionService(metrics, settings.top_k, settings.batch_limit)
     app.state.keys = keys
+    app.state.job_watch = job_watch
     app.state.limiter = RateLimiter(settings.rate_limit, settings.rate_burst)
     problems.install(app)
     app.add_exception_handler(Replay, replay_handler)

@@ -307,6 +307,11 @@ def jobs_finished_since(session: Session, since) -> list[tuple]:
     return [tuple(row) for row in session.execute(stmt)]
 
 
+def finished_job_ids(session: Session, ids: Sequence[int]) -> list[int]:
+    """Those of ``ids`` whose jobs have succeeded or failed."""
+    return list(session.scalars(select(Job.id).where(Job.id.in_(ids), Job.status.in_(("succeeded", "failed")))))
+
+
 def jobs_by_status(session: Session) -> dict[str, int]:
     return dict(session.execute(select(Job.status, func.count()).group_by(Job.status)).all())
 

@@ -53,3 +53,21 @@ def test_bad_waits_are_named_422(client, dataset):
         r = client.get(f"/v1/jobs/{job_id}", params={"wait": wait})
         assert r.status_code == 422 and r.headers["content-type"] == PROBLEM, wait
         assert r.json()["errors"][0]["field"] == "wait"
+
+
+def test_many_waiting_robots_are_woken_together_and_leave_nothing_behind(client, app, worker, dataset):
+    job_id = register(client, dataset)
+    answers: list[dict] = []
+    robots = [threading.Thread(target=lambda: answers.append(
+        client.get(f"/v1/jobs/{job_id}", params={"wait": 20}).json())) for _ in range(4)]
+    for robot in robots:
+        robot.start()
+    deadline = time.monotonic() + 15
+    while app.state.job_watch.waiting < 4 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert app.state.job_watch.waiting == 4  # one event each, no connection, no thread
+    worker.run_once()
+    for robot in robots:
+        robot.join()
+    assert [a["status"] for a in answers] == ["succeeded"] * 4
+    assert app.state.job_watch.waiting == 0

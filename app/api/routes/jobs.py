@@ -1,4 +1,3 @@
-import asyncio
 import time
 from typing import Annotated
 
@@ -7,7 +6,7 @@ from fastapi.concurrency import run_in_threadpool
 from sqlalchemy.orm import Session
 
 from app.api import problems
-from app.api.deps import HolderDep, ReadAccess, RowId, SessionDep
+from app.api.deps import HolderDep, JobWatchDep, ReadAccess, RowId, SessionDep
 from app.api.problems import not_found
 from app.api.schemas import JobOut
 from app.store import repo
@@ -19,7 +18,6 @@ router = APIRouter(
 )
 
 MAX_WAIT_SECONDS = 20  # a waiting request delays a graceful shutdown by at most this
-WAIT_POLL_SECONDS = 0.2
 FINISHED = ("succeeded", "failed")
 
 WaitSeconds = Annotated[float, Query(
@@ -37,18 +35,18 @@ def _read_job(session: Session, job_id: int) -> Job | None:
 
 
 @router.get("/{job_id}", response_model=JobOut)
-async def get_job(job_id: RowId, session: SessionDep, holder: HolderDep, wait: WaitSeconds = 0) -> JobOut:
+async def get_job(
+    job_id: RowId, session: SessionDep, holder: HolderDep, watch: JobWatchDep, wait: WaitSeconds = 0,
+) -> JobOut:
     """An enrollment's progress: queued, running, succeeded (with the model version
     that includes it) or failed (with the error)."""
     deadline = time.monotonic() + wait
-    while True:
-        job = await run_in_threadpool(_read_job, session, job_id)
-        if job is None:
-            raise not_found("job", "job_id", job_id)
-        left = deadline - time.monotonic()
-        if job.status in FINISHED or left <= 0:
-            break
-        await asyncio.sleep(min(WAIT_POLL_SECONDS, left))
+    job = await run_in_threadpool(_read_job, session, job_id)
+    if job is None:
+        raise not_found("job", "job_id", job_id)
+    if job.status not in FINISHED and wait > 0:
+        if await watch.wait(job_id, max(0.0, deadline - time.monotonic())):
+            job = await run_in_threadpool(_read_job, session, job_id)
     served = holder.current
     if job.model_version is not None and served is not None and served.version < job.model_version:
         # whoever sees "succeeded" here gets the new model from this process next

@@ -1,0 +1,76 @@
+"""Requests waiting for their jobs to finish (``GET /v1/jobs/{id}?wait=``), woken together.
+
+However many robots wait, an API process asks the store one question per interval: which
+of these jobs have finished. Each waiting request only holds an ``asyncio.Event``, no
+database connection and no thread; the watching task runs only while someone waits.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Sequence
+
+from fastapi.concurrency import run_in_threadpool
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.store import repo
+
+log = logging.getLogger(__name__)
+
+QUERY_CHUNK = 500  # job ids per IN (...) list
+
+
+class JobWatch:
+    def __init__(self, sessions: sessionmaker[Session], interval: float = 0.2) -> None:
+        self._sessions = sessions
+        self.interval = interval
+        self._waiting: dict[int, set[asyncio.Event]] = {}
+        self._task: asyncio.Task | None = None
+
+    @property
+    def waiting(self) -> int:
+        """Requests waiting now."""
+        return sum(len(events) for events in self._waiting.values())
+
+    async def wait(self, job_id: int, timeout: float) -> bool:
+        """Until job ``job_id`` has finished (True) or ``timeout`` seconds passed (False)."""
+        event = asyncio.Event()
+        self._waiting.setdefault(job_id, set()).add(event)
+        if self._task is None or self._task.done():
+            self._task = asyncio.create_task(self._watch(), name="job-watch")
+        try:
+            await asyncio.wait_for(event.wait(), timeout)
+            return True
+        except TimeoutError:
+            return False
+        finally:
+            events = self._waiting.get(job_id, set())
+            events.discard(event)
+            if not events:
+                self._waiting.pop(job_id, None)
+
+    async def _watch(self) -> None:
+        while self._waiting:
+            await asyncio.sleep(self.interval)
+            ids = list(self._waiting)
+            try:
+                finished = await run_in_threadpool(self._finished, ids)
+            except Exception:  # the store is unreachable: waiters time out, or it comes back
+                log.exception("could not read the jobs that requests wait for")
+                continue
+            for job_id in finished:
+                for event in self._waiting.get(job_id, ()):
+                    event.set()
+
+    def _finished(self, ids: Sequence[int]) -> set[int]:
+        with self._sessions() as s:
+            return {j for start in range(0, len(ids), QUERY_CHUNK)
+                    for j in repo.finished_job_ids(s, ids[start:start + QUERY_CHUNK])}
+
+    async def close(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
