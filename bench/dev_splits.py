@@ -4,8 +4,14 @@ arguments (``--data --seeds --novel --splits``) and the loop over seeds and spli
 from __future__ import annotations
 
 import argparse
+import json
+import sys
+import time
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from app.data.dataset import TactileDataset
 from app.evaluation.splits import ZslSplit, make_zsl_splits
@@ -35,3 +41,63 @@ def splits(dataset: TactileDataset, args: argparse.Namespace,
     for seed in split_seeds(args, development_only):
         for split in make_zsl_splits(dataset, args.novel, args.splits, seed):
             yield seed, split
+
+
+@dataclass
+class ZslCase:
+    """One development split as the zero-shot exploration scripts use it: ``best`` fitted on
+    its known objects, their scaled inputs ``z``, the novel test trials' ``zt`` and labels
+    ``yn``, the novel attribute ``vectors``, and DAP's log-posterior as the reference."""
+
+    seed: int
+    split: ZslSplit
+    train: TactileDataset
+    cues: object
+    z: np.ndarray
+    zt: np.ndarray
+    yn: np.ndarray
+    vectors: np.ndarray
+    log_dap: np.ndarray
+    row: dict
+    started: float
+
+    def record(self, approach: str, scores: np.ndarray) -> None:
+        """Accuracy of ``scores`` (N, novel classes) alone and multiplied with DAP's posterior."""
+        scores = scores - scores.max(1, keepdims=True)
+        log_p = scores - np.log(np.exp(scores).sum(1, keepdims=True))
+        self.row[approach] = float((scores.argmax(1) == self.yn).mean())
+        self.row[f"dap*{approach}"] = float(((self.log_dap + log_p).argmax(1) == self.yn).mean())
+
+    def finish(self) -> None:
+        self.row["seconds"] = round(time.perf_counter() - self.started, 1)
+        print(json.dumps(self.row), file=sys.stderr, flush=True)
+
+
+def zsl_cases(dataset: TactileDataset, args: argparse.Namespace) -> Iterator[ZslCase]:
+    """A ``ZslCase`` per development split."""
+    from app.evaluation.protocol import make_recognizer
+    from app.methods.known import flatten
+
+    for seed, split in splits(dataset, args, development_only=True):
+        started = time.perf_counter()
+        train = split.train_dataset(dataset)
+        best = make_recognizer("best", None, 0).fit(train)
+        xn = dataset.samples[split.novel_test_idx]
+        yn = split.novel_labels(dataset, split.novel_test_idx)
+        vectors = split.novel_attributes(dataset).astype(np.float64)
+        p_dap = best.add_novel_classes(list(split.novel_names), vectors,
+                                       allow_known_vectors=True).novel_proba(xn)
+        cues = best.known_.cues_model
+        yield ZslCase(seed, split, train, cues, cues.scaled(flatten(train.samples)), cues.scaled(flatten(xn)),
+                      yn, vectors, np.log(p_dap + 1e-12),
+                      {"seed": seed, "split": split.index + 1, "dap": float((p_dap.argmax(1) == yn).mean())},
+                      started)
+
+
+def print_zsl_means(cases: list[ZslCase], args: argparse.Namespace) -> None:
+    """The means over every case's row (stdout)."""
+    rows = [c.row for c in cases]
+    mean = {k: round(float(np.mean([r[k] for r in rows])), 3) for k in rows[0]
+            if k not in ("seed", "split", "seconds")}
+    print(json.dumps({"zsl_mean": mean, "splits": len(rows), **{k: str(v) for k, v in vars(args).items()}},
+                     indent=2))

@@ -24,9 +24,7 @@ trials of development split seeds (never seed 0):
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -36,10 +34,9 @@ from sklearn.model_selection import GroupKFold
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from dev_splits import add_split_arguments, splits  # noqa: E402
+from dev_splits import add_split_arguments, print_zsl_means, zsl_cases  # noqa: E402
 
 from app.data.phac2 import load_phac2  # noqa: E402
-from app.evaluation.protocol import make_recognizer  # noqa: E402
 from app.methods.attributes import LinearAttributeModel, dap_log_scores  # noqa: E402
 from app.methods.known import flatten  # noqa: E402
 
@@ -115,39 +112,20 @@ def main() -> int:
     args = p.parse_args()
     data = load_phac2(args.data)
     cols = finger_columns(flatten(data.samples[:1]).shape[1] // FEATURES)
-    rows = []
-    for seed, split in splits(data, args, development_only=True):
-        t = time.perf_counter()
-        train = split.train_dataset(data)
-        best = make_recognizer("best", None, 0).fit(train)
-        xn = data.samples[split.novel_test_idx]
-        yn = split.novel_labels(data, split.novel_test_idx)
-        vectors = split.novel_attributes(data).astype(np.float64)
-        p_dap = best.add_novel_classes(list(split.novel_names), vectors,
-                                       allow_known_vectors=True).novel_proba(xn)
-        log_dap = np.log(p_dap + 1e-12)
-        row = {"seed": seed, "split": split.index + 1, "dap": float((p_dap.argmax(1) == yn).mean())}
-        cues = best.known_.cues_model
-        z, zt = cues.scaled(flatten(train.samples)), cues.scaled(flatten(xn))
+    cases = []
+    for case in zsl_cases(data, args):
+        train = case.train
         targets = train.class_attributes[train.labels].astype(np.float64)
         prior = train.class_attributes.astype(np.float64).mean(0)
         for approach in args.approaches.split(","):
-            proba = variant_proba(approach, z, targets, zt, cols, args.C)
-            scores = dap_log_scores(proba, vectors, prior, args.clip)
-            scores = scores - scores.max(1, keepdims=True)
-            log_p = scores - np.log(np.exp(scores).sum(1, keepdims=True))
-            row[approach] = float((scores.argmax(1) == yn).mean())
-            row[f"dap*{approach}"] = float(((log_dap + log_p).argmax(1) == yn).mean())
+            proba = variant_proba(approach, case.z, targets, case.zt, cols, args.C)
+            case.record(approach, dap_log_scores(proba, case.vectors, prior, args.clip))
             if not args.no_auc:
-                row[f"auc_{approach}"] = out_of_object_auc(approach, z, train.labels, targets, cols,
-                                                           args.C, args.folds)
-        row["seconds"] = round(time.perf_counter() - t, 1)
-        rows.append(row)
-        print(json.dumps(row), file=sys.stderr, flush=True)
-    mean = {k: round(float(np.mean([r[k] for r in rows])), 3) for k in rows[0]
-            if k not in ("seed", "split", "seconds")}
-    print(json.dumps({"zsl_mean": mean, "splits": len(rows), **{k: str(v) for k, v in vars(args).items()}},
-                     indent=2))
+                case.row[f"auc_{approach}"] = out_of_object_auc(approach, case.z, train.labels, targets, cols,
+                                                                args.C, args.folds)
+        case.finish()
+        cases.append(case)
+    print_zsl_means(cases, args)
     return 0
 
 

@@ -35,9 +35,7 @@ novel objects' held-out trials of development split seeds (never seed 0):
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -47,12 +45,10 @@ from sklearn.model_selection import GroupKFold
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from dev_splits import add_split_arguments, splits  # noqa: E402
+from dev_splits import add_split_arguments, print_zsl_means, zsl_cases  # noqa: E402
 
 from app.data.phac2 import load_phac2  # noqa: E402
-from app.evaluation.protocol import make_recognizer  # noqa: E402
 from app.methods.attributes import LinearAttributeModel  # noqa: E402
-from app.methods.known import flatten  # noqa: E402
 
 
 def logits(p: np.ndarray, clip: float) -> np.ndarray:
@@ -177,47 +173,29 @@ def main() -> int:
     p.add_argument("--components", type=int, default=32, help="flg: principal components")
     args = p.parse_args()
     data = load_phac2(args.data)
-    rows = []
-    for seed, split in splits(data, args, development_only=True):
-        t = time.perf_counter()
-        train = split.train_dataset(data)
-        best = make_recognizer("best", None, 0).fit(train)
-        xn = data.samples[split.novel_test_idx]
-        yn = split.novel_labels(data, split.novel_test_idx)
-        vectors = split.novel_attributes(data).astype(np.float64)
-        p_dap = best.add_novel_classes(list(split.novel_names), vectors,
-                                       allow_known_vectors=True).novel_proba(xn)
-        log_dap = np.log(p_dap + 1e-12)
-        row = {"seed": seed, "split": split.index + 1, "dap": float((p_dap.argmax(1) == yn).mean())}
-        cues = best.known_.cues_model
-        z, zt = cues.scaled(flatten(train.samples)), cues.scaled(flatten(xn))
-        attrs = train.class_attributes.astype(np.float64)
+    cases = []
+    for case in zsl_cases(data, args):
+        z, zt, y, vectors = case.z, case.zt, case.train.labels, case.vectors
+        attrs = case.train.class_attributes.astype(np.float64)
         for approach in args.approaches.split(","):
             if approach in ("asg", "asg-diag"):
-                scores = asg(z, train.labels, attrs, zt, vectors, args, approach == "asg-diag")
+                scores = asg(z, y, attrs, zt, vectors, args, approach == "asg-diag")
             elif approach == "flg":
-                scores = flg(z, train.labels, attrs, zt, vectors, args)
+                scores = flg(z, y, attrs, zt, vectors, args)
             elif approach in ("znorm", "zmean"):
-                scores = class_norm(z, train.labels, attrs, zt, vectors, args, approach == "znorm")
+                scores = class_norm(z, y, attrs, zt, vectors, args, approach == "znorm")
             elif approach.startswith("lda"):
-                scores = lda_dap(z, train.labels, attrs, zt, vectors, float(approach[3:] or 0.1), args)
+                scores = lda_dap(z, y, attrs, zt, vectors, float(approach[3:] or 0.1), args)
             elif approach.startswith("svm"):
-                scores = svm_dap(z, train.labels, attrs, zt, vectors, float(approach[3:] or 1), args)
+                scores = svm_dap(z, y, attrs, zt, vectors, float(approach[3:] or 1), args)
             elif approach.startswith("twins"):
-                scores = twins(cues.proba(zt), attrs, vectors, float(approach[5:] or 2))
+                scores = twins(case.cues.proba(zt), attrs, vectors, float(approach[5:] or 2))
             else:
                 raise SystemExit(f"unknown approach {approach!r}")
-            scores = scores - scores.max(1, keepdims=True)
-            log_p = scores - np.log(np.exp(scores).sum(1, keepdims=True))
-            row[approach] = float((scores.argmax(1) == yn).mean())
-            row[f"dap*{approach}"] = float(((log_dap + log_p).argmax(1) == yn).mean())
-        row["seconds"] = round(time.perf_counter() - t, 1)
-        rows.append(row)
-        print(json.dumps(row), file=sys.stderr, flush=True)
-    mean = {k: round(float(np.mean([r[k] for r in rows])), 3) for k in rows[0]
-            if k not in ("seed", "split", "seconds")}
-    print(json.dumps({"zsl_mean": mean, "splits": len(rows), **{k: str(v) for k, v in vars(args).items()}},
-                     indent=2))
+            case.record(approach, scores)
+        case.finish()
+        cases.append(case)
+    print_zsl_means(cases, args)
     return 0
 
 
