@@ -68,7 +68,8 @@ def summarize(path: Path) -> StoreSummary:
             enrolled_samples=one("SELECT COUNT(*) FROM samples WHERE origin = 'enrolled'"),
             versions=one("SELECT COUNT(*) FROM model_versions"),
             active_version=one("SELECT MAX(version) FROM model_versions WHERE active"),
-            bytes=path.stat().st_size,
+            # pages, not the file's size: in WAL mode recent pages may still be in the -wal file
+            bytes=one("PRAGMA page_count") * one("PRAGMA page_size"),
         )
 
 

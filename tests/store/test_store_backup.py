@@ -80,6 +80,15 @@ def test_a_backup_during_enrolments_is_consistent(client, worker, dataset, sampl
 
 
 @sqlite_only
+def test_replace_puts_the_backup_over_a_store_in_use(client, worker, dataset, sample, settings, tmp_path):
+    out = tmp_path / "b.db"
+    summary = backup(settings.sqlalchemy_url, out)
+    enrol(client, worker, dataset, "cup", 0, sample)  # the live store moves on (WAL mode)
+    assert restore(out, settings.sqlalchemy_url, replace=True) == summary
+    assert check_store(settings.sqlalchemy_url) == []
+
+
+@sqlite_only
 def test_bad_backups_and_restores_are_refused_and_write_nothing(client, settings, tmp_path):
     out = tmp_path / "b.db"
     backup(settings.sqlalchemy_url, out)
