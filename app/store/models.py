@@ -137,7 +137,7 @@ class ModelVersion(Base):
     classes: Mapped[list[dict[str, Any]]] = mapped_column(JSON)  # [{"name", "kind"}]
     sample_ids: Mapped[list[int]] = mapped_column(JSON, default=list)  # enrolled samples inside
     active: Mapped[bool] = mapped_column(Boolean, default=False)
-    # filled by repo.list_version_summaries, which leaves the class list itself unread
+    # filled by repo.list_versions(summary=True), which leaves the class list itself unread
     counted_classes: Mapped[int | None] = query_expression()
 
     @property

@@ -157,22 +157,17 @@ def get_version(session: Session, version: int) -> ModelVersion | None:
     return session.get(ModelVersion, version)
 
 
-def list_versions(session: Session, after: int | None = None, limit: int | None = None) -> list[ModelVersion]:
-    """Versions, oldest first; with ``after``, those after it; at most ``limit``."""
+def list_versions(session: Session, after: int | None = None, limit: int | None = None,
+                  summary: bool = False) -> list[ModelVersion]:
+    """Versions, oldest first; with ``after``, those after it; at most ``limit``. With
+    ``summary``, the class and sample lists (thousands of entries per version in a
+    long-running fleet) stay unread and the database counts the classes."""
     stmt = select(ModelVersion).order_by(ModelVersion.version).limit(limit)
-    return list(session.scalars(stmt if after is None else stmt.where(ModelVersion.version > after)))
-
-
-def list_version_summaries(session: Session, after: int | None = None,
-                           limit: int | None = None) -> list[ModelVersion]:
-    """As ``list_versions``, without reading the class and sample lists (thousands of
-    entries per version in a long-running fleet): the database counts the classes."""
-    stmt = (
-        select(ModelVersion)
-        .options(defer(ModelVersion.classes), defer(ModelVersion.sample_ids),
-                 with_expression(ModelVersion.counted_classes, func.json_array_length(ModelVersion.classes)))
-        .order_by(ModelVersion.version).limit(limit)
-    )
+    if summary:
+        stmt = stmt.options(
+            defer(ModelVersion.classes), defer(ModelVersion.sample_ids),
+            with_expression(ModelVersion.counted_classes, func.json_array_length(ModelVersion.classes)),
+        )
     return list(session.scalars(stmt if after is None else stmt.where(ModelVersion.version > after)))
 
 
@@ -307,9 +302,12 @@ def jobs_finished_since(session: Session, since) -> list[tuple]:
     return [tuple(row) for row in session.execute(stmt)]
 
 
+FINISHED_JOB_STATUSES = ("succeeded", "failed")
+
+
 def finished_job_ids(session: Session, ids: Sequence[int]) -> list[int]:
     """Those of ``ids`` whose jobs have succeeded or failed."""
-    return list(session.scalars(select(Job.id).where(Job.id.in_(ids), Job.status.in_(("succeeded", "failed")))))
+    return list(session.scalars(select(Job.id).where(Job.id.in_(ids), Job.status.in_(FINISHED_JOB_STATUSES))))
 
 
 def jobs_by_status(session: Session) -> dict[str, int]:

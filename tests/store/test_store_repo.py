@@ -168,7 +168,7 @@ def test_version_summaries_count_classes_without_reading_them(six_versions):
     with six_versions() as s:
         full = {v.version: len(v.classes) for v in repo.list_versions(s)}
     with six_versions() as s:  # a fresh session: nothing loaded before
-        summaries = repo.list_version_summaries(s, after=2, limit=3)
+        summaries = repo.list_versions(s, after=2, limit=3, summary=True)
         assert [v.version for v in summaries] == [3, 4, 5]
         assert all("classes" not in v.__dict__ and "sample_ids" not in v.__dict__ for v in summaries)
         assert [v.class_count for v in summaries] == [full[3], full[4], full[5]]

@@ -18,7 +18,6 @@ router = APIRouter(
 )
 
 MAX_WAIT_SECONDS = 20  # a waiting request delays a graceful shutdown by at most this
-FINISHED = ("succeeded", "failed")
 
 WaitSeconds = Annotated[float, Query(
     ge=0, le=MAX_WAIT_SECONDS,
@@ -44,7 +43,7 @@ async def get_job(
     job = await run_in_threadpool(_read_job, session, job_id)
     if job is None:
         raise not_found("job", "job_id", job_id)
-    if job.status not in FINISHED and wait > 0:
+    if job.status not in repo.FINISHED_JOB_STATUSES and wait > 0:
         if await watch.wait(job_id, max(0.0, deadline - time.monotonic())):
             job = await run_in_threadpool(_read_job, session, job_id)
     served = holder.current

@@ -14,7 +14,7 @@ router = APIRouter(prefix="/v1/models", tags=["models"], responses=problems.resp
 def list_models(session: SessionDep, page: PageDep) -> ModelList:
     """The model versions the store keeps (``TACTILE_KEEP_VERSIONS``), oldest first, a
     page at a time, each without its class list (``GET /v1/models/{version}`` has it)."""
-    rows, next_after = page.cut(repo.list_version_summaries(session, page.after, page.limit + 1),
+    rows, next_after = page.cut(repo.list_versions(session, page.after, page.limit + 1, summary=True),
                                 lambda v: v.version)
     return ModelList(models=[ModelSummary.model_validate(v) for v in rows], next_after=next_after)
 
