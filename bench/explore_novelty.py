@@ -159,23 +159,20 @@ def main() -> int:
         z, zt = scaled(flatten(train.samples)), scaled(flatten(x))
         for cue in cues:
             if cue == "phases":
-                both = phase_disagreement(by_phase(train.samples), train.labels,
-                                          by_phase(np.concatenate([x, train.samples])), args.trees, seed)
-                scores[cue], on_train = both[:len(x)], both[len(x):]
+                scores[cue] = phase_disagreement(by_phase(train.samples), train.labels, by_phase(x),
+                                                 args.trees, seed)
                 weight = 1.0  # as measured in session 5: the raw cue, weights 0.02–0.2
             elif cue == "proximity":
                 scores[cue] = proximity_novelty(flat(train.samples), train.labels, flat(x), args.trees, seed)
-                on_train, weight = None, 10.0
+                weight = 10.0
             elif cue == "mahalanobis":
                 scores[cue] = np.log(mahalanobis_novelty(z, train.labels, zt))
-                on_train = np.log(mahalanobis_novelty(z, train.labels, z))
+                weight = 1 / spread(np.log(mahalanobis_novelty(z, train.labels, z)))
             elif cue == "prototype":
                 both = prototype_novelty(z, train.labels, np.concatenate([zt, z]), seed)
-                scores[cue], on_train = both[:len(x)], both[len(x):]
+                scores[cue], weight = both[:len(x)], 1 / spread(both[len(x):])
             else:
                 raise SystemExit(f"unknown cue {cue!r}")
-            if cue in ("mahalanobis", "prototype"):
-                weight = 1 / spread(on_train)
             for w in WEIGHTS:
                 scores[f"best+{cue}*{w}"] = scores["best"] + w * weight * scores[cue]
         line = []
