@@ -146,7 +146,7 @@ class Worker:
             log.info(
                 "retraining v%d: %d new class(es), samples for %d, %s",
                 base.version, len(plan.new_classes), len(plan.new_samples),
-                "full retrain" if plan.full_retrain else "incremental",
+                f"full retrain ({plan.reason})" if plan.full_retrain else "incremental",
             )
             new = build(plan, model, self.settings, known)
             split = self._encoder.split(new)  # serialised before the transaction opens
@@ -168,7 +168,7 @@ class Worker:
         plan: Plan, job_ids: list[int],
     ) -> int:
         row = repo.add_version(
-            s, method=new.method, reason="promotion" if plan.full_retrain else "update",
+            s, method=new.method, reason=plan.reason,
             base_version=base_version, bundle_sha256=bundles.store_model(s, split),
             input_shape=list(new.input_shape), metrics=repo.jsonable(new.metrics),
             classes=model_classes(new), sample_ids=plan.sample_ids,
@@ -179,6 +179,11 @@ class Worker:
             s.execute(
                 update(ObjectClass).where(ObjectClass.id.in_([c.id for c in plan.promote]))
                 .values(kind="known", promoted_at=utcnow())
+            )
+        if plan.demote:
+            s.execute(
+                update(ObjectClass).where(ObjectClass.id.in_([c.id for c in plan.demote]))
+                .values(kind="novel", promoted_at=None)
             )
         # a full retrain has a new encoder: every stored sample's features change
         new_rows = [r for rows in plan.new_samples.values() for r in rows]

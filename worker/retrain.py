@@ -5,7 +5,10 @@ sample whose enrollment succeeded earlier or is claimed now belongs in the new
 model; failed enrollments and ones still queued for the next round do not.
 Usually that is an incremental update (new FC_Z, one-shot samples); when a novel
 class has gathered ``promotion_threshold`` real samples it becomes a known class
-and the whole model is retrained from the stored samples.
+and the whole model is retrained from the stored samples. So is it when the base
+model holds something the store has withdrawn (a class, a sample, or a class's old
+attributes): a fresh fit is the one way to leave no trace of it, since one-shot
+samples may have fine-tuned shared parts such as the paper's generator.
 """
 
 from __future__ import annotations
@@ -13,12 +16,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from sqlalchemy import or_, select
+from sqlalchemy import func, or_, select
 from sqlalchemy.orm import Session
 
 from app.config import Settings
 from app.data.dataset import TactileDataset
-from app.framework.recognizer import TactileRecognizer
+from app.framework.recognizer import ClassRegistry, TactileRecognizer
 from app.framework.registry import make_method
 from app.store import repo
 from app.store.models import Job, ModelVersion, ObjectClass, Sample
@@ -32,7 +35,10 @@ class Plan:
     new_classes: list[ObjectClass] = field(default_factory=list)
     new_samples: dict[str, list[Sample]] = field(default_factory=dict)  # by novel class name
     full_retrain: bool = False
+    withdrawal: bool = False  # the full retrain leaves out what was withdrawn
     promote: list[ObjectClass] = field(default_factory=list)
+    # promoted classes left with fewer than ``promotion_threshold`` samples: novel again
+    demote: list[ObjectClass] = field(default_factory=list)
     novel: list[ObjectClass] = field(default_factory=list)  # every novel class of the new model
     samples: dict[int, list[Sample]] = field(default_factory=dict)  # its enrolled samples by class
     rejected: dict[int, str] = field(default_factory=dict)  # job id -> why it cannot succeed
@@ -40,6 +46,13 @@ class Plan:
     @property
     def changes_model(self) -> bool:
         return bool(self.new_classes or self.new_samples or self.full_retrain)
+
+    @property
+    def reason(self) -> str:
+        """The new model version's ``reason``."""
+        if not self.full_retrain:
+            return "update"
+        return "withdrawal" if self.withdrawal and not self.promote else "promotion"
 
     @property
     def sample_ids(self) -> list[int]:
@@ -52,21 +65,30 @@ def make_plan(
 ) -> Plan:
     plan = Plan()
     claimed_ids = {j.id for j in claimed}
-    live = s.execute(
-        select(Job.id, Job.kind, Job.class_id, Job.sample_id)
-        .where(or_(Job.status == "succeeded", Job.id.in_(claimed_ids)))
-    ).all()
-    live_classes = {cid for _, kind, cid, _ in live if kind == "register_class"}
-    classes = repo.list_classes(s)
+    classes = repo.list_classes(s)  # withdrawn ones are not among them
     by_id = {c.id: c for c in classes}
+    live_classes = _live_registrations(s, claimed_ids)
     live_samples = set()
-    for job_id, kind, cid, sid in live:
-        if kind != "add_sample":
+    for job in claimed:
+        if job.kind in ("register_class", "add_sample") and job.class_id not in by_id:
+            plan.rejected[job.id] = f"class {job.class_id} was withdrawn"
+    added = s.execute(
+        select(Job.id, Job.class_id, Sample.id, Sample.withdrawn_at)
+        .join(Sample, Sample.id == Job.sample_id)
+        .where(Job.kind == "add_sample", or_(Job.status == "succeeded", Job.id.in_(claimed_ids)))
+    ).all()
+    for job_id, cid, sid, withdrawn_at in added:
+        cls = by_id.get(cid)
+        if cls is None or job_id in plan.rejected:
             continue
-        if by_id[cid].origin == "enrolled" and cid not in live_classes:
+        if withdrawn_at is not None:
+            if job_id in claimed_ids:
+                plan.rejected[job_id] = f"sample {sid} was withdrawn"
+            continue
+        if cls.origin == "enrolled" and cid not in live_classes:
             if job_id in claimed_ids:
                 plan.rejected[job_id] = (
-                    f"class '{by_id[cid].name}' is not enrolled: its registration failed"
+                    f"class '{cls.name}' is not enrolled: its registration failed"
                 )
             continue
         live_samples.add(sid)
@@ -77,14 +99,20 @@ def make_plan(
 
     reg = model.registry
     in_base = set(base.sample_ids)
+    in_model = []
     for cls in classes:
         if cls.origin == "enrolled" and cls.id not in live_classes:
             continue  # failed, or queued for a later round
+        in_model.append(cls)
         rows = plan.samples.get(cls.id, [])
         missing = [r for r in rows if r.id not in in_base]
-        if cls.kind == "known":
+        if cls.kind == "known" and (cls.origin == "dataset" or len(rows) >= threshold):
             # a promoted class the base lacks as known, or with samples it has not seen
             plan.full_retrain |= cls.name not in reg.known_names or bool(missing)
+        elif cls.kind == "known":  # withdrawals took it below the promotion threshold
+            plan.demote.append(cls)
+            plan.novel.append(cls)
+            plan.full_retrain = True
         elif len(rows) >= threshold:
             plan.promote.append(cls)
             plan.full_retrain = True
@@ -94,7 +122,40 @@ def make_plan(
                 plan.new_classes.append(cls)
             if missing:
                 plan.new_samples[cls.name] = missing
+    plan.withdrawal = bool(plan.demote) or _holds_withdrawn(reg, in_base - live_samples, in_model)
+    plan.full_retrain |= plan.withdrawal
     return plan
+
+
+def _live_registrations(s: Session, claimed_ids: set[int]) -> set[int]:
+    """Classes whose latest registration succeeded or is being done now. Only the latest
+    counts: a withdrawn class registered again must wait for its new registration."""
+    latest = (
+        select(func.max(Job.id)).where(Job.kind == "register_class").group_by(Job.class_id)
+    ).scalar_subquery()
+    rows = s.execute(
+        select(Job.id, Job.class_id, Job.status).where(Job.id.in_(latest))
+    ).all()
+    return {cid for job_id, cid, status in rows if status == "succeeded" or job_id in claimed_ids}
+
+
+def _holds_withdrawn(
+    reg: ClassRegistry, stale_samples: set[int], in_model: list[ObjectClass]
+) -> bool:
+    """Whether the base model holds a withdrawn sample or class, or a class as it was
+    before it was withdrawn and registered again: other attributes, or known where the
+    store now has it novel (promotion only ever goes the other way)."""
+    if stale_samples:
+        return True
+    live = {c.name: c for c in in_model}
+    if set(reg.all_names) - set(live):
+        return True
+    for names, vectors in ((reg.known_names, reg.known_attributes),
+                           (reg.novel_names, reg.novel_attributes)):
+        for name, vector in zip(names, vectors, strict=True):
+            if repo.vector_key(vector) != live[name].attribute_key:
+                return True
+    return any(live[name].kind == "novel" for name in reg.known_names)
 
 
 def build(
@@ -120,9 +181,10 @@ def build(
 
 def known_dataset(s: Session, plan: Plan) -> TactileDataset:
     """Every known class (promoted ones included) with its stored samples, for a full retrain."""
-    promoted = {c.id for c in plan.promote}
+    promoted, demoted = {c.id for c in plan.promote}, {c.id for c in plan.demote}
     live = set(plan.sample_ids)
-    known = [c for c in repo.list_classes(s) if c.kind == "known" or c.id in promoted]
+    known = [c for c in repo.list_classes(s)
+             if (c.kind == "known" and c.id not in demoted) or c.id in promoted]
     index = {c.id: i for i, c in enumerate(known)}
     rows = [r for r in repo.samples_of(s, list(index)) if r.origin == "dataset" or r.id in live]
     return TactileDataset(

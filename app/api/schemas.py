@@ -71,11 +71,14 @@ class JobOut(BaseModel):
     model_config = ConfigDict(from_attributes=True)
 
     id: int
-    kind: Literal["register_class", "add_sample"]
+    kind: Literal["register_class", "add_sample", "withdraw_class", "withdraw_sample"]
     status: Literal["queued", "running", "succeeded", "failed"]
     class_id: int
     sample_id: int | None
-    model_version: int | None = Field(description="The version that includes the enrollment.")
+    model_version: int | None = Field(
+        description="The version that includes the enrollment; for a withdrawal, the first "
+        "active version without the class or sample."
+    )
     created_at: datetime
     started_at: datetime | None
     finished_at: datetime | None
@@ -96,6 +99,16 @@ class SampleCreate(Strict):
 
 class SampleCreated(BaseModel):
     sample_id: int
+    job: JobOut
+
+
+# ----------------------------------------------------------------- withdrawals
+class Withdrawal(BaseModel):
+    """A withdrawn class or sample: gone from the store's live data now, and from the
+    served model once ``job`` has succeeded."""
+
+    class_id: int
+    sample_id: int | None = Field(description="The withdrawn sample; null when the whole class is.")
     job: JobOut
 
 
@@ -139,7 +152,7 @@ class ModelSummary(BaseModel):
     created_at: datetime
     active: bool
     method: str
-    reason: Literal["bootstrap", "update", "promotion"]
+    reason: Literal["bootstrap", "update", "promotion", "withdrawal"]
     base_version: int | None
     sha256: str = Field(validation_alias="bundle_sha256")
     input_shape: list[int]

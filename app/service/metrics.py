@@ -50,6 +50,9 @@ class Metrics:
         self.enrollments = Counter(
             "tactile_enrollments", "Accepted enrollments.", ["kind"], registry=r
         )
+        self.withdrawals = Counter(
+            "tactile_withdrawals", "Withdrawn classes and samples.", ["kind"], registry=r
+        )
         self.job_duration = Histogram(
             "tactile_job_duration_seconds", "Retrain time of finished jobs (start to end).",
             ["status"], buckets=JOB_BUCKETS, registry=r,

@@ -70,6 +70,9 @@ class Attribute(Base):
     name: Mapped[str] = mapped_column(String(200), unique=True)
 
 
+LIVE_ENROLLED = "origin = 'enrolled' AND withdrawn_at IS NULL"
+
+
 class ObjectClass(Base):
     __tablename__ = "classes"
 
@@ -81,16 +84,20 @@ class ObjectClass(Base):
     attribute_key: Mapped[str] = mapped_column(String(1000), index=True)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     promoted_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
+    # set when an operator withdraws a wrongly enrolled class: it leaves every later
+    # model; the row stays for the jobs and model versions that name it
+    withdrawn_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
 
     __table_args__ = (
         # Two concurrent registrations of one vector cannot both commit; dataset
-        # classes are exempt because real datasets may repeat a vector.
+        # classes are exempt because real datasets may repeat a vector, and a
+        # withdrawn class no longer holds its vector.
         Index(
-            "uq_classes_enrolled_attribute_key",
+            "uq_classes_live_enrolled_attribute_key",
             "attribute_key",
             unique=True,
-            sqlite_where=text("origin = 'enrolled'"),
-            postgresql_where=text("origin = 'enrolled'"),
+            sqlite_where=text(LIVE_ENROLLED),
+            postgresql_where=text(LIVE_ENROLLED),
         ),
     )
 
@@ -110,6 +117,7 @@ class Sample(Base):
     features: Mapped[bytes | None] = mapped_column(LargeBinary)
     features_version: Mapped[int | None] = mapped_column(Integer)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+    withdrawn_at: Mapped[datetime | None] = mapped_column(UTCDateTime)  # see ObjectClass
 
 
 class Bundle(Base):
@@ -129,7 +137,7 @@ class ModelVersion(Base):
     version: Mapped[int] = mapped_column(primary_key=True)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     method: Mapped[str] = mapped_column(String(100))
-    reason: Mapped[str] = mapped_column(String(20))  # bootstrap | update | promotion
+    reason: Mapped[str] = mapped_column(String(20))  # bootstrap | update | promotion | withdrawal
     base_version: Mapped[int | None] = mapped_column(Integer)
     bundle_sha256: Mapped[str] = mapped_column(ForeignKey("bundles.sha256"))
     input_shape: Mapped[list[int]] = mapped_column(JSON)
@@ -166,7 +174,7 @@ class Job(Base):
     __tablename__ = "jobs"
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    kind: Mapped[str] = mapped_column(String(20))  # register_class | add_sample
+    kind: Mapped[str] = mapped_column(String(20))  # register_class | add_sample | withdraw_…
     status: Mapped[str] = mapped_column(String(10), default="queued")
     class_id: Mapped[int] = mapped_column(ForeignKey("classes.id"), index=True)
     sample_id: Mapped[int | None] = mapped_column(ForeignKey("samples.id"))

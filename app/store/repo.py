@@ -67,33 +67,46 @@ def attribute_labels(key: str, vocabulary: Sequence[str]) -> list[str]:
 # ------------------------------------------------------------------- classes
 
 
+LIVE_CLASS = ObjectClass.withdrawn_at.is_(None)
+LIVE_SAMPLE = Sample.withdrawn_at.is_(None)
+
+
 def get_class(session: Session, class_id: int) -> ObjectClass | None:
-    return session.get(ObjectClass, class_id)
+    """The class, unless it does not exist or was withdrawn."""
+    cls = session.get(ObjectClass, class_id)
+    return cls if cls is not None and cls.withdrawn_at is None else None
 
 
-def class_by_name(session: Session, name: str) -> ObjectClass | None:
-    return session.scalar(select(ObjectClass).where(ObjectClass.name == name))
+def class_by_name(session: Session, name: str, withdrawn: bool = False) -> ObjectClass | None:
+    """The live class of that name; with ``withdrawn``, the withdrawn one (names are unique
+    over both, so a withdrawn class's name comes back with its row)."""
+    state = ObjectClass.withdrawn_at.is_not(None) if withdrawn else LIVE_CLASS
+    return session.scalar(select(ObjectClass).where(ObjectClass.name == name, state))
 
 
 def class_by_key(session: Session, key: str) -> ObjectClass | None:
-    return session.scalar(select(ObjectClass).where(ObjectClass.attribute_key == key).limit(1))
+    return session.scalar(
+        select(ObjectClass).where(ObjectClass.attribute_key == key, LIVE_CLASS).limit(1)
+    )
 
 
 def list_classes(session: Session, after: int | None = None, limit: int | None = None) -> list[ObjectClass]:
-    """Classes by id; with ``after``, those after it; at most ``limit``."""
-    stmt = select(ObjectClass).order_by(ObjectClass.id).limit(limit)
+    """Live classes by id; with ``after``, those after it; at most ``limit``."""
+    stmt = select(ObjectClass).where(LIVE_CLASS).order_by(ObjectClass.id).limit(limit)
     return list(session.scalars(stmt if after is None else stmt.where(ObjectClass.id > after)))
 
 
 def sample_counts(session: Session, class_ids: Sequence[int] | None = None) -> dict[int, int]:
-    stmt = select(Sample.class_id, func.count()).group_by(Sample.class_id)
+    """Live samples per class."""
+    stmt = select(Sample.class_id, func.count()).where(LIVE_SAMPLE).group_by(Sample.class_id)
     if class_ids is not None:
         stmt = stmt.where(Sample.class_id.in_(class_ids))
     return {cid: n for cid, n in session.execute(stmt)}
 
 
 def class_ids_by_name(session: Session) -> dict[str, int]:
-    return {name: cid for cid, name in session.execute(select(ObjectClass.id, ObjectClass.name))}
+    return {name: cid for cid, name in session.execute(
+        select(ObjectClass.id, ObjectClass.name).where(LIVE_CLASS))}
 
 
 def add_class(
@@ -137,8 +150,41 @@ def add_dataset_samples(
 
 
 def samples_of(session: Session, class_ids: Sequence[int]) -> list[Sample]:
-    stmt = select(Sample).where(Sample.class_id.in_(class_ids)).order_by(Sample.id)
+    """The live samples of these classes, by id."""
+    stmt = select(Sample).where(Sample.class_id.in_(class_ids), LIVE_SAMPLE).order_by(Sample.id)
     return list(session.scalars(stmt))
+
+
+def get_sample(session: Session, class_id: int, sample_id: int) -> Sample | None:
+    """The live sample ``sample_id`` of class ``class_id``."""
+    row = session.get(Sample, sample_id)
+    live = row is not None and row.class_id == class_id and row.withdrawn_at is None
+    return row if live else None
+
+
+# --------------------------------------------------------------- withdrawals
+
+
+def withdraw_class(session: Session, cls: ObjectClass) -> None:
+    """The class and its samples leave every later model (the worker's next round)."""
+    now = utcnow()
+    cls.withdrawn_at = now
+    session.execute(
+        update(Sample).where(Sample.class_id == cls.id, LIVE_SAMPLE).values(withdrawn_at=now)
+    )
+    session.flush()
+
+
+def withdraw_sample(session: Session, row: Sample) -> None:
+    row.withdrawn_at = utcnow()
+    session.flush()
+
+
+def revive_class(session: Session, cls: ObjectClass, key: str) -> ObjectClass:
+    """A withdrawn class registered again: the same row, the new attributes, no samples."""
+    cls.withdrawn_at, cls.attribute_key, cls.kind, cls.promoted_at = None, key, "novel", None
+    session.flush()
+    return cls
 
 
 # ------------------------------------------------------------ model versions

@@ -92,10 +92,10 @@ def test_every_v1_operation_needs_a_key_once_one_exists(client, app):
     paths = client.get("/openapi.json").json()["paths"]
     operations = [
         (method.upper(), path.replace("{class_id}", "1").replace("{job_id}", "1")
-         .replace("{version}", "1"))
+         .replace("{version}", "1").replace("{sample_id}", "1"))
         for path, item in paths.items() if path.startswith("/v1") for method in item
     ]
-    assert len(operations) == 11
+    assert len(operations) == 13
     for path, item in paths.items():
         for method, operation in item.items():
             if path.startswith("/v1"):
@@ -103,7 +103,7 @@ def test_every_v1_operation_needs_a_key_once_one_exists(client, app):
     for method, path in operations:
         problem(client.request(method, path), 401, "X-API-Key")
         r = client.request(method, path, headers={"X-API-Key": read})
-        writes = method == "POST" and path != "/v1/recognize"
+        writes = method in ("POST", "DELETE") and path != "/v1/recognize"
         assert (r.status_code == 403) == writes, (method, path, r.status_code)
 
 

@@ -12,7 +12,7 @@ from app.store import migrate
 from app.store.db import make_engine
 from tests.service_fixtures import fresh_postgres_database, postgres_url
 
-HEAD = "0003"
+HEAD = "0004"
 PG_URL = postgres_url()
 
 TABLES = {

@@ -17,7 +17,8 @@ from app.api.deps import (
     SessionDep,
 )
 from app.api.problems import Problem, blame, not_found
-from app.api.schemas import ClassCreate, ClassCreated, ClassList, ClassOut, JobOut
+from app.api.schemas import ClassCreate, ClassCreated, ClassList, ClassOut, JobOut, Withdrawal
+from app.api.withdrawals import queue_withdrawal
 from app.service.holder import LoadedModel
 from app.store import repo
 from app.store.models import ObjectClass
@@ -72,15 +73,20 @@ def register_class(
     """Register a novel class by its attributes (zero-shot). The class and its job are
     committed before the 202; poll the job until the class is in the active model.
     Registering a class whose registration failed again, with the same attributes,
-    queues a new attempt. With an ``Idempotency-Key``, a retry gets the first answer."""
+    queues a new attempt. Registering a withdrawn class's name again gives that class
+    back (same id) with the new attributes and none of its old samples. With an
+    ``Idempotency-Key``, a retry gets the first answer."""
     idempotency.replay(session)
     vector = _attribute_vector(body, model)
     key = repo.vector_key(vector)
     field = "attributes" if body.attributes is not None else "attribute_vector"
     cls = _failed_registration(session, body.name, key)
+    withdrawn = None if cls else repo.class_by_name(session, body.name, withdrawn=True)
     if cls is None:
         _check_unique(session, body.name, key, field)
     try:
+        if withdrawn is not None:
+            cls = repo.revive_class(session, withdrawn, key)
         cls = cls or repo.add_class(session, body.name, key)
         job = repo.add_job(session, "register_class", cls.id)
         vocab = repo.attribute_names(session)
@@ -126,3 +132,29 @@ def _check_unique(session: Session, name: str, key: str, field: str) -> None:
             "them apart",
             field,
         )
+
+
+@router.delete(
+    "/{class_id}", status_code=202, response_model=Withdrawal, dependencies=[EnrollAccess],
+    responses=problems.responses(404, 409),
+)
+def withdraw_class(
+    class_id: RowId, session: SessionDep, metrics: MetricsDep, response: Response,
+    idempotency: IdempotencyDep,
+) -> Withdrawal:
+    """Withdraw a wrongly enrolled class with its samples. It leaves the store's live data
+    at once and the served model when the job succeeds (a full retrain without it); until
+    then recognition may still answer it. Classes of the training dataset cannot be
+    withdrawn. Its name can then be registered again."""
+    idempotency.replay(session)
+    cls = repo.get_class(session, class_id)
+    if cls is None:
+        raise not_found("class", "class_id", class_id)
+    if cls.origin != "enrolled":
+        raise Problem(
+            409, f"class '{cls.name}' comes from the training dataset; only enrolled classes "
+            "can be withdrawn", "class_id",
+        )
+    repo.withdraw_class(session, cls)
+    return queue_withdrawal(session, idempotency, metrics, response, cls.id, None)
+

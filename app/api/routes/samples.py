@@ -4,7 +4,8 @@ from sqlalchemy.exc import IntegrityError
 from app.api import problems
 from app.api.deps import EnrollAccess, IdempotencyDep, MetricsDep, ModelDep, RowId, SessionDep
 from app.api.problems import Problem, blame, not_found
-from app.api.schemas import JobOut, SampleCreate, SampleCreated
+from app.api.schemas import JobOut, SampleCreate, SampleCreated, Withdrawal
+from app.api.withdrawals import queue_withdrawal
 from app.store import repo
 
 router = APIRouter(
@@ -51,3 +52,29 @@ def add_sample(
     metrics.enrollments.labels("sample").inc()
     response.headers["Location"] = location
     return out
+
+
+@router.delete(
+    "/{class_id}/samples/{sample_id}", status_code=202, response_model=Withdrawal,
+    dependencies=[EnrollAccess], responses=problems.responses(404, 409),
+)
+def withdraw_sample(
+    class_id: RowId, sample_id: RowId, session: SessionDep, metrics: MetricsDep,
+    response: Response, idempotency: IdempotencyDep,
+) -> Withdrawal:
+    """Withdraw a wrongly enrolled sample (say, one taken of the wrong object). It leaves
+    the store's live data at once and the served model when the job succeeds (a full
+    retrain without it). Samples of the training dataset cannot be withdrawn."""
+    idempotency.replay(session)
+    if repo.get_class(session, class_id) is None:
+        raise not_found("class", "class_id", class_id)
+    row = repo.get_sample(session, class_id, sample_id)
+    if row is None:
+        raise not_found("sample", "sample_id", sample_id)
+    if row.origin != "enrolled":
+        raise Problem(
+            409, f"sample {sample_id} comes from the training dataset; only enrolled samples "
+            "can be withdrawn", "sample_id",
+        )
+    repo.withdraw_sample(session, row)
+    return queue_withdrawal(session, idempotency, metrics, response, class_id, sample_id)

@@ -1,0 +1,34 @@
+"""What both withdrawal routes do once the class or sample is marked: queue the job that
+takes it out of the served model, in the same transaction."""
+
+from __future__ import annotations
+
+from fastapi import Response
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
+
+from app.api.deps import Idempotency
+from app.api.schemas import JobOut, Withdrawal
+from app.service.metrics import Metrics
+from app.store import repo
+
+
+def queue_withdrawal(
+    session: Session, idempotency: Idempotency, metrics: Metrics, response: Response,
+    class_id: int, sample_id: int | None,
+) -> Withdrawal:
+    """Queue the withdrawal's job and commit it with the change; the 202's body."""
+    kind = "withdraw_class" if sample_id is None else "withdraw_sample"
+    job = repo.add_job(session, kind, class_id, sample_id)
+    out = Withdrawal(class_id=class_id, sample_id=sample_id, job=JobOut.model_validate(job))
+    location = f"/v1/jobs/{job.id}"
+    idempotency.save(session, 202, out, location)
+    try:
+        session.commit()
+    except IntegrityError:  # a concurrent retry with the same Idempotency-Key won
+        session.rollback()
+        idempotency.replay(session)
+        raise
+    metrics.withdrawals.labels("class" if sample_id is None else "sample").inc()
+    response.headers["Location"] = location
+    return out

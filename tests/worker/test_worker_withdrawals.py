@@ -1,0 +1,139 @@
+"""Withdrawn classes and samples leave the served model, and nothing else changes."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from app.store import repo
+from tests.service_fixtures import names_of, unused_vectors
+
+
+def register(client, dataset, name: str, i: int = 0) -> dict:
+    vector = unused_vectors(dataset, i + 1)[i]
+    r = client.post("/v1/classes", json={"name": name, "attributes": names_of(vector, dataset)})
+    assert r.status_code == 202, r.text
+    return r.json()
+
+
+def add_sample(client, class_id: int, sample) -> dict:
+    r = client.post(f"/v1/classes/{class_id}/samples", json={"sample": np.asarray(sample).tolist()})
+    assert r.status_code == 202, r.text
+    return r.json()
+
+
+def withdraw(client, path: str) -> dict:
+    r = client.delete(path)
+    assert r.status_code == 202, r.text
+    return r.json()["job"]
+
+
+def job(client, job_id: int) -> dict:
+    return client.get(f"/v1/jobs/{job_id}").json()
+
+
+def served(app):
+    return app.state.holder.current.recognizer
+
+
+def test_a_withdrawn_sample_leaves_the_model_and_the_class_stays(client, app, worker, dataset):
+    cid = register(client, dataset, "mug")["class"]["id"]
+    kept = add_sample(client, cid, dataset.samples[0] + 0.01)["sample_id"]
+    wrong = add_sample(client, cid, dataset.samples[-1])["sample_id"]
+    worker.run_once()
+    assert len(served(app).registry.novel_samples["mug"]) == 2
+
+    withdrawal = withdraw(client, f"/v1/classes/{cid}/samples/{wrong}")
+    assert worker.run_once() == 1
+    done = job(client, withdrawal["id"])
+    active = client.get("/v1/models/active").json()
+    assert done["status"] == "succeeded" and done["model_version"] == active["version"]
+    assert active["reason"] == "withdrawal"
+    with app.state.sessions() as s:
+        assert repo.get_version(s, active["version"]).sample_ids == [kept]
+    shots = served(app).registry.novel_samples["mug"]
+    assert len(shots) == 1 and np.allclose(shots[0], dataset.samples[0] + 0.01)
+    assert client.get(f"/v1/classes/{cid}").json()["in_active_model"] is True
+
+
+def test_a_withdrawn_class_is_never_answered_again(client, app, worker, dataset):
+    mug = register(client, dataset, "mug", 0)["class"]["id"]
+    register(client, dataset, "cup", 1)
+    add_sample(client, mug, dataset.samples[0])
+    worker.run_once()
+    assert "mug" in served(app).registry.novel_names
+
+    withdraw(client, f"/v1/classes/{mug}")
+    assert worker.run_once() == 1
+    model = served(app)
+    assert "mug" not in model.registry.all_names and "mug" not in model.registry.novel_samples
+    assert model.registry.novel_names == ["cup"]
+    active = client.get("/v1/models/active").json()
+    assert "mug" not in {c["name"] for c in active["classes"]} and active["reason"] == "withdrawal"
+    r = client.post("/v1/recognize", json={"samples": dataset.samples[:20].tolist()})
+    answered = {s["class_name"] for res in r.json()["results"] for s in res["top_k"]}
+    assert "mug" not in answered and answered
+
+
+def test_a_withdrawn_class_registered_again_is_served_with_its_new_attributes(
+    client, app, worker, dataset
+):
+    first = register(client, dataset, "mug", 0)["class"]["id"]
+    worker.run_once()
+    withdraw(client, f"/v1/classes/{first}")
+    again = register(client, dataset, "mug", 1)  # both are folded into one round
+    assert again["class"]["id"] == first
+    assert worker.run_once() == 2
+    assert job(client, again["job"]["id"])["status"] == "succeeded"
+    reg = served(app).registry
+    vector = reg.novel_attributes[reg.novel_names.index("mug")]
+    assert vector.tolist() == unused_vectors(dataset, 2)[1]
+    assert client.get(f"/v1/classes/{first}").json()["in_active_model"] is True
+
+
+def test_enrolments_of_what_was_withdrawn_before_training_fail_and_change_nothing(
+    client, app, worker, dataset
+):
+    created = register(client, dataset, "mug")
+    cid = created["class"]["id"]
+    sample = add_sample(client, cid, dataset.samples[0])
+    withdrawal = withdraw(client, f"/v1/classes/{cid}")
+    assert worker.run_once() == 3
+    for queued in (created["job"], sample["job"]):
+        failed = job(client, queued["id"])
+        assert failed["status"] == "failed" and f"class {cid} was withdrawn" in failed["error"]
+    done = job(client, withdrawal["id"])
+    assert done["status"] == "succeeded" and done["model_version"] == 1  # no retrain was needed
+    assert client.get("/v1/models/active").json()["version"] == 1
+
+
+def test_a_sample_withdrawn_before_training_fails_its_own_job_only(client, app, worker, dataset):
+    created = register(client, dataset, "mug")
+    cid = created["class"]["id"]
+    wrong = add_sample(client, cid, dataset.samples[0])
+    withdraw(client, f"/v1/classes/{cid}/samples/{wrong['sample_id']}")
+    worker.run_once()
+    failed = job(client, wrong["job"]["id"])
+    assert failed["status"] == "failed" and f"sample {wrong['sample_id']} was withdrawn" in failed["error"]
+    assert job(client, created["job"]["id"])["status"] == "succeeded"
+    assert "mug" in served(app).registry.novel_names
+    assert "mug" not in served(app).registry.novel_samples
+
+
+def test_a_promoted_class_below_the_threshold_again_is_novel_again(client, app, worker, dataset):
+    app.state.settings.promotion_threshold = 2
+    cid = register(client, dataset, "promoted")["class"]["id"]
+    first = add_sample(client, cid, dataset.samples[0] + 0.01)["sample_id"]
+    add_sample(client, cid, dataset.samples[1] + 0.01)
+    worker.run_once()
+    assert client.get(f"/v1/classes/{cid}").json()["kind"] == "known"
+    assert "promoted" in served(app).registry.known_names
+
+    withdraw(client, f"/v1/classes/{cid}/samples/{first}")
+    assert worker.run_once() == 1
+    cls = client.get(f"/v1/classes/{cid}").json()
+    assert cls["kind"] == "novel" and cls["n_samples"] == 1 and cls["in_active_model"] is True
+    reg = served(app).registry
+    assert "promoted" in reg.novel_names and "promoted" not in reg.known_names
+    assert len(reg.novel_samples["promoted"]) == 1
+    assert len(reg.known_names) == dataset.n_classes
+    assert client.get("/v1/models/active").json()["reason"] == "withdrawal"
