@@ -42,6 +42,24 @@ def test_models_match_the_migrations(tmp_path):
     engine.dispose()
 
 
+def test_going_below_0004_is_refused_while_the_store_holds_withdrawals(tmp_path):
+    engine = make_engine(f"sqlite:///{tmp_path / 'w.db'}")
+    migrate.upgrade(engine)
+    with engine.begin() as conn:
+        conn.execute(text(
+            "INSERT INTO classes (name, kind, origin, attribute_key, created_at, withdrawn_at) "
+            "VALUES ('mug', 'novel', 'enrolled', '01', '2026-11-23', '2026-11-23')"))
+    with pytest.raises(RuntimeError, match="1 withdrawn classes and samples"):
+        migrate.downgrade(engine, "0003")
+    assert migrate.current_revision(engine) == HEAD
+    assert "withdrawn_at" in {c["name"] for c in inspect(engine).get_columns("classes")}
+    with engine.begin() as conn:
+        conn.execute(text("DELETE FROM classes"))
+    migrate.downgrade(engine, "0003")
+    assert "withdrawn_at" not in {c["name"] for c in inspect(engine).get_columns("classes")}
+    engine.dispose()
+
+
 def test_works_from_any_working_directory(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     engine = make_engine("sqlite:///relative.db")
