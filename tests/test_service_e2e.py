@@ -155,5 +155,16 @@ def test_robot_session_survives_a_restart(tmp_path):
             r = client.post("/v1/recognize", json={"samples": [touch.tolist()]})
             assert r.json()["model_version"] == before["models"][-1]["version"]
             assert "base model stored" not in (service.data_dir / "serve-1.log").read_text()
+
+            # the sample was of the wrong object after all: withdrawn, the model retrained without it
+            sample_id = job["sample_id"]
+            r = client.delete(f"/v1/classes/{teapot}/samples/{sample_id}")
+            assert r.status_code == 202, r.text
+            job = wait_job(client, r.json()["job"]["id"], service)
+            assert job["status"] == "succeeded", job
+            active = client.get("/v1/models/active").json()
+            assert active["version"] == job["model_version"] and active["reason"] == "withdrawal"
+            teapot_now = client.get(f"/v1/classes/{teapot}").json()
+            assert teapot_now["n_samples"] == 0 and teapot_now["in_active_model"] is True
     finally:
         service.stop()
