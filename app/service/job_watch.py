@@ -28,6 +28,7 @@ class JobWatch:
         self.interval = interval
         self._waiting: dict[int, set[asyncio.Event]] = {}
         self._task: asyncio.Task | None = None
+        self._failing = False  # one error per outage in the log, not one per interval
 
     @property
     def waiting(self) -> int:
@@ -58,8 +59,14 @@ class JobWatch:
             try:
                 finished = await run_in_threadpool(self._finished, ids)
             except Exception:  # the store is unreachable: waiters time out, or it comes back
-                log.exception("could not read the jobs that requests wait for")
+                if not self._failing:
+                    log.exception("could not read the jobs that requests wait for; retrying "
+                                  "every %.1f s", self.interval)
+                self._failing = True
                 continue
+            if self._failing:
+                log.info("reading the jobs that requests wait for again")
+                self._failing = False
             for job_id in finished:
                 for event in self._waiting.get(job_id, ()):
                     event.set()

@@ -71,3 +71,41 @@ def test_many_waiting_robots_are_woken_together_and_leave_nothing_behind(client,
         robot.join()
     assert [a["status"] for a in answers] == ["succeeded"] * 4
     assert app.state.job_watch.waiting == 0
+
+
+
+def test_a_store_outage_while_robots_wait_is_logged_once_and_they_are_answered_after(
+    client, app, worker, dataset, monkeypatch, caplog
+):
+    from sqlalchemy.exc import OperationalError
+
+    from app.store import repo
+
+    job_id = register(client, dataset)
+    real, outage, failed = repo.finished_job_ids, threading.Event(), []
+
+    def unreachable(session, ids):
+        if outage.is_set():
+            failed.append(ids)
+            raise OperationalError("SELECT", {}, Exception("connection refused"))
+        return real(session, ids)
+
+    def retrain_during_the_outage():
+        time.sleep(0.5)
+        worker.run_once()
+        time.sleep(0.6)  # the job has finished, but the watch cannot see it yet
+        outage.clear()
+
+    outage.set()
+    monkeypatch.setattr(repo, "finished_job_ids", unreachable)
+    retrain = threading.Thread(target=retrain_during_the_outage)
+    retrain.start()
+    try:
+        with caplog.at_level("INFO", logger="app.service.job_watch"):
+            job = client.get(f"/v1/jobs/{job_id}", params={"wait": 20}).json()
+    finally:
+        retrain.join()
+    assert job["status"] == "succeeded" and len(failed) >= 4
+    records = [r for r in caplog.records if r.name == "app.service.job_watch"]
+    assert [r.levelname for r in records] == ["ERROR", "INFO"]  # one error for the whole outage
+    assert "again" in records[1].getMessage()
