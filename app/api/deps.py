@@ -231,6 +231,8 @@ MetricsDep = Annotated[Metrics, Depends(get_metrics)]
 JobWatchDep = Annotated[JobWatch, Depends(get_job_watch)]
 RecognizingDep = Annotated[Recognizing, Depends(get_recognizing)]
 ModelDep = Annotated[LoadedModel, Depends(get_model)]
+# the caller of a write, for the jobs it queues (the same dependency as EnrollAccess: run once)
+Enroller = Annotated[Principal, Depends(require_enroll)]
 ReadAccess = Depends(require_read)
 EnrollAccess = Depends(require_enroll)
 AdminAccess = Depends(require_admin)

@@ -83,6 +83,11 @@ class JobOut(BaseModel):
     started_at: datetime | None
     finished_at: datetime | None
     error: str | None
+    requested_by: str | None = Field(
+        description="Who queued it: `key:<id>` of an API key (`tactile-zsl apikey list` names "
+        "it), `env:<hash prefix>` for a key from the environment, `addr:<ip>` while no keys "
+        "exist; null for jobs older than this field."
+    )
 
 
 class ClassCreated(BaseModel):
@@ -100,6 +105,23 @@ class SampleCreate(Strict):
 class SampleCreated(BaseModel):
     sample_id: int
     job: JobOut
+
+
+class SampleOut(BaseModel):
+    """A stored sample, without its data."""
+
+    id: int
+    origin: Literal["dataset", "enrolled"]
+    trial: int | None = Field(description="The dataset's trial id; null for enrolled samples.")
+    created_at: datetime
+    enrolled_by: str | None = Field(
+        description="Who added it (as a job's `requested_by`); null for dataset samples."
+    )
+
+
+class SampleList(BaseModel):
+    samples: list[SampleOut]
+    next_after: int | None = NEXT_AFTER
 
 
 # ----------------------------------------------------------------- withdrawals

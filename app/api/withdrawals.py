@@ -9,17 +9,18 @@ from sqlalchemy.orm import Session
 
 from app.api.deps import Idempotency
 from app.api.schemas import JobOut, Withdrawal
+from app.service.keys import Principal
 from app.service.metrics import Metrics
 from app.store import repo
 
 
 def queue_withdrawal(
     session: Session, idempotency: Idempotency, metrics: Metrics, response: Response,
-    class_id: int, sample_id: int | None,
+    principal: Principal, class_id: int, sample_id: int | None,
 ) -> Withdrawal:
     """Queue the withdrawal's job and commit it with the change; the 202's body."""
     kind = "withdraw_class" if sample_id is None else "withdraw_sample"
-    job = repo.add_job(session, kind, class_id, sample_id)
+    job = repo.add_job(session, kind, class_id, sample_id, requested_by=principal.id)
     out = Withdrawal(class_id=class_id, sample_id=sample_id, job=JobOut.model_validate(job))
     location = f"/v1/jobs/{job.id}"
     idempotency.save(session, 202, out, location)

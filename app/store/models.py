@@ -180,6 +180,8 @@ class Job(Base):
     sample_id: Mapped[int | None] = mapped_column(ForeignKey("samples.id"))
     model_version: Mapped[int | None] = mapped_column(Integer)
     error: Mapped[str | None] = mapped_column(Text)
+    # the principal that queued it: key:<id>, env:<hash prefix> or addr:<ip> (keys.Principal)
+    requested_by: Mapped[str | None] = mapped_column(String(200))
     claimed_by: Mapped[str | None] = mapped_column(String(200))
     heartbeat_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)

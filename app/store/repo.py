@@ -13,7 +13,7 @@ from datetime import datetime
 
 import numpy as np
 from sqlalchemy import LargeBinary, delete, func, insert, select, update
-from sqlalchemy.orm import Session, defer, with_expression
+from sqlalchemy.orm import Session, aliased, defer, with_expression
 
 from app.framework.errors import BundleError
 from app.store.models import (
@@ -155,6 +155,22 @@ def samples_of(session: Session, class_ids: Sequence[int]) -> list[Sample]:
     return list(session.scalars(stmt))
 
 
+def list_samples(
+    session: Session, class_id: int, after: int | None = None, limit: int | None = None
+) -> list[tuple[int, str, int | None, datetime, str | None]]:
+    """(id, origin, trial, created_at, who enrolled it) of the class's live samples by id;
+    the sample data stay unread."""
+    enrolment = aliased(Job)
+    stmt = (
+        select(Sample.id, Sample.origin, Sample.trial, Sample.created_at, enrolment.requested_by)
+        .outerjoin(enrolment, (enrolment.sample_id == Sample.id) & (enrolment.kind == "add_sample"))
+        .where(Sample.class_id == class_id, LIVE_SAMPLE).order_by(Sample.id).limit(limit)
+    )
+    if after is not None:
+        stmt = stmt.where(Sample.id > after)
+    return [tuple(row) for row in session.execute(stmt)]
+
+
 def get_sample(session: Session, class_id: int, sample_id: int) -> Sample | None:
     """The live sample ``sample_id`` of class ``class_id``."""
     row = session.get(Sample, sample_id)
@@ -276,8 +292,12 @@ def activate(session: Session, version: int) -> bool:
 # ---------------------------------------------------------------------- jobs
 
 
-def add_job(session: Session, kind: str, class_id: int, sample_id: int | None = None) -> Job:
-    job = Job(kind=kind, status="queued", class_id=class_id, sample_id=sample_id)
+def add_job(
+    session: Session, kind: str, class_id: int, sample_id: int | None = None,
+    requested_by: str | None = None,
+) -> Job:
+    job = Job(kind=kind, status="queued", class_id=class_id, sample_id=sample_id,
+              requested_by=requested_by)
     session.add(job)
     session.flush()
     return job

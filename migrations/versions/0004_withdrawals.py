@@ -1,4 +1,5 @@
-"""Withdrawals: wrongly enrolled classes and samples can be taken out of the model.
+"""Withdrawals: wrongly enrolled classes and samples can be taken out of the model; and
+jobs record who asked for them.
 
 ``withdrawn_at`` on classes and samples marks them; the rows stay, because jobs and
 stored model versions refer to them. A withdrawn class no longer holds its attribute
@@ -34,6 +35,7 @@ def _vector_index(name: str, where: str) -> None:
 def upgrade() -> None:
     op.add_column("classes", sa.Column("withdrawn_at", UTC_TS, nullable=True))
     op.add_column("samples", sa.Column("withdrawn_at", UTC_TS, nullable=True))
+    op.add_column("jobs", sa.Column("requested_by", sa.String(length=200), nullable=True))
     op.drop_index(OLD_INDEX, table_name="classes")
     _vector_index(NEW_INDEX, NEW_WHERE)
 
@@ -51,5 +53,6 @@ def downgrade() -> None:
         )
     op.drop_index(NEW_INDEX, table_name="classes")
     _vector_index(OLD_INDEX, OLD_WHERE)
+    op.drop_column("jobs", "requested_by")
     op.drop_column("samples", "withdrawn_at")
     op.drop_column("classes", "withdrawn_at")

@@ -7,6 +7,7 @@ import re
 from sqlalchemy import func, select
 
 from app.store.models import Bundle
+from tests.service_fixtures import unused_vectors
 
 PROBLEM = "application/problem+json"
 
@@ -188,3 +189,29 @@ def test_bad_page_parameters_are_named_422(client):
             r = client.get(path, params=params)
             assert r.status_code == 422 and r.headers["content-type"] == PROBLEM, (path, params)
             assert r.json()["errors"][0]["field"] == field
+
+
+def test_a_dataset_class_lists_its_training_trials_a_page_at_a_time(client, dataset):
+    trials = sorted(int(t) for t in dataset.trials[dataset.labels == 0])
+    first = client.get("/v1/classes/1/samples", params={"limit": 3}).json()
+    assert len(first["samples"]) == 3 and first["next_after"] == first["samples"][-1]["id"]
+    rest = client.get("/v1/classes/1/samples", params={"after": first["next_after"]}).json()
+    samples = first["samples"] + rest["samples"]
+    assert rest["next_after"] is None and len(samples) == len(trials)
+    assert sorted(s["trial"] for s in samples) == trials
+    assert {(s["origin"], s["enrolled_by"]) for s in samples} == {("dataset", None)}
+    assert "data" not in samples[0] and "sample" not in samples[0]
+
+
+def test_an_enrolled_class_lists_its_live_samples_and_who_added_them(client, dataset, sample):
+    r = client.post("/v1/classes", json={"name": "mug", "attribute_vector": unused_vectors(dataset, 1)[0]})
+    cid = r.json()["class"]["id"]
+    ids = [client.post(f"/v1/classes/{cid}/samples", json={"sample": sample}).json()["sample_id"]
+           for _ in range(3)]
+    assert client.delete(f"/v1/classes/{cid}/samples/{ids[1]}").status_code == 202
+    samples = client.get(f"/v1/classes/{cid}/samples").json()["samples"]
+    assert [s["id"] for s in samples] == [ids[0], ids[2]]  # the withdrawn one is gone
+    assert all(s["origin"] == "enrolled" and s["trial"] is None for s in samples)
+    assert {s["enrolled_by"] for s in samples} == {"addr:testclient"}
+    r = client.get("/v1/classes/424242/samples")
+    assert r.status_code == 404 and r.json()["errors"][0]["field"] == "class_id"

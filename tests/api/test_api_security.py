@@ -95,7 +95,7 @@ def test_every_v1_operation_needs_a_key_once_one_exists(client, app):
          .replace("{version}", "1").replace("{sample_id}", "1"))
         for path, item in paths.items() if path.startswith("/v1") for method in item
     ]
-    assert len(operations) == 13
+    assert len(operations) == 14
     for path, item in paths.items():
         for method, operation in item.items():
             if path.startswith("/v1"):
@@ -217,3 +217,23 @@ def test_no_stack_trace_or_sql_in_any_response(app, monkeypatch, error):
         assert leak not in text, r.text
     if isinstance(error, OperationalError):
         assert r.status_code == 503 and r.headers["retry-after"]
+
+
+def test_every_job_records_who_queued_it(client, app, vectors, sample):
+    r = client.post("/v1/classes", json={"name": "open", "attribute_vector": vectors[0]})
+    assert r.json()["job"]["requested_by"] == "addr:testclient"  # no keys yet: the address
+    robot = make_key(app, "enroll", "robot-7")
+    with app.state.sessions() as s:
+        key_id = s.scalar(select(ApiKey.id).where(ApiKey.name == "robot-7"))
+    h = {"X-API-Key": robot}
+    r = client.post("/v1/classes", json={"name": "by-key", "attribute_vector": vectors[1]}, headers=h)
+    cid = r.json()["class"]["id"]
+    jobs = [r.json()["job"]]
+    r = client.post(f"/v1/classes/{cid}/samples", json={"sample": sample}, headers=h)
+    jobs.append(r.json()["job"])
+    jobs.append(client.delete(f"/v1/classes/{cid}/samples/{r.json()['sample_id']}", headers=h).json()["job"])
+    jobs.append(client.delete(f"/v1/classes/{cid}", headers=h).json()["job"])
+    assert [j["kind"] for j in jobs] == ["register_class", "add_sample", "withdraw_sample", "withdraw_class"]
+    for j in jobs:
+        stored = client.get(f"/v1/jobs/{j['id']}", headers=h).json()
+        assert j["requested_by"] == stored["requested_by"] == f"key:{key_id}"

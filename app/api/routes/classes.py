@@ -8,6 +8,7 @@ from sqlalchemy.orm import Session
 from app.api import problems
 from app.api.deps import (
     EnrollAccess,
+    Enroller,
     IdempotencyDep,
     MetricsDep,
     ModelDep,
@@ -68,7 +69,7 @@ def get_class(class_id: RowId, session: SessionDep, model: ModelDep) -> ClassOut
 )
 def register_class(
     body: ClassCreate, session: SessionDep, model: ModelDep, metrics: MetricsDep,
-    response: Response, idempotency: IdempotencyDep,
+    response: Response, idempotency: IdempotencyDep, principal: Enroller,
 ) -> ClassCreated:
     """Register a novel class by its attributes (zero-shot). The class and its job are
     committed before the 202; poll the job until the class is in the active model.
@@ -88,7 +89,7 @@ def register_class(
         if withdrawn is not None:
             cls = repo.revive_class(session, withdrawn, key)
         cls = cls or repo.add_class(session, body.name, key)
-        job = repo.add_job(session, "register_class", cls.id)
+        job = repo.add_job(session, "register_class", cls.id, requested_by=principal.id)
         vocab = repo.attribute_names(session)
         n = repo.sample_counts(session, [cls.id]).get(cls.id, 0)
         out = ClassCreated(class_=class_out(cls, vocab, n, model), job=JobOut.model_validate(job))
@@ -140,7 +141,7 @@ def _check_unique(session: Session, name: str, key: str, field: str) -> None:
 )
 def withdraw_class(
     class_id: RowId, session: SessionDep, metrics: MetricsDep, response: Response,
-    idempotency: IdempotencyDep,
+    idempotency: IdempotencyDep, principal: Enroller,
 ) -> Withdrawal:
     """Withdraw a wrongly enrolled class with its samples. It leaves the store's live data
     at once and the served model when the job succeeds (a full retrain without it); until
@@ -156,5 +157,5 @@ def withdraw_class(
             "can be withdrawn", "class_id",
         )
     repo.withdraw_class(session, cls)
-    return queue_withdrawal(session, idempotency, metrics, response, cls.id, None)
+    return queue_withdrawal(session, idempotency, metrics, response, principal, cls.id, None)
 

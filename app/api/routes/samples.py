@@ -2,9 +2,19 @@ from fastapi import APIRouter, Response
 from sqlalchemy.exc import IntegrityError
 
 from app.api import problems
-from app.api.deps import EnrollAccess, IdempotencyDep, MetricsDep, ModelDep, RowId, SessionDep
+from app.api.deps import (
+    EnrollAccess,
+    Enroller,
+    IdempotencyDep,
+    MetricsDep,
+    ModelDep,
+    PageDep,
+    ReadAccess,
+    RowId,
+    SessionDep,
+)
 from app.api.problems import Problem, blame, not_found
-from app.api.schemas import JobOut, SampleCreate, SampleCreated, Withdrawal
+from app.api.schemas import JobOut, SampleCreate, SampleCreated, SampleList, SampleOut, Withdrawal
 from app.api.withdrawals import queue_withdrawal
 from app.store import repo
 
@@ -13,13 +23,30 @@ router = APIRouter(
 )
 
 
+@router.get(
+    "/{class_id}/samples", response_model=SampleList, dependencies=[ReadAccess],
+    responses=problems.responses(404),
+)
+def list_samples(class_id: RowId, session: SessionDep, page: PageDep) -> SampleList:
+    """The class's samples by id, a page at a time, without their data: the training
+    trials of a dataset class, or the samples robots enrolled (and who), e.g. to find one
+    to withdraw."""
+    if repo.get_class(session, class_id) is None:
+        raise not_found("class", "class_id", class_id)
+    rows, next_after = page.cut(repo.list_samples(session, class_id, page.after, page.limit + 1),
+                                lambda r: r[0])
+    fields = ("id", "origin", "trial", "created_at", "enrolled_by")
+    return SampleList(samples=[SampleOut(**dict(zip(fields, r, strict=True))) for r in rows],
+                      next_after=next_after)
+
+
 @router.post(
     "/{class_id}/samples", status_code=202, response_model=SampleCreated,
     dependencies=[EnrollAccess], responses=problems.responses(404, 409),
 )
 def add_sample(
     class_id: RowId, body: SampleCreate, session: SessionDep, model: ModelDep,
-    metrics: MetricsDep, response: Response, idempotency: IdempotencyDep,
+    metrics: MetricsDep, response: Response, idempotency: IdempotencyDep, principal: Enroller,
 ) -> SampleCreated:
     """Add one real sample of a novel class (one-shot learning). Stored and queued
     before the 202; the job says when a model including it is live. With an
@@ -40,7 +67,7 @@ def add_sample(
         raise Problem(422, f"expected one sample of shape {list(rec.input_shape)}", "sample")
     try:
         row = repo.add_sample(session, class_id, x[0])
-        job = repo.add_job(session, "add_sample", class_id, row.id)
+        job = repo.add_job(session, "add_sample", class_id, row.id, requested_by=principal.id)
         out = SampleCreated(sample_id=row.id, job=JobOut.model_validate(job))
         location = f"/v1/jobs/{job.id}"
         idempotency.save(session, 202, out, location)
@@ -60,7 +87,7 @@ def add_sample(
 )
 def withdraw_sample(
     class_id: RowId, sample_id: RowId, session: SessionDep, metrics: MetricsDep,
-    response: Response, idempotency: IdempotencyDep,
+    response: Response, idempotency: IdempotencyDep, principal: Enroller,
 ) -> Withdrawal:
     """Withdraw a wrongly enrolled sample (say, one taken of the wrong object). It leaves
     the store's live data at once and the served model when the job succeeds (a full
@@ -77,4 +104,4 @@ def withdraw_sample(
             "can be withdrawn", "sample_id",
         )
     repo.withdraw_sample(session, row)
-    return queue_withdrawal(session, idempotency, metrics, response, class_id, sample_id)
+    return queue_withdrawal(session, idempotency, metrics, response, principal, class_id, sample_id)
