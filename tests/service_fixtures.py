@@ -75,6 +75,40 @@ def names_of(vector: list[int], dataset: TactileDataset) -> list[str]:
     return [a for a, bit in zip(dataset.attribute_names, vector, strict=True) if bit]
 
 
+PROBLEM = "application/problem+json"
+
+
+def problem(response, status: int, field: str | None = None) -> dict:
+    """The RFC 9457 body of an error ``response``, checked: its status, content type, and
+    the field it names (when ``field`` is given)."""
+    assert response.status_code == status, response.text
+    assert response.headers["content-type"] == PROBLEM
+    body = response.json()
+    assert body["status"] == status and body["title"] and body["detail"]
+    if field:
+        assert field in [e["field"] for e in body["errors"]], body
+    return body
+
+
+def register(client, dataset: TactileDataset, name: str, i: int = 0) -> dict:
+    """POST /v1/classes of ``name`` with the ``i``-th unused attribute vector; the 202 body."""
+    vector = unused_vectors(dataset, i + 1)[i]
+    r = client.post("/v1/classes", json={"name": name, "attributes": names_of(vector, dataset)})
+    assert r.status_code == 202, r.text
+    return r.json()
+
+
+def add_sample(client, class_id: int, sample) -> dict:
+    """POST /v1/classes/{class_id}/samples; the 202 body."""
+    r = client.post(f"/v1/classes/{class_id}/samples", json={"sample": np.asarray(sample).tolist()})
+    assert r.status_code == 202, r.text
+    return r.json()
+
+
+def job(client, job_id: int) -> dict:
+    return client.get(f"/v1/jobs/{job_id}").json()
+
+
 def npy(array: np.ndarray) -> bytes:
     buf = io.BytesIO()
     np.save(buf, array)

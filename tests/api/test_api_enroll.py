@@ -9,17 +9,7 @@ import pytest
 from sqlalchemy import select
 
 from app.store.models import Job, ObjectClass, Sample
-from tests.service_fixtures import names_of, unused_vectors
-
-PROBLEM = "application/problem+json"
-
-
-def problem(r, status: int, field: str) -> dict:
-    assert r.status_code == status, r.text
-    assert r.headers["content-type"] == PROBLEM
-    body = r.json()
-    assert field in [e["field"] for e in body["errors"]], body
-    return body
+from tests.service_fixtures import names_of, problem, unused_vectors
 
 
 @pytest.fixture

@@ -8,19 +8,9 @@ import numpy as np
 import pytest
 
 from app.api.schemas import RecognizeResponse
-from tests.service_fixtures import npy
+from tests.service_fixtures import PROBLEM, npy, problem
 
-PROBLEM = "application/problem+json"
 NPY = {"content-type": "application/x-npy"}
-
-
-def problem(r, status: int, field: str) -> dict:
-    assert r.status_code == status, r.text
-    assert r.headers["content-type"] == PROBLEM
-    body = r.json()
-    assert body["status"] == status and body["title"] and body["detail"]
-    assert field in [e["field"] for e in body["errors"]], body
-    return body
 
 
 def test_json_batch(client, dataset):

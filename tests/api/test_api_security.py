@@ -13,18 +13,7 @@ from app.cli import main as cli
 from app.service.keys import RateLimiter
 from app.store import repo
 from app.store.models import ApiKey
-from tests.service_fixtures import unused_vectors
-
-PROBLEM = "application/problem+json"
-
-
-def problem(r, status: int, field: str | None = None) -> dict:
-    assert r.status_code == status, r.text
-    assert r.headers["content-type"] == PROBLEM
-    body = r.json()
-    if field:
-        assert field in [e["field"] for e in body["errors"]], body
-    return body
+from tests.service_fixtures import PROBLEM, problem, unused_vectors
 
 
 def make_key(app, scope: str, name: str | None = None) -> str:

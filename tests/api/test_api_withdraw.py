@@ -6,28 +6,13 @@ from __future__ import annotations
 from sqlalchemy import select
 
 from app.store.models import Job, ObjectClass, Sample
-from tests.service_fixtures import names_of, unused_vectors
-
-PROBLEM = "application/problem+json"
-
-
-def problem(r, status: int, field: str) -> dict:
-    assert r.status_code == status, r.text
-    assert r.headers["content-type"] == PROBLEM
-    body = r.json()
-    assert field in [e["field"] for e in body["errors"]], body
-    return body
+from tests.service_fixtures import add_sample, names_of, problem, register, unused_vectors
 
 
 def enrol(client, dataset, name: str = "mug", i: int = 0) -> tuple[int, int]:
     """A registered class with one sample: (class id, sample id)."""
-    vector = unused_vectors(dataset, i + 1)[i]
-    r = client.post("/v1/classes", json={"name": name, "attributes": names_of(vector, dataset)})
-    assert r.status_code == 202, r.text
-    cid = r.json()["class"]["id"]
-    r = client.post(f"/v1/classes/{cid}/samples", json={"sample": dataset.samples[0].tolist()})
-    assert r.status_code == 202, r.text
-    return cid, r.json()["sample_id"]
+    cid = register(client, dataset, name, i)["class"]["id"]
+    return cid, add_sample(client, cid, dataset.samples[0])["sample_id"]
 
 
 def test_withdrawing_a_sample_is_committed_before_the_202(client, app, dataset):

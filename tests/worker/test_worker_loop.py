@@ -6,32 +6,14 @@ import os
 import threading
 import time
 
-import numpy as np
 import pytest
 from sqlalchemy import select
 
 from app.framework.recognizer import TactileRecognizer
 from app.store import leases, repo
 from app.store.models import Sample
-from tests.service_fixtures import names_of, unused_vectors
+from tests.service_fixtures import add_sample, job, register
 from worker import loop
-
-
-def register(client, dataset, name: str, i: int = 0) -> dict:
-    vector = unused_vectors(dataset, i + 1)[i]
-    r = client.post("/v1/classes", json={"name": name, "attributes": names_of(vector, dataset)})
-    assert r.status_code == 202, r.text
-    return r.json()
-
-
-def add_sample(client, class_id: int, sample) -> dict:
-    r = client.post(f"/v1/classes/{class_id}/samples", json={"sample": np.asarray(sample).tolist()})
-    assert r.status_code == 202, r.text
-    return r.json()
-
-
-def job(client, job_id: int) -> dict:
-    return client.get(f"/v1/jobs/{job_id}").json()
 
 
 def test_enrollment_makes_a_new_active_version(client, worker, dataset):

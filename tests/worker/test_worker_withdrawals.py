@@ -5,30 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from app.store import repo
-from tests.service_fixtures import names_of, unused_vectors
-
-
-def register(client, dataset, name: str, i: int = 0) -> dict:
-    vector = unused_vectors(dataset, i + 1)[i]
-    r = client.post("/v1/classes", json={"name": name, "attributes": names_of(vector, dataset)})
-    assert r.status_code == 202, r.text
-    return r.json()
-
-
-def add_sample(client, class_id: int, sample) -> dict:
-    r = client.post(f"/v1/classes/{class_id}/samples", json={"sample": np.asarray(sample).tolist()})
-    assert r.status_code == 202, r.text
-    return r.json()
+from tests.service_fixtures import add_sample, job, register, unused_vectors
 
 
 def withdraw(client, path: str) -> dict:
     r = client.delete(path)
     assert r.status_code == 202, r.text
     return r.json()["job"]
-
-
-def job(client, job_id: int) -> dict:
-    return client.get(f"/v1/jobs/{job_id}").json()
 
 
 def served(app):
