@@ -33,8 +33,9 @@ def _vectors(n: int) -> list[list[int]]:
 
 
 class Enroller:
-    """A robot fleet in one thread: registers classes and adds samples, retrying a
-    timed-out or cut request with the same Idempotency-Key, round-robin over the APIs."""
+    """A robot fleet in one thread: registers classes, adds samples and now and then
+    withdraws one, retrying a timed-out or cut request with the same Idempotency-Key,
+    round-robin over the APIs."""
 
     def __init__(self, urls: list[str], seed: int = 0, max_classes: int = 400) -> None:
         self.urls = itertools.cycle(urls)
@@ -43,17 +44,19 @@ class Enroller:
         self.samples = quick_dataset().samples
         self.classes: dict[int, str] = {}  # 202'd class id -> name
         self.sample_ids: list[int] = []  # 202'd sample ids
+        self.sample_class: dict[int, int] = {}
+        self.withdrawn: list[int] = []  # sample ids whose withdrawal got a 202
         self.per_class: dict[int, int] = {}
         self.retries = self.replays = self.bad = 0
         self.statuses: dict[int, int] = {}
         self.stop = threading.Event()
 
-    def post(self, path: str, body: dict) -> httpx.Response | None:
+    def post(self, path: str, body: dict | None, method: str = "POST") -> httpx.Response | None:
         key = uuid.uuid4().hex
         for _attempt in range(200):  # a robot keeps retrying until some API answers
             try:
-                r = httpx.post(next(self.urls) + path, json=body, timeout=10,
-                               headers={"Idempotency-Key": key})
+                r = httpx.request(method, next(self.urls) + path, json=body, timeout=10,
+                                  headers={"Idempotency-Key": key})
             except httpx.TransportError:
                 self.retries += 1
                 time.sleep(0.1)
@@ -68,6 +71,15 @@ class Enroller:
         return None
 
     def step(self) -> None:
+        kept = sorted(set(self.sample_ids) - set(self.withdrawn))
+        if kept and self.rng.random() < 0.1:  # a sample of the wrong object: withdrawn
+            sid = self.rng.choice(kept)
+            r = self.post(f"/v1/classes/{self.sample_class[sid]}/samples/{sid}", None, "DELETE")
+            if r is not None and r.status_code == 202:
+                self.withdrawn.append(sid)
+            elif r is not None:
+                self.bad += 1
+            return
         open_classes = [c for c, n in self.per_class.items() if n < 3]
         if not open_classes or (len(self.classes) < len(self.vectors) and self.rng.random() < 0.5):
             i = len(self.classes)
@@ -85,6 +97,7 @@ class Enroller:
         r = self.post(f"/v1/classes/{cid}/samples", {"sample": x.tolist()})
         if r is not None and r.status_code == 202:
             self.sample_ids.append(r.json()["sample_id"])
+            self.sample_class[self.sample_ids[-1]] = cid
             self.per_class[cid] += 1
         elif r is not None:
             self.bad += 1
@@ -95,8 +108,10 @@ class Enroller:
             time.sleep(0.02)
 
 
-def verify(cluster: Cluster, classes: dict[int, str], sample_ids: list[int], timeout: float) -> dict:
-    """Every 202'd class and sample is in the store and in the active model; jobs settled."""
+def verify(cluster: Cluster, classes: dict[int, str], sample_ids: list[int], timeout: float,
+           withdrawn: list[int] = ()) -> dict:
+    """Every 202'd class and sample is in the store and in the active model, except the
+    samples whose withdrawal got a 202, which are in neither; jobs settled."""
     counts = wait_jobs_settled(cluster.sqlalchemy_url, timeout)
     url = cluster.urls[0]
     active = httpx.get(f"{url}/v1/models/active", timeout=30).json()
@@ -111,9 +126,12 @@ def verify(cluster: Cluster, classes: dict[int, str], sample_ids: list[int], tim
         in_model = set(repo.active_version(s).sample_ids)
         from sqlalchemy import select
 
-        from app.store.models import Sample
+        from app.store.models import Job, Sample
 
-        present = set(s.scalars(select(Sample.id).where(Sample.id.in_(sample_ids))))
+        live = select(Sample.id).where(Sample.id.in_(sample_ids), Sample.withdrawn_at.is_(None))
+        present = set(s.scalars(live))
+        failed = s.execute(select(Job.id, Job.kind, Job.sample_id, Job.error)
+                           .where(Job.status == "failed")).all()
     engine.dispose()
     return {
         "jobs": counts,
@@ -121,9 +139,17 @@ def verify(cluster: Cluster, classes: dict[int, str], sample_ids: list[int], tim
         "classes_missing": sorted(c for c in classes if stored.get(c, {}).get("name") != classes[c]),
         "classes_not_in_model": sorted(c for c, n in classes.items() if n not in model_names),
         "samples_202": len(sample_ids),
-        "samples_missing": sorted(set(sample_ids) - present),
-        "samples_not_in_model": sorted(set(sample_ids) - in_model),
+        "samples_missing": sorted(set(sample_ids) - set(withdrawn) - present),
+        "samples_not_in_model": sorted(set(sample_ids) - set(withdrawn) - in_model),
+        "withdrawn_202": len(withdrawn),
+        "withdrawn_still_live": sorted(set(withdrawn) & present),
+        "withdrawn_in_model": sorted(set(withdrawn) & in_model),
         "active_version": active["version"],
+        # the one failure that is right: a sample withdrawn before a model took it in
+        "unexpected_failures": [
+            (job_id, kind, error) for job_id, kind, sid, error in failed
+            if not (kind == "add_sample" and sid in withdrawn and "was withdrawn" in (error or ""))
+        ],
         "integrity_problems": check_store(cluster.sqlalchemy_url),
     }
 
@@ -151,7 +177,7 @@ def crash(cluster: Cluster, kills: int, seed: int = 0, gap: tuple[float, float] 
         fleet.stop.set()
         thread.join(120)
     cluster.wait_ready()
-    report = verify(cluster, fleet.classes, fleet.sample_ids, settle_timeout)
+    report = verify(cluster, fleet.classes, fleet.sample_ids, settle_timeout, fleet.withdrawn)
     report.update(kills=killed, seconds=round(time.monotonic() - started, 1),
                   retries=fleet.retries, replays=fleet.replays, statuses=fleet.statuses,
                   non_202=fleet.bad)
