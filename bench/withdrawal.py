@@ -6,9 +6,12 @@
 A fresh SQLite store is bootstrapped on ``--dataset`` (the embedded default: the built-in
 simulator) with ``--method``, in process (the API app under TestClient and a worker run by
 hand, as the tests do). Per repeat: a class is registered and given two samples, then one
-sample is withdrawn, then the class. Printed: the worker's round (claim to active) for
-the enrolments, which are incremental updates, and for each withdrawal, which is a full
-retrain from the stored samples, so it costs what a bootstrap fit costs.
+sample is withdrawn, then the class; and a second class is given ``PROMOTION`` samples,
+which promotes it to a known class, and loses one of them again, which makes it novel
+again. Printed: the worker's round (claim to active) for each step. Enrolments are
+incremental updates; a withdrawal from the novel part rebuilds the novel classes on the
+base's known part where the method allows it (``novel_part_separable``: ``best``), else
+it is a full retrain, as a promotion and a withdrawal from the known part always are.
 """
 
 from __future__ import annotations
@@ -32,6 +35,8 @@ from app.api.main import create_app  # noqa: E402
 from app.config import Settings  # noqa: E402
 from app.framework.registry import DEFAULT_METHOD  # noqa: E402
 from worker import Worker  # noqa: E402
+
+PROMOTION = 3  # real samples that make a novel class known
 
 
 def cpu_model() -> str:
@@ -68,11 +73,12 @@ def main() -> int:
 
     with tempfile.TemporaryDirectory() as tmp:
         settings = Settings(data_dir=Path(tmp), embedded_worker=False, dataset=args.dataset,
-                            method=args.method, promotion_threshold=10)
+                            method=args.method, promotion_threshold=PROMOTION)
         started = time.perf_counter()
         app = create_app(settings)
-        times: dict[str, list[float]] = {k: [] for k in
-                                         ("register", "add sample", "withdraw sample", "withdraw class")}
+        times: dict[str, list[float]] = {k: [] for k in (
+            "register", "add sample", "withdraw sample", "withdraw class",
+            "promotion (full retrain)", "withdraw a promoted class's sample (full retrain)")}
         with TestClient(app) as client:
             print(f"bootstrapped in {time.perf_counter() - started:.1f} s", file=sys.stderr)
             worker = Worker(settings, app.state.sessions, on_activate=app.state.holder.serve)
@@ -94,6 +100,22 @@ def main() -> int:
                 times["withdraw sample"].append(timed_round(worker, client, r.json()["job"]["id"]))
                 r = client.delete(f"/v1/classes/{cid}")
                 times["withdraw class"].append(timed_round(worker, client, r.json()["job"]["id"]))
+
+                r = client.post("/v1/classes", json={"name": f"promoted-{i}",
+                                                     "attributes": unused_attributes(client, i)})
+                cid = r.json()["class"]["id"]
+                timed_round(worker, client, r.json()["job"]["id"])
+                for k in range(PROMOTION):
+                    sample = rng.normal(size=shape).astype(np.float32).tolist()
+                    r = client.post(f"/v1/classes/{cid}/samples", json={"sample": sample})
+                    if k < PROMOTION - 1:
+                        timed_round(worker, client, r.json()["job"]["id"])
+                times["promotion (full retrain)"].append(timed_round(worker, client, r.json()["job"]["id"]))
+                assert client.get(f"/v1/classes/{cid}").json()["kind"] == "known"
+                r = client.delete(f"/v1/classes/{cid}/samples/{r.json()['sample_id']}")
+                times["withdraw a promoted class's sample (full retrain)"].append(
+                    timed_round(worker, client, r.json()["job"]["id"]))
+                assert client.get(f"/v1/classes/{cid}").json()["kind"] == "novel"
                 print(json.dumps({k: round(v[-1], 2) for k, v in times.items()}), file=sys.stderr)
     print(json.dumps({
         "dataset": args.dataset, "method": args.method, "repeats": args.repeats,

@@ -146,7 +146,8 @@ class Worker:
             log.info(
                 "retraining v%d: %d new class(es), samples for %d, %s",
                 base.version, len(plan.new_classes), len(plan.new_samples),
-                f"full retrain ({plan.reason})" if plan.full_retrain else "incremental",
+                f"full retrain ({plan.reason})" if plan.full_retrain
+                else "novel classes rebuilt (withdrawal)" if plan.rebuild_novel else "incremental",
             )
             new = build(plan, model, self.settings, known)
             split = self._encoder.split(new)  # serialised before the transaction opens

@@ -7,8 +7,11 @@ Usually that is an incremental update (new FC_Z, one-shot samples); when a novel
 class has gathered ``promotion_threshold`` real samples it becomes a known class
 and the whole model is retrained from the stored samples. So is it when the base
 model holds something the store has withdrawn (a class, a sample, or a class's old
-attributes): a fresh fit is the one way to leave no trace of it, since one-shot
-samples may have fine-tuned shared parts such as the paper's generator.
+attributes) in its known part, or in its novel part where one-shot samples may have
+fine-tuned shared parts (the paper's generator): a fresh fit is the one way to leave no
+trace of it. Methods whose novel part is rebuilt from the registry alone
+(``novel_part_separable``, e.g. ``best``) drop their novel classes and add the live
+ones back instead.
 """
 
 from __future__ import annotations
@@ -35,7 +38,8 @@ class Plan:
     new_classes: list[ObjectClass] = field(default_factory=list)
     new_samples: dict[str, list[Sample]] = field(default_factory=dict)  # by novel class name
     full_retrain: bool = False
-    withdrawal: bool = False  # the full retrain leaves out what was withdrawn
+    withdrawal: bool = False  # the new model leaves out what was withdrawn
+    rebuild_novel: bool = False  # every novel class added anew to the base's known part
     promote: list[ObjectClass] = field(default_factory=list)
     # promoted classes left with fewer than ``promotion_threshold`` samples: novel again
     demote: list[ObjectClass] = field(default_factory=list)
@@ -45,14 +49,14 @@ class Plan:
 
     @property
     def changes_model(self) -> bool:
-        return bool(self.new_classes or self.new_samples or self.full_retrain)
+        return bool(self.new_classes or self.new_samples or self.full_retrain or self.rebuild_novel)
 
     @property
     def reason(self) -> str:
         """The new model version's ``reason``."""
-        if not self.full_retrain:
-            return "update"
-        return "withdrawal" if self.withdrawal and not self.promote else "promotion"
+        if self.withdrawal and not self.promote:
+            return "withdrawal"
+        return "promotion" if self.full_retrain else "update"
 
     @property
     def sample_ids(self) -> list[int]:
@@ -122,8 +126,13 @@ def make_plan(
                 plan.new_classes.append(cls)
             if missing:
                 plan.new_samples[cls.name] = missing
-    plan.withdrawal = bool(plan.demote) or _holds_withdrawn(reg, in_base - live_samples, in_model)
-    plan.full_retrain |= plan.withdrawal
+    known_part, novel_part = _holds_withdrawn(s, reg, in_base - live_samples, in_model)
+    known_part |= bool(plan.demote)
+    plan.withdrawal = known_part or novel_part
+    if known_part or (novel_part and not model.novel_part_separable):
+        plan.full_retrain = True
+    elif novel_part and not plan.full_retrain:
+        plan.rebuild_novel = True
     return plan
 
 
@@ -140,31 +149,40 @@ def _live_registrations(s: Session, claimed_ids: set[int]) -> set[int]:
 
 
 def _holds_withdrawn(
-    reg: ClassRegistry, stale_samples: set[int], in_model: list[ObjectClass]
-) -> bool:
-    """Whether the base model holds a withdrawn sample or class, or a class as it was
-    before it was withdrawn and registered again: other attributes, or known where the
-    store now has it novel (promotion only ever goes the other way)."""
-    if stale_samples:
-        return True
+    s: Session, reg: ClassRegistry, stale_samples: set[int], in_model: list[ObjectClass]
+) -> tuple[bool, bool]:
+    """Whether the base model's known part, and its novel part, hold a withdrawn sample or
+    class, or a class as it was before it was withdrawn and registered again: other
+    attributes, or known where the store now has it novel (promotion only ever goes the
+    other way)."""
     live = {c.name: c for c in in_model}
-    if set(reg.all_names) - set(live):
-        return True
+    known, novel = set(reg.known_names), set(reg.novel_names)
+    stale_classes = set(s.scalars(
+        select(ObjectClass.name).join(Sample, Sample.class_id == ObjectClass.id)
+        .where(Sample.id.in_(stale_samples))
+    )) if stale_samples else set()
+    stale_classes |= set(reg.all_names) - set(live)
     for names, vectors in ((reg.known_names, reg.known_attributes),
                            (reg.novel_names, reg.novel_attributes)):
         for name, vector in zip(names, vectors, strict=True):
-            if repo.vector_key(vector) != live[name].attribute_key:
-                return True
-    return any(live[name].kind == "novel" for name in reg.known_names)
+            if name in live and repo.vector_key(vector) != live[name].attribute_key:
+                stale_classes.add(name)
+    stale_classes |= {name for name in known if name in live and live[name].kind == "novel"}
+    unplaced = stale_classes - known - novel  # cannot happen; if it does, retrain it all
+    return bool(stale_classes & known or unplaced), bool(stale_classes & novel)
 
 
 def build(
     plan: Plan, model: TactileRecognizer, settings: Settings, known: TactileDataset | None = None
 ) -> TactileRecognizer:
     """The new recognizer; the base model is never modified. A full retrain fits a
-    fresh model on ``known`` (from ``known_dataset``) first."""
-    if plan.full_retrain:
-        model = make_method(settings.method, **settings.method_params).fit(known)
+    fresh model on ``known`` (from ``known_dataset``) first; a novel-part rebuild starts
+    from the base's known part alone."""
+    if plan.full_retrain or plan.rebuild_novel:
+        if plan.full_retrain:
+            model = make_method(settings.method, **settings.method_params).fit(known)
+        else:
+            model = model.without_novel_classes()
         new_classes = plan.novel
         new_samples = {c.name: plan.samples[c.id] for c in plan.novel if plan.samples.get(c.id)}
     else:

@@ -34,3 +34,7 @@ class NotFittedError(FrameworkError):
 
 class BundleError(FrameworkError):
     """A model bundle is corrupt, truncated, or of an incompatible format version."""
+
+
+class UnsupportedOperationError(FrameworkError):
+    """The method cannot do this (e.g. drop its novel classes without being fitted again)."""

@@ -29,6 +29,7 @@ from app.framework.errors import (
     NonFiniteInputError,
     NotFittedError,
     UnknownClassError,
+    UnsupportedOperationError,
 )
 
 
@@ -155,6 +156,10 @@ class TactileRecognizer(ABC):
     """Base class of recognition methods; see the module docstring."""
 
     method: ClassVar[str] = "abstract"
+    #: True when enrolments never change what ``fit`` trained (the known part), so novel
+    #: classes can be dropped and rebuilt from the registry alone: then a withdrawal needs
+    #: no full retrain. False where one-shot samples fine-tune shared parts (``paper``).
+    novel_part_separable: ClassVar[bool] = False
 
     def __init__(self) -> None:
         self.input_shape: tuple[int, ...] | None = None
@@ -305,6 +310,25 @@ class TactileRecognizer(ABC):
         new.registry.novel_samples[class_name] = x if prev is None else np.concatenate([prev, x])
         new._refit_novel(**options)
         return new
+
+    def without_novel_classes(self) -> Self:
+        """A new recognizer with the known part only: no novel class, no one-shot sample.
+        Only for methods with ``novel_part_separable``; others must be fitted again."""
+        self._require_fitted()
+        if not self.novel_part_separable:
+            raise UnsupportedOperationError(
+                f"method '{self.method}' adapts shared parts to enrolments; fit it again instead"
+            )
+        new = copy.deepcopy(self)
+        reg = new.registry
+        reg.novel_names, reg.novel_samples = [], {}
+        reg.novel_attributes = np.zeros((0, len(reg.attribute_names)), np.float32)
+        new._reset_novel()
+        return new
+
+    def _reset_novel(self) -> None:
+        """Forget FC_Z; methods with ``novel_part_separable`` override it."""
+        raise UnsupportedOperationError(f"method '{self.method}' cannot drop its novel classes")
 
     @abstractmethod
     def _refit_novel(self, **options: Any) -> None:

@@ -60,6 +60,7 @@ class BestRecognizer(TactileRecognizer):
     """See the module docstring; hyper-parameters are constructor arguments."""
 
     method = "best"
+    novel_part_separable = True  # enrolments never touch the forest or the attribute models
 
     _PARAMS = ("seed", "n_estimators", "max_features", "attribute_C", "dap_clip", "shot_temperature",
                "knn_weight", "top_weight", "novelty_val_fraction", "novelty_holdout_trials",

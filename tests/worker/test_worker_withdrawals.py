@@ -3,9 +3,20 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from app.framework.errors import UnsupportedOperationError
+from app.framework.registry import make_method
 from app.store import repo
-from tests.service_fixtures import add_sample, job, register, unused_vectors
+from tests.service_fixtures import (
+    add_sample,
+    job,
+    quick_dataset,
+    quick_settings,
+    register,
+    unused_vectors,
+)
+from worker import retrain
 
 
 def withdraw(client, path: str) -> dict:
@@ -120,3 +131,68 @@ def test_a_promoted_class_below_the_threshold_again_is_novel_again(client, app, 
     assert len(reg.novel_samples["promoted"]) == 1
     assert len(reg.known_names) == dataset.n_classes
     assert client.get("/v1/models/active").json()["reason"] == "withdrawal"
+
+
+BEST_PARAMS = {"seed": 0, "n_estimators": 10, "tuning_rounds": 1, "distance_components": 8}
+
+
+@pytest.fixture(scope="module")
+def best_base():
+    dataset = quick_dataset()
+    return make_method("best", **BEST_PARAMS).fit(dataset), dataset
+
+
+@pytest.fixture
+def best_service(tmp_path, best_base):
+    """(client, app, worker) of a service whose method is ``best`` (SQLite)."""
+    from fastapi.testclient import TestClient
+
+    from app.api.main import create_app
+    from worker import Worker
+
+    app = create_app(quick_settings(tmp_path, method="best", method_params=BEST_PARAMS),
+                     trainer=lambda: best_base)
+    with TestClient(app) as client:
+        yield client, app, Worker(app.state.settings, app.state.sessions, on_activate=app.state.holder.serve)
+
+
+def test_best_withdraws_from_its_novel_part_without_fitting_again(best_service, best_base, monkeypatch):
+    client, app, worker = best_service
+    base, dataset = best_base
+    mug = register(client, dataset, "mug", 0)["class"]["id"]
+    cup = register(client, dataset, "cup", 1)["class"]["id"]
+    bowl = register(client, dataset, "bowl", 2)["class"]["id"]
+    shots = {name: [add_sample(client, cid, dataset.samples[k] + 0.01)["sample_id"] for k in (3, 4)]
+             for name, cid in (("mug", mug), ("cup", cup))}
+    worker.run_once()
+
+    def no_fit(*args, **kwargs):
+        raise AssertionError("a withdrawal from the novel part must not fit the model again")
+
+    monkeypatch.setattr(retrain, "make_method", no_fit)
+    withdraw(client, f"/v1/classes/{mug}/samples/{shots['mug'][0]}")
+    withdraw(client, f"/v1/classes/{bowl}")
+    assert worker.run_once() == 2
+    active = client.get("/v1/models/active").json()
+    assert active["reason"] == "withdrawal" and active["class_count"] == dataset.n_classes + 2
+
+    # the same model as one built from scratch on what is left
+    reference = base.add_novel_classes(["mug", "cup"], np.stack([
+        unused_vectors(dataset, 2)[0], unused_vectors(dataset, 2)[1]]).astype(np.float32))
+    reference = reference.add_one_shot("mug", dataset.samples[4:5] + 0.01)
+    reference = reference.add_one_shot("cup", dataset.samples[3:5] + 0.01)
+    served = app.state.holder.current.recognizer
+    assert served.registry.novel_names == ["mug", "cup"]
+    x = dataset.samples[::3]
+    assert np.allclose(served.novel_proba(x), reference.novel_proba(x))
+    assert np.allclose(served.known_proba(x), base.known_proba(x))
+    assert np.array_equal(served.is_novel(x), base.is_novel(x))
+
+
+def test_only_separable_methods_drop_their_novel_classes(best_base, base_model):
+    best, dataset = best_base
+    with_novel = best.add_novel_classes(["mug"], np.asarray(unused_vectors(dataset, 1), np.float32))
+    dropped = with_novel.without_novel_classes()
+    assert dropped.registry.novel_names == [] and with_novel.registry.novel_names == ["mug"]
+    with pytest.raises(UnsupportedOperationError, match="fit it again"):
+        base_model[0].without_novel_classes()  # the paper's one-shot step tunes its generator
