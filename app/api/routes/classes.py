@@ -144,9 +144,10 @@ def withdraw_class(
     idempotency: IdempotencyDep, principal: Enroller,
 ) -> Withdrawal:
     """Withdraw a wrongly enrolled class with its samples. It leaves the store's live data
-    at once and the served model when the job succeeds (a full retrain without it); until
-    then recognition may still answer it. Classes of the training dataset cannot be
-    withdrawn. Its name can then be registered again."""
+    at once and the served model when the job succeeds (the novel classes rebuilt, or a
+    full retrain where it was in the known part); until then recognition may answer it.
+    Classes of the training dataset cannot be withdrawn. Its name can then be registered
+    again."""
     idempotency.replay(session)
     cls = repo.get_class(session, class_id)
     if cls is None:

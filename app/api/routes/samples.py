@@ -90,8 +90,9 @@ def withdraw_sample(
     response: Response, idempotency: IdempotencyDep, principal: Enroller,
 ) -> Withdrawal:
     """Withdraw a wrongly enrolled sample (say, one taken of the wrong object). It leaves
-    the store's live data at once and the served model when the job succeeds (a full
-    retrain without it). Samples of the training dataset cannot be withdrawn."""
+    the store's live data at once and the served model when the job succeeds (the novel
+    classes rebuilt, or a full retrain where it was in the known part). Samples of the
+    training dataset cannot be withdrawn."""
     idempotency.replay(session)
     if repo.get_class(session, class_id) is None:
         raise not_found("class", "class_id", class_id)
