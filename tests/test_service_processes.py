@@ -11,6 +11,7 @@ import re
 import signal
 import socket
 import subprocess
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -20,7 +21,13 @@ import pytest
 
 from app.config import MAX_DEFAULT_PROCESSES, Settings
 from tests.reliability.harness import STARTUP_TIMEOUT, free_port, tactile_zsl
-from tests.service_fixtures import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS
+from tests.service_fixtures import (
+    QUICK_DATASET,
+    QUICK_METHOD,
+    QUICK_PARAMS,
+    quick_dataset,
+    unused_vectors,
+)
 
 pytestmark = pytest.mark.slow
 
@@ -88,7 +95,25 @@ def test_processes_serve_together_restart_and_stop_together(tmp_path):
         again = two_serving(url, 120, without=victim)  # the killed process is replaced
         assert httpx.get(f"{url}/readyz").status_code == 200
 
+        # a robot waits for a job no worker will take; a stop answers it with the status then
+        vector = unused_vectors(quick_dataset(), 1)[0]
+        r = httpx.post(f"{url}/v1/classes", json={"name": "cup", "attribute_vector": vector})
+        job_id = r.json()["job"]["id"]
+        answers: list[tuple[float, httpx.Response]] = []
+
+        def robot():
+            started = time.monotonic()
+            answer = httpx.get(f"{url}/v1/jobs/{job_id}", params={"wait": 20}, timeout=30)
+            answers.append((time.monotonic() - started, answer))
+
+        waiting = threading.Thread(target=robot)
+        waiting.start()
+        time.sleep(1.0)  # the request is waiting in one of the processes
         proc.send_signal(signal.SIGTERM)
+        waiting.join(30)
+        (seconds, answer), = answers
+        assert answer.status_code == 200 and answer.json()["status"] == "queued"
+        assert seconds < 15  # answered at the stop, not after its 20 s
         assert proc.wait(60) == 0
         for pid in again:
             with pytest.raises(ProcessLookupError):

@@ -115,6 +115,12 @@ def _run_one(overrides: dict[str, Any], server: dict[str, Any], index: int, serv
             if self.started:
                 serving.set()
 
+        async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
+            # uvicorn waits for open requests before the app's own shutdown runs: robots
+            # waiting for their jobs answer first, or they would hold it for up to 20 s
+            app.state.job_watch.release_all()
+            await super().shutdown(sockets)
+
     from app.api.main import create_app
     from app.config import Settings
 

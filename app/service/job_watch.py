@@ -29,6 +29,7 @@ class JobWatch:
         self._waiting: dict[int, set[asyncio.Event]] = {}
         self._task: asyncio.Task | None = None
         self._failing = False  # one error per outage in the log, not one per interval
+        self._closing = False
 
     @property
     def waiting(self) -> int:
@@ -36,7 +37,10 @@ class JobWatch:
         return sum(len(events) for events in self._waiting.values())
 
     async def wait(self, job_id: int, timeout: float) -> bool:
-        """Until job ``job_id`` has finished (True) or ``timeout`` seconds passed (False)."""
+        """Until job ``job_id`` has finished (True) or ``timeout`` seconds passed (False).
+        Once the process shuts down, at once (True: the caller reads the status then)."""
+        if self._closing:
+            return True
         event = asyncio.Event()
         self._waiting.setdefault(job_id, set()).add(event)
         if self._task is None or self._task.done():
@@ -75,6 +79,14 @@ class JobWatch:
         with self._sessions() as s:
             return {j for start in range(0, len(ids), QUERY_CHUNK)
                     for j in repo.finished_job_ids(s, ids[start:start + QUERY_CHUNK])}
+
+    def release_all(self) -> None:
+        """The process is shutting down: every waiting request answers now, with its job's
+        status then, instead of holding the shutdown for up to its whole wait."""
+        self._closing = True
+        for events in self._waiting.values():
+            for event in events:
+                event.set()
 
     async def close(self) -> None:
         if self._task is not None:

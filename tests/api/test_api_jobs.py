@@ -109,3 +109,27 @@ def test_a_store_outage_while_robots_wait_is_logged_once_and_they_are_answered_a
     records = [r for r in caplog.records if r.name == "app.service.job_watch"]
     assert [r.levelname for r in records] == ["ERROR", "INFO"]  # one error for the whole outage
     assert "again" in records[1].getMessage()
+
+
+def test_a_shutdown_answers_waiting_robots_at_once_with_the_status_then(client, app, dataset):
+    app.state.holder.stop()
+    job_id = register(client, dataset)
+    answers: list[tuple[float, dict]] = []
+
+    def robot():
+        started = time.monotonic()
+        job = client.get(f"/v1/jobs/{job_id}", params={"wait": 20}).json()
+        answers.append((time.monotonic() - started, job))
+
+    thread = threading.Thread(target=robot)
+    thread.start()
+    deadline = time.monotonic() + 15
+    while app.state.job_watch.waiting < 1 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert app.state.job_watch.waiting == 1
+    client.portal.call(app.state.job_watch.release_all)  # what the server's shutdown calls
+    thread.join(15)
+    (seconds, job), = answers
+    assert job["status"] == "queued" and seconds < 15  # not the whole 20 s wait
+    # a request that comes during the shutdown does not wait either
+    assert client.get(f"/v1/jobs/{job_id}", params={"wait": 20}).json()["status"] == "queued"

@@ -17,13 +17,13 @@ router = APIRouter(
     responses=problems.responses(401, 403, 404, 422, 429),
 )
 
-MAX_WAIT_SECONDS = 20  # a waiting request delays a graceful shutdown by at most this
+MAX_WAIT_SECONDS = 20  # how long a request may hold its event (a shutdown answers it at once)
 
 WaitSeconds = Annotated[float, Query(
     ge=0, le=MAX_WAIT_SECONDS,
     description="Seconds to wait for the job to finish before answering (long polling): the "
-    "answer comes as soon as it has succeeded or failed, or after this long with its status then. "
-    "One waiting request replaces many polls.",
+    "answer comes as soon as it has succeeded or failed, or after this long (or when the API "
+    "process shuts down) with its status then. One waiting request replaces many polls.",
 )]
 
 
