@@ -21,6 +21,8 @@ model both, learning from the known objects only; the last two change DAP's inpu
 - ``znorm`` / ``zmean`` (session 7): DAP scores minus each novel class's mean score (and
   divided by its spread) over known training samples scored out of object (hubness).
 - ``lda<C>`` (session 7): DAP on the shrinkage-LDA subspace of the known objects.
+- ``sae<s|f><λ>`` (session 8): the semantic autoencoder of Kodirov et al. (2017), matched
+  in attribute space (``s``) or feature space (``f``).
 
 Each is reported alone and as a product with DAP (``best``'s zero-shot), on the
 novel objects' held-out trials of development split seeds (never seed 0):
@@ -153,6 +155,21 @@ def lda_dap(z, y, attrs, z_test, vectors, C, args):
     return dap_log_scores(model.predict_proba(pt / scale), vectors, attrs.mean(0), args.clip)
 
 
+def sae(z, y, attrs, z_test, vectors, lam: float, space: str):
+    """Semantic autoencoder (Kodirov et al., 2017): W maps features to attributes and Wᵀ
+    maps back, min ‖X − WᵀS‖² + λ‖WX − S‖², closed form by a Sylvester equation. A test
+    sample is matched to the novel classes by cosine, either as W x against their vectors
+    (``space`` 's') or as x against Wᵀ a^z (``space`` 'f'); ×10 as a temperature."""
+    from scipy.linalg import solve_sylvester
+
+    x, a = z.T, attrs[y].T  # (D, N), (K, N)
+    w = solve_sylvester(a @ a.T, lam * (x @ x.T), (1 + lam) * (a @ x.T))  # (K, D)
+    unit = lambda m: m / np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-12)  # noqa: E731
+    if space == "s":
+        return 10 * unit(z_test @ w.T) @ unit(vectors).T
+    return 10 * unit(z_test) @ unit(vectors @ w).T
+
+
 def twins(known_p: np.ndarray, attrs: np.ndarray, vectors: np.ndarray, sharpness: float) -> np.ndarray:
     """log Σ_k p(k | x) exp(-sharpness · hamming(a^z, a^k)): a novel class feels like the
     known objects that people describe alike."""
@@ -188,6 +205,8 @@ def main() -> int:
                 scores = lda_dap(z, y, attrs, zt, vectors, float(approach[3:] or 0.1), args)
             elif approach.startswith("svm"):
                 scores = svm_dap(z, y, attrs, zt, vectors, float(approach[3:] or 1), args)
+            elif approach.startswith("sae"):  # sae<s|f><λ>, e.g. saes1, saef0.2
+                scores = sae(z, y, attrs, zt, vectors, float(approach[4:] or 1), approach[3])
             elif approach.startswith("twins"):
                 scores = twins(case.cues.proba(zt), attrs, vectors, float(approach[5:] or 2))
             else:

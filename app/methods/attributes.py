@@ -65,3 +65,27 @@ class LinearAttributeModel:
     def from_state(cls, arrays: dict[str, np.ndarray]) -> LinearAttributeModel:
         return cls(arrays["weights"], arrays["bias"], arrays["constant"])
 
+
+
+def semantic_autoencoder(z: np.ndarray, targets: np.ndarray, lam: float) -> np.ndarray:
+    """The semantic autoencoder of Kodirov et al. (2017): the (M, D) projection W that
+    minimises ||Z - W^T A||^2 + lam ||W Z - A||^2 over samples Z (D, N) and their classes'
+    attribute vectors A (M, N), in closed form by the Sylvester equation
+    (A A^T) W + W (lam Z Z^T) = (1 + lam) A Z^T. A tiny ridge on A A^T keeps the equation
+    solvable when an attribute is constant over the known classes."""
+    from scipy.linalg import solve_sylvester
+
+    x = np.asarray(z, np.float64).T
+    a = np.asarray(targets, np.float64).T
+    aa = a @ a.T
+    aa += 1e-6 * max(float(np.trace(aa)) / len(aa), 1.0) * np.eye(len(aa))
+    return solve_sylvester(aa, lam * (x @ x.T), (1.0 + lam) * (a @ x.T))
+
+
+def cosine_scores(z: np.ndarray, projection: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """(N, L) cosine between each projected sample W z and each class's attribute vector."""
+    def unit(m: np.ndarray) -> np.ndarray:
+        return m / np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-12)
+
+    projected = np.asarray(z, np.float32) @ np.asarray(projection, np.float32).T
+    return unit(projected.astype(np.float64)) @ unit(np.asarray(vectors, np.float64)).T

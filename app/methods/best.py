@@ -17,7 +17,10 @@ reach 1e10.
   one ``tune_threshold`` call, which steadies the threshold. The deployed model
   covers every known class and keeps it.
 - Zero-shot (FC_Z from attributes): Direct Attribute Prediction with one
-  L2-regularised logistic regression per attribute (``attributes``).
+  L2-regularised logistic regression per attribute (``attributes``), its log scores
+  plus ``sae_temperature`` x the cosine between the sample projected by a semantic
+  autoencoder (Kodirov et al., 2017; ``sae_lambda``) and each novel class's attribute
+  vector: a product of the two posteriors. 0 for ``sae_lambda`` leaves DAP alone.
 - One-shot: a sample's *signature* is its known-class posterior, L2-normalised:
   which known objects it feels like. A novel class with real samples gets the
   mean signature of its samples as prototype, and samples are matched by cosine
@@ -41,7 +44,13 @@ from app.framework.errors import FrameworkError
 from app.framework.novelty import novelty_validation_split, tune_threshold
 from app.framework.recognizer import TactileRecognizer
 from app.framework.runtime import configure_torch_threads  # noqa: F401  (sets torch and BLAS threads)
-from app.methods.attributes import LinearAttributeModel, dap_log_scores, softmax
+from app.methods.attributes import (
+    LinearAttributeModel,
+    cosine_scores,
+    dap_log_scores,
+    semantic_autoencoder,
+    softmax,
+)
 from app.methods.known import CUES, KnownModel, flatten, relabelled
 
 
@@ -64,7 +73,7 @@ class BestRecognizer(TactileRecognizer):
 
     _PARAMS = ("seed", "n_estimators", "max_features", "attribute_C", "dap_clip", "shot_temperature",
                "knn_weight", "top_weight", "novelty_val_fraction", "novelty_holdout_trials",
-               "tuning_rounds", "distance_components", "n_jobs")
+               "tuning_rounds", "distance_components", "sae_lambda", "sae_temperature", "n_jobs")
 
     def __init__(
         self,
@@ -80,6 +89,8 @@ class BestRecognizer(TactileRecognizer):
         novelty_holdout_trials: int = 1,
         tuning_rounds: int = 3,
         distance_components: int = 64,
+        sae_lambda: float = 400.0,
+        sae_temperature: float = 10.0,
         n_jobs: int | None = 1,
     ) -> None:
         super().__init__()
@@ -95,7 +106,10 @@ class BestRecognizer(TactileRecognizer):
         self.novelty_holdout_trials = novelty_holdout_trials
         self.tuning_rounds = tuning_rounds
         self.distance_components = distance_components
+        self.sae_lambda = sae_lambda
+        self.sae_temperature = sae_temperature
         self.n_jobs = n_jobs
+        self.sae_: np.ndarray | None = None
         self._check_params()
 
     def get_params(self) -> dict[str, Any]:
@@ -127,6 +141,10 @@ class BestRecognizer(TactileRecognizer):
             self.distance_components, bool) and self.distance_components >= 0,
                f"distance_components must be a non-negative integer (0 = exact), got "
                f"{self.distance_components!r}")
+        for name in ("sae_lambda", "sae_temperature"):
+            value = getattr(self, name)
+            _check(isinstance(value, int | float) and not isinstance(value, bool) and value >= 0
+                   and np.isfinite(value), f"{name} must be a non-negative number, got {value!r}")
 
     def _cue_weights(self) -> np.ndarray:
         w = np.zeros(len(CUES))
@@ -181,6 +199,8 @@ class BestRecognizer(TactileRecognizer):
         attrs = dataset.class_attributes
         self.attributes_ = LinearAttributeModel.fit(z, attrs[y], float(self.attribute_C))
         self.prior_ = attrs.mean(axis=0).astype(np.float64)
+        self.sae_ = (semantic_autoencoder(z, attrs[y], float(self.sae_lambda)).astype(np.float32)
+                     if self.sae_lambda > 0 else None)
         timings["attributes_s"] = time.perf_counter() - t
         self._reset_novel()
         timings["total_s"] = time.perf_counter() - t0
@@ -218,6 +238,8 @@ class BestRecognizer(TactileRecognizer):
         reg = self.registry
         scores = dap_log_scores(self.attributes_.predict_proba(z), reg.novel_attributes, self.prior_,
                                 float(self.dap_clip))
+        if self.sae_ is not None:
+            scores = scores + float(self.sae_temperature) * cosine_scores(z, self.sae_, reg.novel_attributes)
         p_zsl = softmax(scores)
         has = self.shot_has_
         if not has.any():
@@ -251,6 +273,8 @@ class BestRecognizer(TactileRecognizer):
     # ------------------------------------------------------------ persistence
     def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         arrays: dict[str, np.ndarray] = {"prior": self.prior_}
+        if self.sae_ is not None:
+            arrays["sae"] = self.sae_
         for key, value in self.known_.get_state().items():
             arrays[f"known/{key}"] = value
         for key, value in self.attributes_.get_state().items():
@@ -264,6 +288,7 @@ class BestRecognizer(TactileRecognizer):
 
     def set_state(self, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
         self.distance_components = 0  # bundles made before the parameter measure exact distances
+        self.sae_lambda = 0.0  # and those made before the autoencoder have none
         for key, value in meta["params"].items():
             if key not in self._PARAMS:
                 raise KeyError(f"unknown parameter {key!r} in the bundle")
@@ -283,6 +308,9 @@ class BestRecognizer(TactileRecognizer):
         self.known_ = KnownModel.from_state(part("known/"), self._cue_weights(), n_classes, n_features)
         self.attributes_ = LinearAttributeModel.from_state(part("attributes/"))
         self.prior_ = np.asarray(arrays["prior"], np.float64)
+        self.sae_ = np.asarray(arrays["sae"], np.float32) if "sae" in arrays else None
+        if self.sae_ is not None and self.sae_.shape != (len(self.prior_), n_features):
+            raise ValueError("semantic autoencoder does not match the inputs or the attribute vocabulary")
         if self.attributes_.weights.shape[1] != n_features or len(self.prior_) != len(self.registry.attribute_names):
             raise ValueError("attribute model does not match the inputs or the attribute vocabulary")
         self._reset_novel()

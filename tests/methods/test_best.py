@@ -23,7 +23,12 @@ from app.framework.errors import (
     UnknownClassError,
 )
 from app.framework.registry import make_method
-from app.methods.attributes import LinearAttributeModel, dap_log_scores
+from app.methods.attributes import (
+    LinearAttributeModel,
+    cosine_scores,
+    dap_log_scores,
+    semantic_autoencoder,
+)
 from app.methods.best import BestRecognizer
 
 FAST = {"n_estimators": 40, "tuning_rounds": 2, "distance_components": 8}  # 8 < rank: subspace distances
@@ -190,7 +195,8 @@ def test_bad_input_raises_framework_errors(fitted, enrolled, data):
 @pytest.mark.parametrize("params", [
     {"n_estimators": 0}, {"attribute_C": -1.0}, {"dap_clip": 0.7}, {"shot_temperature": 0},
     {"max_features": "all"}, {"tuning_rounds": 0}, {"novelty_val_fraction": 1.5}, {"knn_weight": -1},
-    {"distance_components": -1}, {"distance_components": 2.5},
+    {"distance_components": -1}, {"distance_components": 2.5}, {"sae_lambda": -1},
+    {"sae_temperature": float("nan")}, {"sae_lambda": True},
 ])
 def test_bad_hyper_parameters(params):
     with pytest.raises(FrameworkError):
@@ -223,6 +229,41 @@ def test_dap_and_attribute_model():
     assert s.argmax() == 0
     again = LinearAttributeModel.from_state(model.get_state())
     assert np.array_equal(again.predict_proba(z), p)
+
+
+def test_semantic_autoencoder_maps_samples_to_their_attributes():
+    rng = np.random.default_rng(0)
+    classes = rng.integers(0, 2, size=(8, 6)).astype(float)
+    mixing = rng.normal(size=(6, 20))
+    y = np.repeat(np.arange(8), 10)
+    z = classes[y] @ mixing + 0.05 * rng.normal(size=(80, 20))  # features made from attributes
+    w = semantic_autoencoder(z, classes[y], lam=10.0)
+    assert w.shape == (6, 20)
+    assert np.mean((z @ w.T > 0.5) == classes[y]) > 0.95  # W z recovers the attributes
+    constant = np.c_[classes[y], np.ones(80)]  # an attribute no class lacks: still solvable
+    assert np.isfinite(semantic_autoencoder(z, constant, lam=10.0)).all()
+
+
+def test_the_autoencoder_adds_to_dap_and_old_bundles_keep_dap_alone(enrolled, data):
+    ds, *_ = data
+    model, names = enrolled
+    x = ds.samples
+    assert model.sae_ is not None and model.sae_.shape == (ds.n_attributes, int(np.prod(ds.input_shape)))
+    z = model.known_.cues_model.scaled(x.reshape(len(x), -1))
+    dap = dap_log_scores(model.attributes_.predict_proba(z), model.registry.novel_attributes,
+                         model.prior_, model.dap_clip)
+    both = dap + model.sae_temperature * cosine_scores(z, model.sae_, model.registry.novel_attributes)
+    expected = np.exp(both - both.max(1, keepdims=True))
+    assert np.allclose(model.novel_proba(x), expected / expected.sum(1, keepdims=True), atol=1e-6)
+
+    meta, arrays = model.get_state()  # a bundle written before the autoencoder existed
+    del meta["params"]["sae_lambda"], meta["params"]["sae_temperature"], arrays["sae"]
+    old = BestRecognizer()
+    old.input_shape, old.registry = model.input_shape, model.registry
+    old.set_state(meta, arrays)
+    assert old.sae_ is None and old.sae_lambda == 0
+    plain = np.exp(dap - dap.max(1, keepdims=True))
+    assert np.allclose(old.novel_proba(x), plain / plain.sum(1, keepdims=True), atol=1e-6)
 
 
 def test_distance_offsets_are_blockwise_exact_and_finite():
