@@ -305,7 +305,7 @@ def main() -> int:
         p_dap = LinearAttributeModel.fit(z, attrs[y], BASE_C).predict_proba(zn)
         if args.verify and split.index == 0:
             from app.evaluation.protocol import make_recognizer
-            best = make_recognizer("best", None, 0).fit(train)
+            best = make_recognizer("best", {"sae_lambda": 0}, 0).fit(train)  # its DAP part alone
             p_best = best.add_novel_classes(list(split.novel_names), vectors,
                                             allow_known_vectors=True).novel_proba(xn)
             p_here = softmax(dap_log_scores(p_dap, vectors, prior, CLIP))

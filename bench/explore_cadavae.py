@@ -21,7 +21,7 @@ novel test trials that ``bench/explore_zsl.py`` and the evaluation protocol use.
 DAP here is ``best``'s zero-shot computed directly (same ``RobustInputScaler`` fitted on
 the flattened training trials, ``LinearAttributeModel`` with C = 0.1, prior = mean known
 vector, clip 0.02), without fitting the forest; ``--check-best`` asserts on the first
-split that it equals ``make_recognizer("best").novel_proba`` to 1e-6.
+split that it equals ``best``'s posterior without its autoencoder (``sae_lambda`` 0) to 1e-6.
 
 Protocols (``--protocol``):
 
@@ -300,7 +300,7 @@ def main() -> int:
         p_dap = dap_proba(z_tr, train.labels, train.class_attributes, z_ev, vectors)
         if args.check_best and n == 0 and args.protocol == "test":
             from app.evaluation.protocol import make_recognizer
-            best = make_recognizer("best", None, 0).fit(train)
+            best = make_recognizer("best", {"sae_lambda": 0}, 0).fit(train)  # its DAP part alone
             ref = best.add_novel_classes(list(split.novel_names), vectors, allow_known_vectors=True).novel_proba(xe)
             gap = float(np.abs(ref - p_dap).max())
             print(f"check-best: max |p_dap - best.novel_proba| = {gap:.2e}", file=sys.stderr)

@@ -126,7 +126,7 @@ def main() -> int:
     for seed, split in splits(data, args):
         t = time.perf_counter()
         train = split.train_dataset(data)
-        best = make_recognizer("best", None, 0).fit(train)
+        best = make_recognizer("best", {"sae_lambda": 0}, 0).fit(train)  # its DAP part alone
         xn = data.samples[split.novel_test_idx]
         yn = split.novel_labels(data, split.novel_test_idx)
         vectors = split.novel_attributes(data)
