@@ -172,8 +172,8 @@ def list_samples(
 
 
 def get_sample(session: Session, class_id: int, sample_id: int) -> Sample | None:
-    """The live sample ``sample_id`` of class ``class_id``."""
-    row = session.get(Sample, sample_id)
+    """The live sample ``sample_id`` of class ``class_id`` (its data left unread)."""
+    row = session.get(Sample, sample_id, options=[defer(Sample.data), defer(Sample.features)])
     live = row is not None and row.class_id == class_id and row.withdrawn_at is None
     return row if live else None
 
