@@ -67,12 +67,16 @@ class ClassList(BaseModel):
 
 
 # ------------------------------------------------------------------------ jobs
+JobStatus = Literal["queued", "running", "succeeded", "failed"]
+JobKind = Literal["register_class", "add_sample", "withdraw_class", "withdraw_sample"]
+
+
 class JobOut(BaseModel):
     model_config = ConfigDict(from_attributes=True)
 
     id: int
-    kind: Literal["register_class", "add_sample", "withdraw_class", "withdraw_sample"]
-    status: Literal["queued", "running", "succeeded", "failed"]
+    kind: JobKind
+    status: JobStatus
     class_id: int
     sample_id: int | None
     model_version: int | None = Field(
@@ -88,6 +92,11 @@ class JobOut(BaseModel):
         "it), `env:<hash prefix>` for a key from the environment, `addr:<ip>` while no keys "
         "exist; null for jobs older than this field."
     )
+
+
+class JobList(BaseModel):
+    jobs: list[JobOut]
+    next_after: int | None = NEXT_AFTER
 
 
 class ClassCreated(BaseModel):

@@ -307,6 +307,18 @@ def get_job(session: Session, job_id: int) -> Job | None:
     return session.get(Job, job_id)
 
 
+def list_jobs(
+    session: Session, after: int | None = None, limit: int | None = None, *,
+    status: str | None = None, kind: str | None = None, class_id: int | None = None,
+) -> list[Job]:
+    """Jobs by id, newest last; with ``after``, those after it; filtered by whatever is given."""
+    stmt = select(Job).order_by(Job.id).limit(limit)
+    for column, value in ((Job.id, after), (Job.status, status), (Job.kind, kind), (Job.class_id, class_id)):
+        if value is not None:
+            stmt = stmt.where(column > value if column is Job.id else column == value)
+    return list(session.scalars(stmt))
+
+
 def claim_queued_jobs(session: Session, worker_id: str) -> list[Job]:
     """Mark every queued job running for this worker and commit; returns them.
 

@@ -133,3 +133,33 @@ def test_a_shutdown_answers_waiting_robots_at_once_with_the_status_then(client, 
     assert job["status"] == "queued" and seconds < 15  # not the whole 20 s wait
     # a request that comes during the shutdown does not wait either
     assert client.get(f"/v1/jobs/{job_id}", params={"wait": 20}).json()["status"] == "queued"
+
+
+def test_jobs_are_listed_a_page_at_a_time_and_filtered(client, worker, dataset, sample):
+    vectors = unused_vectors(dataset, 3)
+    ids = {}
+    for i, name in enumerate(("a", "b", "c")):
+        r = client.post("/v1/classes", json={"name": name, "attribute_vector": vectors[i]})
+        ids[name] = (r.json()["class"]["id"], r.json()["job"]["id"])
+    r = client.post(f"/v1/classes/{ids['a'][0]}/samples", json={"sample": sample})
+    sample_job = r.json()["job"]["id"]
+    client.delete(f"/v1/classes/{ids['c'][0]}")  # c's registration will fail: withdrawn first
+    worker.run_once()
+
+    first = client.get("/v1/jobs", params={"limit": 2}).json()
+    rest = client.get("/v1/jobs", params={"after": first["next_after"]}).json()
+    everything = first["jobs"] + rest["jobs"]
+    assert [j["id"] for j in everything] == sorted(j["id"] for j in everything) and len(everything) == 5
+    assert rest["next_after"] is None
+
+    failed = client.get("/v1/jobs", params={"status": "failed"}).json()["jobs"]
+    assert [(j["id"], j["kind"]) for j in failed] == [(ids["c"][1], "register_class")]
+    assert "was withdrawn" in failed[0]["error"]
+    of_a = client.get("/v1/jobs", params={"class_id": ids["a"][0]}).json()["jobs"]
+    assert [j["id"] for j in of_a] == [ids["a"][1], sample_job]
+    samples = client.get("/v1/jobs", params={"kind": "add_sample", "status": "succeeded"}).json()["jobs"]
+    assert [j["id"] for j in samples] == [sample_job]
+    for bad in ({"status": "done"}, {"kind": "delete"}, {"class_id": 0}):
+        r = client.get("/v1/jobs", params=bad)
+        assert r.status_code == 422 and r.headers["content-type"] == PROBLEM, bad
+        assert r.json()["errors"][0]["field"] == next(iter(bad))

@@ -6,9 +6,9 @@ from fastapi.concurrency import run_in_threadpool
 from sqlalchemy.orm import Session
 
 from app.api import problems
-from app.api.deps import HolderDep, JobWatchDep, ReadAccess, RowId, SessionDep
+from app.api.deps import MAX_ROW_ID, HolderDep, JobWatchDep, PageDep, ReadAccess, RowId, SessionDep
 from app.api.problems import not_found
-from app.api.schemas import JobOut
+from app.api.schemas import JobKind, JobList, JobOut, JobStatus
 from app.store import repo
 from app.store.models import Job
 
@@ -31,6 +31,20 @@ def _read_job(session: Session, job_id: int) -> Job | None:
     job = repo.get_job(session, job_id)
     session.close()  # give the connection back: a waiting request must not hold one
     return job
+
+
+@router.get("", response_model=JobList)
+def list_jobs(
+    session: SessionDep, page: PageDep,
+    status: Annotated[JobStatus | None, Query(description="Only jobs in this status.")] = None,
+    kind: Annotated[JobKind | None, Query(description="Only jobs of this kind.")] = None,
+    class_id: Annotated[int | None, Query(ge=1, le=MAX_ROW_ID, description="Only jobs of this class.")] = None,
+) -> JobList:
+    """Jobs by id, a page at a time, e.g. ``?status=failed`` for the enrolments that did not
+    make it and why, or ``?class_id=`` for one class's history."""
+    rows = repo.list_jobs(session, page.after, page.limit + 1, status=status, kind=kind, class_id=class_id)
+    rows, next_after = page.cut(rows, lambda j: j.id)
+    return JobList(jobs=[JobOut.model_validate(j) for j in rows], next_after=next_after)
 
 
 @router.get("/{job_id}", response_model=JobOut)
