@@ -313,9 +313,11 @@ def list_jobs(
 ) -> list[Job]:
     """Jobs by id, newest last; with ``after``, those after it; filtered by whatever is given."""
     stmt = select(Job).order_by(Job.id).limit(limit)
-    for column, value in ((Job.id, after), (Job.status, status), (Job.kind, kind), (Job.class_id, class_id)):
+    if after is not None:
+        stmt = stmt.where(Job.id > after)
+    for column, value in ((Job.status, status), (Job.kind, kind), (Job.class_id, class_id)):
         if value is not None:
-            stmt = stmt.where(column > value if column is Job.id else column == value)
+            stmt = stmt.where(column == value)
     return list(session.scalars(stmt))
 
 
