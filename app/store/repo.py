@@ -12,7 +12,7 @@ from collections.abc import Iterable, Sequence
 from datetime import datetime
 
 import numpy as np
-from sqlalchemy import LargeBinary, delete, func, insert, select, update
+from sqlalchemy import LargeBinary, Row, delete, func, insert, select, update
 from sqlalchemy.orm import Session, aliased, defer, with_expression
 
 from app.framework.errors import BundleError
@@ -157,18 +157,19 @@ def samples_of(session: Session, class_ids: Sequence[int]) -> list[Sample]:
 
 def list_samples(
     session: Session, class_id: int, after: int | None = None, limit: int | None = None
-) -> list[tuple[int, str, int | None, datetime, str | None]]:
-    """(id, origin, trial, created_at, who enrolled it) of the class's live samples by id;
-    the sample data stay unread."""
+) -> list[Row]:
+    """Rows of ``id, origin, trial, created_at, enrolled_by`` (who added it) of the class's
+    live samples by id; the sample data stay unread."""
     enrolment = aliased(Job)
     stmt = (
-        select(Sample.id, Sample.origin, Sample.trial, Sample.created_at, enrolment.requested_by)
+        select(Sample.id, Sample.origin, Sample.trial, Sample.created_at,
+               enrolment.requested_by.label("enrolled_by"))
         .outerjoin(enrolment, (enrolment.sample_id == Sample.id) & (enrolment.kind == "add_sample"))
         .where(Sample.class_id == class_id, LIVE_SAMPLE).order_by(Sample.id).limit(limit)
     )
     if after is not None:
         stmt = stmt.where(Sample.id > after)
-    return [tuple(row) for row in session.execute(stmt)]
+    return list(session.execute(stmt))
 
 
 def get_sample(session: Session, class_id: int, sample_id: int) -> Sample | None:

@@ -51,7 +51,7 @@ class Enroller:
         self.statuses: dict[int, int] = {}
         self.stop = threading.Event()
 
-    def post(self, path: str, body: dict | None, method: str = "POST") -> httpx.Response | None:
+    def send(self, method: str, path: str, body: dict | None = None) -> httpx.Response | None:
         key = uuid.uuid4().hex
         for _attempt in range(200):  # a robot keeps retrying until some API answers
             try:
@@ -74,7 +74,7 @@ class Enroller:
         kept = sorted(set(self.sample_ids) - set(self.withdrawn))
         if kept and self.rng.random() < 0.1:  # a sample of the wrong object: withdrawn
             sid = self.rng.choice(kept)
-            r = self.post(f"/v1/classes/{self.sample_class[sid]}/samples/{sid}", None, "DELETE")
+            r = self.send("DELETE", f"/v1/classes/{self.sample_class[sid]}/samples/{sid}")
             if r is not None and r.status_code == 202:
                 self.withdrawn.append(sid)
             elif r is not None:
@@ -84,7 +84,7 @@ class Enroller:
         if not open_classes or (len(self.classes) < len(self.vectors) and self.rng.random() < 0.5):
             i = len(self.classes)
             name = f"crash-{i}-{uuid.uuid4().hex[:6]}"
-            r = self.post("/v1/classes", {"name": name, "attribute_vector": self.vectors[i]})
+            r = self.send("POST", "/v1/classes", {"name": name, "attribute_vector": self.vectors[i]})
             if r is not None and r.status_code == 202:
                 cid = r.json()["class"]["id"]
                 self.classes[cid] = name
@@ -94,7 +94,7 @@ class Enroller:
             return
         cid = self.rng.choice(open_classes)
         x = self.samples[self.rng.randrange(len(self.samples))]
-        r = self.post(f"/v1/classes/{cid}/samples", {"sample": x.tolist()})
+        r = self.send("POST", f"/v1/classes/{cid}/samples", {"sample": x.tolist()})
         if r is not None and r.status_code == 202:
             self.sample_ids.append(r.json()["sample_id"])
             self.sample_class[self.sample_ids[-1]] = cid

@@ -82,13 +82,13 @@ def register_class(
     key = repo.vector_key(vector)
     field = "attributes" if body.attributes is not None else "attribute_vector"
     cls = _failed_registration(session, body.name, key)
-    withdrawn = None if cls else repo.class_by_name(session, body.name, withdrawn=True)
     if cls is None:
         _check_unique(session, body.name, key, field)
     try:
-        if withdrawn is not None:
-            cls = repo.revive_class(session, withdrawn, key)
-        cls = cls or repo.add_class(session, body.name, key)
+        if cls is None:
+            withdrawn = repo.class_by_name(session, body.name, withdrawn=True)
+            cls = (repo.revive_class(session, withdrawn, key) if withdrawn is not None
+                   else repo.add_class(session, body.name, key))
         job = repo.add_job(session, "register_class", cls.id, requested_by=principal.id)
         vocab = repo.attribute_names(session)
         n = repo.sample_counts(session, [cls.id]).get(cls.id, 0)

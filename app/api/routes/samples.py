@@ -34,10 +34,8 @@ def list_samples(class_id: RowId, session: SessionDep, page: PageDep) -> SampleL
     if repo.get_class(session, class_id) is None:
         raise not_found("class", "class_id", class_id)
     rows, next_after = page.cut(repo.list_samples(session, class_id, page.after, page.limit + 1),
-                                lambda r: r[0])
-    fields = ("id", "origin", "trial", "created_at", "enrolled_by")
-    return SampleList(samples=[SampleOut(**dict(zip(fields, r, strict=True))) for r in rows],
-                      next_after=next_after)
+                                lambda r: r.id)
+    return SampleList(samples=[SampleOut(**r._mapping) for r in rows], next_after=next_after)
 
 
 @router.post(
