@@ -24,7 +24,8 @@ model both, learning from the known objects only; the last two change DAP's inpu
 - ``sae<s|f><λ>`` (session 8): the semantic autoencoder of Kodirov et al. (2017), matched
   in attribute space (``s``) or feature space (``f``). Seeds 1–2, 6 novel (DAP 0.446):
   alone 0.41–0.45 for every λ from 0.2 to 4000, × DAP 0.442–0.471 (s-space, rising with
-  λ to 0.459–0.471 for λ 5–1000); 12 novel (DAP 0.267): × DAP 0.268–0.276. ``saes400``
+  λ to 0.459–0.471 for λ 5–1000); 12 novel (DAP 0.267), 9 of those variants: × DAP
+  0.268–0.276. ``saes400``
   (× DAP 0.466 / 0.273) was then fixed and run on untouched seeds 3–4: DAP 0.403 → 0.447
   at 6 novel (paired +0.044 ± 0.041, 10 splits won, 0 lost) and 0.234 → 0.251 at 12
   (+0.017 ± 0.021, 10 won, 2 lost). Adopted into ``best`` (``sae_lambda``).
@@ -39,6 +40,8 @@ novel objects' held-out trials of development split seeds (never seed 0):
     .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches lda0.01,lda0.1,lda1
     .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 \
         --approaches saes0.2,saes1,saes5,saes25,saes100,saes400,saes1000,saes4000,saef0.2,saef1,saef5
+    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 12 \
+        --approaches saes1,saes5,saes25,saes100,saes400,saes1000,saes4000,saef1,saef5
     .venv/bin/python bench/explore_scorespace.py --seeds 3,4 --novel 6 --approaches saes400   # then --novel 12
 
 ``dap`` is plain DAP throughout: ``dev_splits`` fits ``best`` with ``sae_lambda`` 0.
