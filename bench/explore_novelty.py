@@ -24,6 +24,10 @@ scores, each a diagnostic on development seeds only:
 - ``prototype`` (session 8): 1 − the largest cosine similarity to a learned class
   prototype, in a small MLP embedding trained with a prototype (normalised-softmax)
   loss on the same scaled inputs, as issue 5 suggests;
+- ``attributes`` (session 9): how badly ``best``'s attribute classifiers' probabilities fit
+  the attribute vector of the forest's top known class (mean −log p(a_m = a^k_m | x)): a
+  known trial should have its own object's attributes, a novel object's may not match the
+  object it is mistaken for; ``attributes-any``: the best fit over all known classes;
 - ``best+<cue>·w``: each added to ``best``'s score after dividing it by its spread
   (interquartile range) on the training trials.
 
@@ -39,8 +43,20 @@ less well than the forest: with 8 trials per object, a linear or MLP embedding l
 from 432 samples does not generalise to unseen trials as the trees do (the MLP twin of
 the paper's network reaches 0.85 known accuracy, the forest 0.99). Not adopted.
 
+Measured (session 9; AUROC / oracle balance): seeds 1–2, 6 novel: attributes alone 0.7885 /
+0.7183, added at w = 0.005–0.03 0.9747–0.9762 / 0.9272–0.9352 (best at 0.02, against best's
+0.9731 / 0.9233); attributes-any alone 0.5828 / 0.5503, added at most 0.9744 / 0.9246.
+Seeds 1–2, 12 novel, at 0.02: 0.9818 / 0.9373 against 0.9807 / 0.9339. Fixed at w = 0.02 and
+run on untouched seeds 3–4: 6 novel 0.9867 / 0.9458 against 0.9861 / 0.9471 (the balance
+falls), 12 novel 0.9764 / 0.9234 against 0.9743 / 0.9192. Out of sample the gain shrinks to
+0.001–0.002 AUROC and the balance moves either way; not adopted.
+
     .venv/bin/python bench/explore_novelty.py --seeds 1,2 --novel 6 --cues phases,proximity
     .venv/bin/python bench/explore_novelty.py --seeds 1,2 --novel 6 --cues mahalanobis,prototype
+    .venv/bin/python bench/explore_novelty.py --seeds 1,2 --novel 6 --cues attributes,attributes-any
+    .venv/bin/python bench/explore_novelty.py --seeds 1,2 --novel 6 --cues attributes --weights 0.005,0.01,0.015,0.02,0.03
+    .venv/bin/python bench/explore_novelty.py --seeds 1,2 --novel 12 --cues attributes --weights 0.01,0.02,0.03
+    .venv/bin/python bench/explore_novelty.py --seeds 3,4 --novel 6 --cues attributes --weights 0.02   # then --novel 12
 """
 
 from __future__ import annotations
@@ -63,7 +79,6 @@ from app.data.phac2 import load_phac2  # noqa: E402
 from app.framework.registry import make_method  # noqa: E402
 from app.methods.known import flatten  # noqa: E402
 
-WEIGHTS = (0.02, 0.05, 0.1, 0.2)
 PHASES = 4  # PHAC-2's exploratory procedures, in the order of the flat features
 
 
@@ -123,6 +138,19 @@ def prototype_novelty(train_z, train_y, test_z, seed: int, epochs: int = 300,
         return 1 - cosines(torch.as_tensor(test_z, dtype=torch.float32)).max(1).values.numpy()
 
 
+def attribute_mismatch(model, z: np.ndarray, class_attributes: np.ndarray, clip: float = 0.02,
+                       top_class: bool = True) -> np.ndarray:
+    """Mean −log p(a_m = a^k_m | x) of ``best``'s attribute classifiers against the attribute
+    vector of the forest's top known class k (``top_class``), or of the best-matching one."""
+    p = np.clip(model.attributes_.predict_proba(z), clip, 1 - clip)  # (N, M)
+    a = class_attributes  # (K, M)
+    nll = -(np.log(p) @ a.T + np.log1p(-p) @ (1 - a).T) / a.shape[1]  # (N, K)
+    if not top_class:
+        return nll.min(axis=1)
+    top = model.known_.cues_model.proba(z).argmax(axis=1)
+    return nll[np.arange(len(z)), top]
+
+
 def spread(values: np.ndarray) -> float:
     q1, q3 = np.percentile(values, [25, 75])
     return float(q3 - q1) or 1.0
@@ -139,11 +167,14 @@ def main() -> int:
     add_split_arguments(ap)
     ap.add_argument("--trees", type=int, default=100)
     ap.add_argument("--cues", default="mahalanobis,prototype",
-                    help="comma-separated: phases, proximity, mahalanobis, prototype")
+                    help="comma-separated: phases, proximity, mahalanobis, prototype, attributes, attributes-any")
+    ap.add_argument("--weights", default="0.02,0.05,0.1,0.2",
+                    help="comma-separated weights w of each cue added to best's score")
     args = ap.parse_args()
+    weights = [float(w) for w in args.weights.split(",")]
     dataset = load_phac2(args.data)
     cues = args.cues.split(",")
-    names = ["best"] + [n for c in cues for n in [c] + [f"best+{c}*{w}" for w in WEIGHTS]]
+    names = ["best"] + [n for c in cues for n in [c] + [f"best+{c}*{w}" for w in weights]]
     auroc: dict[str, list[float]] = {n: [] for n in names}
     oracle: dict[str, list[float]] = {n: [] for n in names}
     print(f"{args.novel} novel objects, seeds {args.seeds}: AUROC / oracle balance per split")
@@ -171,9 +202,13 @@ def main() -> int:
             elif cue == "prototype":
                 both = prototype_novelty(z, train.labels, np.concatenate([zt, z]), seed)
                 scores[cue], weight = both[:len(x)], 1 / spread(both[len(x):])
+            elif cue in ("attributes", "attributes-any"):
+                both = attribute_mismatch(model, np.concatenate([zt, z]), train.class_attributes,
+                                          top_class=cue == "attributes")
+                scores[cue], weight = both[:len(x)], 1 / spread(both[len(x):])
             else:
                 raise SystemExit(f"unknown cue {cue!r}")
-            for w in WEIGHTS:
+            for w in weights:
                 scores[f"best+{cue}*{w}"] = scores["best"] + w * weight * scores[cue]
         line = []
         for n in names:

@@ -29,6 +29,35 @@ model both, learning from the known objects only; the last two change DAP's inpu
   (× DAP 0.466 / 0.273) was then fixed and run on untouched seeds 3–4: DAP 0.403 → 0.447
   at 6 novel (paired +0.044 ± 0.041, 10 splits won, 0 lost) and 0.234 → 0.251 at 12
   (+0.017 ± 0.021, 10 won, 2 lost). Adopted into ``best`` (``sae_lambda``).
+- ``bag<B>`` (session 9): DAP with each attribute's probability averaged over B logistic
+  regressions, each fitted on a random 80 % of the known objects (an ensemble over object
+  subsets). Seeds 1–2, 6 novel: bag20 alone 0.433, × DAP 0.446 (DAP 0.446); with the SAE
+  (``saes400+bag20``, scores summed) 0.466 alone and 0.459 × DAP, against DAP × SAE's
+  0.466. No gain; not adopted.
+
+- ``saes<λ>@<T>`` (session 9): the SAE's temperature T (10 in ``best``). Seeds 1–2, 6 novel,
+  × DAP: T = 5 0.458, 10 0.466, 15 0.466, 20 0.464, 30 0.462. 10 stays.
+- ``ksae<λ>@<γ>`` (session 9): the SAE on 400 Nyström features of an RBF kernel (γ / D).
+  Seeds 1–2, 6 novel: λ 100 / 400 / 1000 at γ 1 alone 0.403–0.405, × DAP 0.426; γ 0.3
+  0.443 / 0.438; beside the linear SAE (``saes400+ksae400@1``) 0.439 / 0.440, against the
+  linear SAE's 0.444 / 0.466. A non-linear map overfits the 54 objects; not adopted.
+
+- ``dap-C<C>``, ``dap-k<clip>``, ``dap-p<exponent>``, ``dap-fisher`` (session 9): DAP's own
+  settings again, now beside the SAE (``+saes400``; alone / with the SAE). Seeds 1–2, 6 novel
+  (DAP 0.446, DAP + SAE 0.466): C 0.03 / 0.3 / 1: 0.427 / 0.433 / 0.423, with the SAE 0.462 /
+  0.451 / 0.430; clip 0.05 / 0.1: 0.431 / 0.407, with the SAE 0.456 / 0.447; inputs weighted by
+  their Fisher ratio 0.451, with the SAE 0.447; the prior p(a) divided out with exponent 0 /
+  0.5 (DAP: 1): 0.460 / 0.462, with the SAE 0.483 / 0.474. At 12 novel (DAP 0.267, DAP + SAE
+  0.273) the prior exponents 0 / 0.5 give 0.237 / 0.266 alone and 0.260 / 0.273 with the SAE:
+  what dropping the prior wins with 6 novel objects it loses with 12. Nothing adopted.
+
+- ``ep-dap``, ``ep-sae`` (session 9): one DAP or SAE per exploratory procedure (squeeze,
+  hold, slide, move down), their scores summed: experts whose errors come from different
+  touches. Seeds 1–2, 6 novel: alone 0.403 / 0.429, × DAP 0.423 / 0.452; ``ep-sae+saes400``
+  × DAP 0.462 and ``ep-dap+ep-sae`` × DAP 0.454, against DAP × SAE's 0.466. Not adopted.
+
+Approaches joined by ``+`` are summed (their posteriors multiplied) before scoring, so
+``saes400+bag20`` with "× DAP" is the product of all three.
 
 Each is reported alone and as a product with DAP (``best``'s zero-shot), on the
 novel objects' held-out trials of development split seeds (never seed 0):
@@ -43,6 +72,18 @@ novel objects' held-out trials of development split seeds (never seed 0):
     .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 12 \
         --approaches saes1,saes5,saes25,saes100,saes400,saes1000,saes4000,saef1,saef5
     .venv/bin/python bench/explore_scorespace.py --seeds 3,4 --novel 6 --approaches saes400   # then --novel 12
+    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches saes400,bag20,saes400+bag20
+    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 \
+        --approaches saes400@5,saes400,saes400@15,saes400@20,saes400@30
+    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 \
+        --approaches saes400,ksae400@1,ksae400@0.3,ksae100@1,ksae1000@1,saes400+ksae400@1
+    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches saes400,dap-C0.03,\
+dap-C0.03+saes400,dap-C0.3,dap-C0.3+saes400,dap-C1,dap-C1+saes400,dap-k0.05,dap-k0.05+saes400,\
+dap-k0.1,dap-k0.1+saes400,dap-p0,dap-p0+saes400,dap-p0.5,dap-p0.5+saes400,dap-fisher,dap-fisher+saes400
+    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 12 \
+        --approaches saes400,dap-p0,dap-p0+saes400,dap-p0.5,dap-p0.5+saes400
+    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 \
+        --approaches saes400,ep-dap,ep-sae,ep-dap+saes400,ep-sae+saes400,ep-dap+ep-sae
 
 ``dap`` is plain DAP throughout: ``dev_splits`` fits ``best`` with ``sae_lambda`` 0.
 """
@@ -183,6 +224,63 @@ def sae(z, y, attrs, z_test, vectors, lam: float, space: str):
     return 10 * unit(z_test) @ unit(vectors @ w).T
 
 
+def bagged_dap(z, y, attrs, z_test, vectors, bags: int, args, share: float = 0.8):
+    """DAP whose attribute probabilities are averaged over ``bags`` classifiers, each fitted
+    on the trials of a random ``share`` of the known objects: an ensemble over object
+    subsets, so that no single object's quirks decide an attribute."""
+    from app.methods.attributes import dap_log_scores
+
+    rng = np.random.default_rng(0)
+    classes = np.unique(y)
+    p = 0.0
+    for _ in range(bags):
+        keep = np.isin(y, rng.choice(classes, int(round(share * len(classes))), replace=False))
+        p = p + LinearAttributeModel.fit(z[keep], attrs[y[keep]], args.C).predict_proba(z_test)
+    return dap_log_scores(p / bags, vectors, attrs.mean(0), args.clip)
+
+
+def kernel_sae(z, y, attrs, z_test, vectors, lam: float, gamma: float, components: int = 400):
+    """The SAE on an RBF kernel's Nyström features of the scaled inputs (γ relative to 1/D):
+    a non-linear map from touch to attributes, regularised by the same reconstruction."""
+    from sklearn.kernel_approximation import Nystroem
+
+    phi = Nystroem(gamma=gamma / z.shape[1], n_components=min(components, len(z)), random_state=0).fit(z)
+    f, ft = phi.transform(z), phi.transform(z_test)
+    mean, std = f.mean(0), f.std(0) + 1e-9
+    return sae((f - mean) / std, y, attrs, (ft - mean) / std, vectors, lam, "s")
+
+
+def dap_variant(z, y, attrs, z_test, vectors, C: float, clip: float, prior: float, fisher: bool):
+    """DAP with another C, probability clip, prior exponent (1: divide by p(a) as DAP does,
+    0: no prior) or, with ``fisher``, on inputs weighted by how well each tells the known
+    objects apart (between- over within-object variance, as ``best``'s distances are)."""
+    from app.methods.attributes import dap_log_scores
+    from app.methods.known import fisher_weights
+
+    if fisher:
+        w = fisher_weights(z, y, int(y.max()) + 1)
+        z, z_test = z * w, z_test * w
+    p = LinearAttributeModel.fit(z, attrs[y], C).predict_proba(z_test)
+    full = dap_log_scores(p, vectors, attrs.mean(0), clip)
+    flat = dap_log_scores(p, vectors, np.full(attrs.shape[1], 0.5), clip)  # a flat prior adds nothing
+    return prior * full + (1 - prior) * flat
+
+
+def per_procedure(z, y, attrs, z_test, vectors, kind: str, args, procedures: int = 4):
+    """The sum over exploratory procedures of one model per procedure (DAP or the SAE on that
+    procedure's features alone): experts whose errors come from different touches."""
+    from app.methods.attributes import dap_log_scores
+
+    total = 0.0
+    for part in np.split(np.arange(z.shape[1]), procedures):
+        if kind == "sae":
+            total = total + sae(z[:, part], y, attrs, z_test[:, part], vectors, 400, "s")
+        else:
+            p = LinearAttributeModel.fit(z[:, part], attrs[y], args.C).predict_proba(z_test[:, part])
+            total = total + dap_log_scores(p, vectors, attrs.mean(0), args.clip)
+    return total
+
+
 def twins(known_p: np.ndarray, attrs: np.ndarray, vectors: np.ndarray, sharpness: float) -> np.ndarray:
     """log Σ_k p(k | x) exp(-sharpness · hamming(a^z, a^k)): a novel class feels like the
     known objects that people describe alike."""
@@ -190,6 +288,42 @@ def twins(known_p: np.ndarray, attrs: np.ndarray, vectors: np.ndarray, sharpness
     kernel = np.exp(-sharpness * hamming)
     kernel /= kernel.sum(1, keepdims=True)
     return np.log(known_p @ kernel.T + 1e-12)
+
+
+def one_approach(approach: str, case, args) -> np.ndarray:
+    """The (N, novel classes) log-scores of one approach on one case."""
+    z, zt, y, vectors = case.z, case.zt, case.train.labels, case.vectors
+    attrs = case.train.class_attributes.astype(np.float64)
+    if approach in ("asg", "asg-diag"):
+        return asg(z, y, attrs, zt, vectors, args, approach == "asg-diag")
+    elif approach == "flg":
+        return flg(z, y, attrs, zt, vectors, args)
+    elif approach in ("znorm", "zmean"):
+        return class_norm(z, y, attrs, zt, vectors, args, approach == "znorm")
+    elif approach.startswith("lda"):
+        return lda_dap(z, y, attrs, zt, vectors, float(approach[3:] or 0.1), args)
+    elif approach.startswith("svm"):
+        return svm_dap(z, y, attrs, zt, vectors, float(approach[3:] or 1), args)
+    elif approach.startswith("sae"):  # sae<s|f><λ>[@temperature], e.g. saes1, saef0.2, saes400@20
+        lam, _, temperature = approach[4:].partition("@")
+        return sae(z, y, attrs, zt, vectors, float(lam or 1), approach[3]) * float(temperature or 10) / 10
+    elif approach.startswith("ksae"):  # ksae<λ>[@γ], e.g. ksae400@1
+        lam, _, gamma = approach[4:].partition("@")
+        return kernel_sae(z, y, attrs, zt, vectors, float(lam or 400), float(gamma or 1))
+    elif approach.startswith("dap-"):  # dap-C<C>, dap-k<clip>, dap-p<prior exponent>, dap-fisher
+        options = {"C": args.C, "k": args.clip, "p": 1.0}
+        key = approach[4]
+        if approach != "dap-fisher":
+            options[key] = float(approach[5:])
+        return dap_variant(z, y, attrs, zt, vectors, options["C"], options["k"], options["p"],
+                           approach == "dap-fisher")
+    elif approach in ("ep-dap", "ep-sae"):
+        return per_procedure(z, y, attrs, zt, vectors, approach[3:], args)
+    elif approach.startswith("twins"):
+        return twins(case.cues.proba(zt), attrs, vectors, float(approach[5:] or 2))
+    elif approach.startswith("bag"):  # bag<bags>, e.g. bag20
+        return bagged_dap(z, y, attrs, zt, vectors, int(approach[3:] or 20), args)
+    raise SystemExit(f"unknown approach {approach!r}")
 
 
 def main() -> int:
@@ -205,26 +339,9 @@ def main() -> int:
     data = load_phac2(args.data)
     cases = []
     for case in zsl_cases(data, args):
-        z, zt, y, vectors = case.z, case.zt, case.train.labels, case.vectors
-        attrs = case.train.class_attributes.astype(np.float64)
-        for approach in args.approaches.split(","):
-            if approach in ("asg", "asg-diag"):
-                scores = asg(z, y, attrs, zt, vectors, args, approach == "asg-diag")
-            elif approach == "flg":
-                scores = flg(z, y, attrs, zt, vectors, args)
-            elif approach in ("znorm", "zmean"):
-                scores = class_norm(z, y, attrs, zt, vectors, args, approach == "znorm")
-            elif approach.startswith("lda"):
-                scores = lda_dap(z, y, attrs, zt, vectors, float(approach[3:] or 0.1), args)
-            elif approach.startswith("svm"):
-                scores = svm_dap(z, y, attrs, zt, vectors, float(approach[3:] or 1), args)
-            elif approach.startswith("sae"):  # sae<s|f><λ>, e.g. saes1, saef0.2
-                scores = sae(z, y, attrs, zt, vectors, float(approach[4:] or 1), approach[3])
-            elif approach.startswith("twins"):
-                scores = twins(case.cues.proba(zt), attrs, vectors, float(approach[5:] or 2))
-            else:
-                raise SystemExit(f"unknown approach {approach!r}")
-            case.record(approach, scores)
+        for combo in args.approaches.split(","):
+            scores = sum(one_approach(approach, case, args) for approach in combo.split("+"))
+            case.record(combo, scores)
         case.finish()
         cases.append(case)
     print_zsl_means(cases, args)

@@ -12,7 +12,8 @@ recognitions with that model version), idle and while the single-sample load run
 time the hypervisor gave to other guests meanwhile (on a shared VM, a phase with high steal
 measured the neighbours, not the service), and ``cpu_us_per_request``, the CPU time each
 process (every API, the worker, this load generator) spent per answered request: where a
-2-core budget goes. ``--phases single,batch`` skips the enrollment phases; ``--phases enroll,reads``
+2-core budget goes. After the phases, ``resident_mb`` gives each process's resident memory
+(a multi-process `serve` lists its own, then each API process's). ``--phases single,batch`` skips the enrollment phases; ``--phases enroll,reads``
 also measures the read endpoints that clients poll (jobs, active model, readiness).
 Only 127.0.0.1 is ever targeted.
 """
@@ -66,21 +67,38 @@ def steal_pct(before: list[int] | None, after: list[int] | None) -> float | None
     return round(100 * delta[7] / sum(delta), 1) if sum(delta) else 0.0
 
 
+def child_pids(pid: int) -> list[int]:
+    """The processes ``pid`` started (OSError off Linux or once it is gone)."""
+    kids = []
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        with open(f"/proc/{pid}/task/{tid}/children") as f:
+            kids += [int(c) for c in f.read().split()]
+    return kids
+
+
 def process_cpu_s(pid: int, children: bool = True) -> float | None:
     """CPU seconds (user + system) a process has used so far, with its children's (the API
     processes of a multi-process `serve`) unless ``children`` is False; None off Linux."""
     try:
         with open(f"/proc/{pid}/stat") as f:
             fields = f.read().rpartition(")")[2].split()
-        kids = []
-        if children:
-            for tid in os.listdir(f"/proc/{pid}/task"):
-                with open(f"/proc/{pid}/task/{tid}/children") as f:
-                    kids += [int(c) for c in f.read().split()]
+        kids = child_pids(pid) if children else []
     except OSError:
         return None
     own = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
     return own + sum(process_cpu_s(k) or 0.0 for k in kids)
+
+
+def resident_mb(pid: int) -> list[float] | None:
+    """Resident memory (VmRSS, MB) of a process, then of each of its children (the API
+    processes of a multi-process `serve`); None off Linux."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            rss = next(int(line.split()[1]) for line in f if line.startswith("VmRSS:"))
+        kids = child_pids(pid)
+    except (OSError, StopIteration):
+        return None
+    return [round(rss / 1024, 1)] + [m for k in kids for m in resident_mb(k) or []]
 
 
 def cpu_per_request(pids: dict[str, int], before: dict, after: dict, requests: int) -> dict:
@@ -285,6 +303,7 @@ async def run(cluster: Cluster, seconds: float, clients: int, batch: int, datase
         out.update(await enrollment_phases(urls, clients, single, dataset_name, poll, pids))
     if "reads" in phases:  # last: after an enrolment there is a job to poll
         out["reads"] = await reads(urls, seconds, pids)
+    out["resident_mb"] = {name: resident_mb(pid) for name, pid in pids.items()}  # after the load
     return out
 
 

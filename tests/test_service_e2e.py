@@ -144,6 +144,23 @@ def test_robot_session_survives_a_restart(tmp_path):
             assert job["status"] == "succeeded", job
             before = snapshot(client)
             assert before["models"][-1]["active"] and len(before["models"]) == 3
+
+            # before it drives out of the network, the robot takes the active model along
+            # and recognises offline with the same answers
+            version = client.get("/v1/models/active").json()["version"]
+            r = client.get(f"/v1/models/{version}/bundle")
+            assert r.status_code == 200, r.text
+            (tmp_path / "robot.bundle").write_bytes(r.content)
+            np.save(tmp_path / "touches.npy", np.stack([touch, samples[3]]))
+            online = client.post("/v1/recognize", json={"samples": [touch.tolist(), samples[3].tolist()]})
+            offline = subprocess.run(
+                [*tactile_zsl(), "recognize", "--model", str(tmp_path / "robot.bundle"),
+                 str(tmp_path / "touches.npy")], capture_output=True, text=True, timeout=120)
+            assert offline.returncode == 0, offline.stderr
+            assert [a["class_name"] for a in json.loads(offline.stdout)["results"]] == [
+                a["class_name"] for a in online.json()["results"]]
+            assert client.get(f"/v1/models/{version}/bundle",
+                              headers={"If-None-Match": r.headers["etag"]}).status_code == 304
             assert [c for c in before["classes"] if c["id"] == teapot][0]["n_samples"] == 1
 
         service.stop()

@@ -37,16 +37,11 @@ from app.framework.errors import FrameworkError
 from app.framework.novelty import novelty_validation_split, tune_threshold
 from app.framework.recognizer import TactileRecognizer
 from app.framework.scaling import RobustInputScaler
+from app.methods.attributes import softmax
 
 
 def flatten(samples: np.ndarray) -> np.ndarray:
     return np.asarray(samples, dtype=np.float32).reshape(len(samples), -1)
-
-
-def softmax(logits: np.ndarray) -> np.ndarray:
-    z = logits - logits.max(axis=1, keepdims=True)
-    e = np.exp(z)
-    return e / e.sum(axis=1, keepdims=True)
 
 
 def _check(cond: bool, message: str) -> None:

@@ -25,8 +25,9 @@ from scipy.optimize import minimize
 from scipy.special import expit
 from sklearn.ensemble import ExtraTreesClassifier
 
-from app.baselines.common import ForestBaseline, _check, softmax, validation_folds
+from app.baselines.common import ForestBaseline, _check, validation_folds
 from app.data.dataset import TactileDataset
+from app.methods.attributes import dap_log_scores, softmax
 
 ATTRIBUTE_MODELS = ("logistic", "extratrees")
 C_GRID = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0)
@@ -112,18 +113,6 @@ def fit_logistic(
     theta0 = np.zeros(d * m + m) if init is None else np.concatenate([np.ravel(init[0]), init[1]])
     res = minimize(loss_grad, theta0, jac=True, method="L-BFGS-B", options={"maxiter": max_iter})
     return res.x[: d * m].reshape(d, m), res.x[d * m :]
-
-
-def dap_log_scores(
-    attr_proba: np.ndarray, class_attributes: np.ndarray, prior: np.ndarray, clip: float
-) -> np.ndarray:
-    """(N, L) log ∏_m p(a_m = a^z_m | x) / p(a_m = a^z_m) for L class vectors."""
-    p = np.clip(attr_proba, clip, 1 - clip)
-    q = np.clip(prior, clip, 1 - clip)
-    a = (np.asarray(class_attributes) > 0.5).astype(np.float64)
-    log_like = np.log(p) @ a.T + np.log1p(-p) @ (1 - a).T
-    log_prior = np.log(q) @ a.T + np.log1p(-q) @ (1 - a).T
-    return log_like - log_prior[None, :]
 
 
 class DAPRecognizer(ForestBaseline):

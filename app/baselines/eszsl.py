@@ -22,8 +22,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from app.baselines.common import ForestBaseline, _check, softmax, validation_folds
+from app.baselines.common import ForestBaseline, _check, validation_folds
 from app.data.dataset import TactileDataset
+from app.methods.attributes import softmax
 
 GAMMA_GRID = (1e-1, 1.0, 1e1, 1e2, 1e3, 1e4)
 LAMBDA_GRID = (1e-2, 1e-1, 1.0, 1e1, 1e2, 1e3)

@@ -10,7 +10,7 @@ import argparse
 import importlib
 import sys
 
-SUBCOMMANDS = ["train", "evaluate", "serve", "worker", "apikey", "store"]
+SUBCOMMANDS = ["train", "evaluate", "recognize", "serve", "worker", "apikey", "store"]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -143,10 +143,19 @@ def _contents(model: TactileRecognizer) -> tuple[dict[str, Any], dict[str, np.nd
 def _zip(manifest: dict[str, Any], all_arrays: dict[str, np.ndarray]) -> bytes:
     out = io.BytesIO()
     with zipfile.ZipFile(out, "w") as zf:
-        zf.writestr(_MANIFEST, json.dumps(manifest, default=_json_default),
+        zf.writestr(_entry(_MANIFEST), json.dumps(manifest, default=_json_default),
                     compress_type=zipfile.ZIP_DEFLATED)
-        zf.writestr(_ARRAYS, _npz(all_arrays))  # its members are compressed where it pays
+        zf.writestr(_entry(_ARRAYS), _npz(all_arrays))  # its members are compressed where it pays
     return out.getvalue()
+
+
+def _entry(name: str) -> zipfile.ZipInfo:
+    """A zip member stamped with a fixed time, not the clock's: the same model gives the
+    same bytes, so a download's strong ETag names its content (the manifest keeps the
+    real creation time)."""
+    info = zipfile.ZipInfo(name, date_time=(1980, 1, 1, 0, 0, 0))
+    info.external_attr = 0o600 << 16  # what ``writestr`` gives a member named by a string
+    return info
 
 
 def _npz(arrays: dict[str, np.ndarray]) -> bytes:
@@ -158,7 +167,7 @@ def _npz(arrays: dict[str, np.ndarray]) -> bytes:
     with zipfile.ZipFile(out, "w") as zf:
         for name, array in arrays.items():
             data = _npy(array)
-            zf.writestr(name + ".npy", data, compress_type=zipfile.ZIP_DEFLATED if _compressible(data)
+            zf.writestr(_entry(name + ".npy"), data, compress_type=zipfile.ZIP_DEFLATED if _compressible(data)
                         else zipfile.ZIP_STORED, compresslevel=1)
     return out.getvalue()
 
@@ -180,21 +189,9 @@ def from_bytes(data: bytes, part: Callable[[str], np.ndarray] | None = None) -> 
     A split bundle's head needs ``part``, which returns the array of a part given its
     SHA-256 (raising BundleError when it cannot).
     """
+    manifest, npz_bytes = _unzip(data)
     try:
-        with zipfile.ZipFile(io.BytesIO(data)) as zf:
-            manifest = json.loads(zf.read(_MANIFEST))
-            npz_bytes = zf.read(_ARRAYS)
-    except (zipfile.BadZipFile, KeyError, json.JSONDecodeError, OSError, EOFError) as exc:
-        raise BundleError(f"not a readable model bundle: {exc}") from None
-    version = manifest.get("format_version")
-    if version != FORMAT_VERSION:
-        raise BundleError(
-            f"bundle format version {version!r} is not supported (this build reads {FORMAT_VERSION}); "
-            "retrain the model with this version"
-        )
-    try:
-        with np.load(io.BytesIO(npz_bytes), allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
+        arrays = _unnpz(npz_bytes)
         refs = manifest.get("parts") or {}
         if refs and part is None:
             raise BundleError(f"this bundle keeps {len(refs)} arrays in parts of a model store; "
@@ -229,6 +226,43 @@ def from_bytes(data: bytes, part: Callable[[str], np.ndarray] | None = None) -> 
     return model
 
 
+def join(data: bytes, part: Callable[[str], np.ndarray]) -> bytes:
+    """A split bundle's head and its parts as one self-contained bundle, the manifest (its
+    creation time included) kept as it was: what a robot downloads to recognise offline.
+    ``part`` returns the array of a part given its SHA-256."""
+    manifest, npz_bytes = _unzip(data)
+    try:
+        arrays = _unnpz(npz_bytes)
+    except (ValueError, OSError, EOFError) as exc:
+        raise BundleError(f"bundle is incomplete or inconsistent: {type(exc).__name__}: {exc}") from None
+    refs = manifest.pop("parts", None) or {}
+    arrays.update({name: part(sha) for name, sha in refs.items()})
+    return _zip(manifest, arrays)
+
+
+def _unzip(data: bytes) -> tuple[dict[str, Any], bytes]:
+    """The manifest of bundle bytes, checked for this build's format version, and the
+    bytes of its ``arrays.npz``."""
+    try:
+        with zipfile.ZipFile(io.BytesIO(data)) as zf:
+            manifest = json.loads(zf.read(_MANIFEST))
+            npz_bytes = zf.read(_ARRAYS)
+    except (zipfile.BadZipFile, KeyError, json.JSONDecodeError, OSError, EOFError) as exc:
+        raise BundleError(f"not a readable model bundle: {exc}") from None
+    version = manifest.get("format_version")
+    if version != FORMAT_VERSION:
+        raise BundleError(
+            f"bundle format version {version!r} is not supported (this build reads {FORMAT_VERSION}); "
+            "retrain the model with this version"
+        )
+    return manifest, npz_bytes
+
+
+def _unnpz(npz_bytes: bytes) -> dict[str, np.ndarray]:
+    with np.load(io.BytesIO(npz_bytes), allow_pickle=False) as npz:
+        return {k: npz[k] for k in npz.files}
+
+
 def save(model: TactileRecognizer, path: str | os.PathLike) -> str:
     """Write the bundle atomically; returns its SHA-256 (content address)."""
     data = to_bytes(model)
@@ -241,6 +275,38 @@ def load(path: str | os.PathLike) -> TactileRecognizer:
     if not p.is_file():
         raise BundleError(f"no model bundle at {p}")
     return from_bytes(p.read_bytes())
+
+
+class BundleFile:
+    """A bundle file that is read again whenever it is replaced (a sync renames a new file
+    over it): ``load`` returns the model and whether it was read just now. When a changed
+    file cannot be read, the error propagates once and the model read before stays."""
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.path = Path(path)
+        self.model: TactileRecognizer | None = None
+        self.sha256: str | None = None  # of the bytes the model was read from
+        self._stamp: tuple[int, int, int] | None = None
+
+    def load(self) -> tuple[TactileRecognizer, bool]:
+        stamp = _file_stamp(self.path)
+        if self.model is not None and stamp == self._stamp:
+            return self.model, False
+        self._stamp = stamp  # a file that fails is not tried again until it changes
+        if stamp is None:
+            raise BundleError(f"no model bundle at {self.path}")
+        data = self.path.read_bytes()
+        self.model, self.sha256 = from_bytes(data), hashlib.sha256(data).hexdigest()
+        return self.model, True
+
+
+def _file_stamp(path: Path) -> tuple[int, int, int] | None:
+    """What tells a replaced file from the one read before (None while there is none)."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return st.st_ino, st.st_mtime_ns, st.st_size
 
 
 def write_atomic(path: Path, data: bytes) -> None:

@@ -22,9 +22,11 @@ from app.framework.generator import build_generator, noisy
 from app.framework.novelty import GMMNoveltyDetector, novelty_validation_split, tune_threshold
 from app.framework.one_shot import one_shot_training_set
 from app.framework.recognizer import TactileRecognizer
-from app.framework.runtime import configure_torch_threads  # noqa: F401  (sets torch threads)
+from app.framework.runtime import configure_torch
 from app.framework.scaling import RobustInputScaler
 from app.framework.synthesis import generate_features, nearest_real_features
+
+configure_torch()  # one thread unless TACTILE_TORCH_THREADS or serve's settings say otherwise
 
 SYNTHESIS = ("neighbf", "genf")
 GENERATORS = ("adversarial", "alg1")

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import copy
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, NamedTuple, Self
 
@@ -81,6 +81,21 @@ class RecognitionBatch:
     def is_novel_class(self) -> np.ndarray:
         """(N,) bool: the answer is a novel class (FC_Z), not a known one (FC_Y)."""
         return self.top_index[:, 0] >= self.n_known
+
+    def records(self, class_ids: Mapping[str, int | None] | None = None) -> list[dict[str, Any]]:
+        """The answers as JSON-ready dicts, in the shape of ``POST /v1/recognize``'s results;
+        with ``class_ids`` (class name → the store's id) every class named carries its
+        ``class_id`` too. Built straight from the arrays: building pydantic models first cost
+        more than the forward pass of a sample."""
+        names, kinds = self.class_names, self.class_kinds
+        label = ([{"class_name": n} for n in names] if class_ids is None
+                 else [{"class_id": class_ids.get(n), "class_name": n} for n in names])
+        return [
+            dict(label[idx[0]], kind=kinds[idx[0]], is_novel=novel, novelty_score=score,
+                 top_k=[dict(label[j], probability=q) for j, q in zip(idx, top_p, strict=True) if j >= 0])
+            for idx, top_p, novel, score in zip(self.top_index.tolist(), self.top_probability.tolist(),
+                                                self.is_novel.tolist(), self.novelty_score.tolist(), strict=True)
+        ]
 
     def answers(self) -> list[Recognition]:
         names, kinds = self.class_names, self.class_kinds

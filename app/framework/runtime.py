@@ -6,23 +6,51 @@ intra-op threads mostly add contention with the API and other processes on a
 560 ms with 2; the best method's nearest-trial distances 0.6 ms per 32 samples
 with 1 BLAS thread, 4 ms with 2). The default is therefore one thread for both;
 TACTILE_TORCH_THREADS overrides it.
+
+Torch is imported only by the methods that use it (the paper's pipeline): a process
+that serves ``best`` never loads it, which saves a second and a few hundred MB.
 """
 
 from __future__ import annotations
 
 import os
+import sys
 
-import torch
 from threadpoolctl import threadpool_limits
 
+_threads: int | None = None  # what the process was configured with; None: not yet
 
-def configure_torch_threads(threads: int | None = None) -> int:
-    n = threads if threads is not None else int(os.environ.get("TACTILE_TORCH_THREADS", "1"))
-    if n > 0 and torch.get_num_threads() != n:
+
+def configure_threads(threads: int | None = None) -> int:
+    """Limit numpy's BLAS, and torch once it is loaded, to ``threads`` (default:
+    TACTILE_TORCH_THREADS, else 1; 0 leaves the libraries' own defaults)."""
+    global _threads
+    _threads = threads if threads is not None else int(os.environ.get("TACTILE_TORCH_THREADS", "1"))
+    if _threads > 0:
+        threadpool_limits(_threads, user_api="blas")  # numpy's BLAS, for the whole process
+        # and the BLAS libraries loaded later (numba's first compile loads scipy's)
+        for name in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ[name] = str(_threads)
+        if "torch" in sys.modules:
+            _set_torch_threads(_threads)
+    return _threads
+
+
+def ensure_threads_configured() -> None:
+    """The default configuration, unless the process chose one already (``serve`` does)."""
+    if _threads is None:
+        configure_threads()
+
+
+def configure_torch() -> None:
+    """For the modules that use torch, at their import: torch gets the process's threads."""
+    ensure_threads_configured()
+    if _threads:
+        _set_torch_threads(_threads)
+
+
+def _set_torch_threads(n: int) -> None:
+    import torch
+
+    if torch.get_num_threads() != n:
         torch.set_num_threads(n)
-    if n > 0:
-        threadpool_limits(n, user_api="blas")  # numpy's BLAS, for the whole process
-    return torch.get_num_threads()
-
-
-configure_torch_threads()

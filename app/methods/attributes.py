@@ -12,11 +12,25 @@ alone, and the prior p(a_m = 1) the mean of the known classes' vectors.
 from __future__ import annotations
 
 import numpy as np
-from sklearn.linear_model import LogisticRegression
 
-# DAP scoring and the softmax are the DAP baseline's own; `best` re-uses them.
-from app.baselines.common import softmax  # noqa: F401
-from app.baselines.dap import dap_log_scores  # noqa: F401
+
+# The DAP baseline (app/baselines/dap.py) scores with these too: one DAP rule for both.
+def dap_log_scores(
+    attr_proba: np.ndarray, class_attributes: np.ndarray, prior: np.ndarray, clip: float
+) -> np.ndarray:
+    """(N, L) log ∏_m p(a_m = a^z_m | x) / p(a_m = a^z_m) for L class vectors."""
+    p = np.clip(attr_proba, clip, 1 - clip)
+    q = np.clip(prior, clip, 1 - clip)
+    a = (np.asarray(class_attributes) > 0.5).astype(np.float64)
+    log_like = np.log(p) @ a.T + np.log1p(-p) @ (1 - a).T
+    log_prior = np.log(q) @ a.T + np.log1p(-q) @ (1 - a).T
+    return log_like - log_prior[None, :]
+
+
+def softmax(logits: np.ndarray) -> np.ndarray:
+    z = logits - logits.max(axis=1, keepdims=True)
+    e = np.exp(z)
+    return e / e.sum(axis=1, keepdims=True)
 
 
 class LinearAttributeModel:
@@ -36,6 +50,8 @@ class LinearAttributeModel:
 
     @classmethod
     def fit(cls, z: np.ndarray, targets: np.ndarray, C: float, max_iter: int = 1000) -> LinearAttributeModel:
+        from sklearn.linear_model import LogisticRegression  # fitting only: loading stays light
+
         targets = (np.asarray(targets) > 0.5).astype(np.int64)
         m = targets.shape[1]
         weights = np.zeros((m, z.shape[1]))

@@ -41,9 +41,8 @@ import numpy as np
 
 from app.data.dataset import DatasetError, TactileDataset
 from app.framework.errors import FrameworkError
-from app.framework.novelty import novelty_validation_split, tune_threshold
 from app.framework.recognizer import TactileRecognizer
-from app.framework.runtime import configure_torch_threads  # noqa: F401  (sets torch and BLAS threads)
+from app.framework.runtime import ensure_threads_configured
 from app.methods.attributes import (
     LinearAttributeModel,
     cosine_scores,
@@ -52,6 +51,8 @@ from app.methods.attributes import (
     softmax,
 )
 from app.methods.known import CUES, KnownModel, flatten, relabelled
+
+ensure_threads_configured()  # one BLAS thread unless TACTILE_TORCH_THREADS or serve's settings say otherwise
 
 
 def _check(cond: bool, message: str) -> None:
@@ -159,6 +160,9 @@ class BestRecognizer(TactileRecognizer):
 
     # ----------------------------------------------------------------- fitting
     def _fit(self, dataset: TactileDataset, progress: bool) -> None:
+        # fitting's own imports (scikit-learn): recognising from a bundle never needs them
+        from app.framework.novelty import novelty_validation_split, tune_threshold
+
         self._check_params()
         if dataset.n_classes < 2:
             raise DatasetError("the best method needs at least 2 known classes")

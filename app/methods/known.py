@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-from sklearn.ensemble import ExtraTreesClassifier
 
 from app.data.dataset import TactileDataset
 from app.framework.scaling import RobustInputScaler
@@ -76,6 +75,8 @@ class ForestCues:
     @classmethod
     def fit(cls, x: np.ndarray, y: np.ndarray, trials: np.ndarray, n_classes: int, n_estimators: int,
             max_features, seed: int, n_jobs: int | None, components: int = 0) -> ForestCues:
+        from sklearn.ensemble import ExtraTreesClassifier  # fitting only: loading stays light
+
         scaler = RobustInputScaler().fit(x)
         z = scaler.transform(x)
         et = ExtraTreesClassifier(n_estimators=n_estimators, max_features=max_features,

@@ -47,9 +47,9 @@ def ensure_ready(
     trainer: Trainer | None = None, progress: bool = True,
 ) -> int:
     """Migrate, bootstrap if needed; returns the active model version."""
-    from app.framework.runtime import configure_torch_threads
+    from app.framework.runtime import configure_threads
 
-    configure_torch_threads(settings.torch_threads)  # every serve and worker process starts here
+    configure_threads(settings.torch_threads)  # every serve and worker process starts here
     migrate.upgrade(engine)
     holder = leases.new_holder_id()
     waited = False

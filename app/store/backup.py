@@ -30,14 +30,18 @@ class StoreBackupError(ValueError):
 
 @dataclass(frozen=True)
 class StoreSummary:
-    classes: int
+    classes: int  # live ones: withdrawn classes and samples are counted apart
     enrolled_samples: int
     versions: int
     active_version: int | None
     bytes: int
+    withdrawn_classes: int = 0
+    withdrawn_samples: int = 0
 
     def __str__(self) -> str:
-        return (f"{self.classes} classes, {self.enrolled_samples} enrolled samples, "
+        withdrawn = (f" (withdrawn: {self.withdrawn_classes} classes, {self.withdrawn_samples} samples)"
+                     if self.withdrawn_classes or self.withdrawn_samples else "")
+        return (f"{self.classes} classes, {self.enrolled_samples} enrolled samples{withdrawn}, "
                 f"{self.versions} model versions (active: {self.active_version}), {self.bytes:,} bytes")
 
 
@@ -63,13 +67,19 @@ def _problems(path: Path) -> list[str]:
 def summarize(path: Path) -> StoreSummary:
     with closing(sqlite3.connect(f"file:{path}?mode=ro", uri=True)) as conn:
         one = lambda sql: conn.execute(sql).fetchone()[0]  # noqa: E731
+        # stores from before migration 0004 have no withdrawals
+        withdrawals = "withdrawn_at" in {row[1] for row in conn.execute("PRAGMA table_info(classes)")}
+        live, gone = ("withdrawn_at IS NULL", "withdrawn_at IS NOT NULL") if withdrawals else ("1", "0")
+        enrolled = "SELECT COUNT(*) FROM samples WHERE origin = 'enrolled' AND "
         return StoreSummary(
-            classes=one("SELECT COUNT(*) FROM classes"),
-            enrolled_samples=one("SELECT COUNT(*) FROM samples WHERE origin = 'enrolled'"),
+            classes=one(f"SELECT COUNT(*) FROM classes WHERE {live}"),
+            enrolled_samples=one(enrolled + live),
             versions=one("SELECT COUNT(*) FROM model_versions"),
             active_version=one("SELECT MAX(version) FROM model_versions WHERE active"),
             # pages, not the file's size: in WAL mode recent pages may still be in the -wal file
             bytes=one("PRAGMA page_count") * one("PRAGMA page_size"),
+            withdrawn_classes=one(f"SELECT COUNT(*) FROM classes WHERE {gone}"),
+            withdrawn_samples=one(enrolled + gone),
         )
 
 

@@ -56,6 +56,15 @@ def read_part(session: Session, sha256: str) -> np.ndarray:
     return bundle.decode_part(data)
 
 
+def export_model(session: Session, sha256: str) -> bytes:
+    """The model whose bundle is ``sha256`` as one self-contained bundle file (``bundle.load``
+    reads it without a store); BundleError when it is missing or damaged."""
+    data = repo.bundle_data(session, sha256)
+    if data is None:
+        raise BundleError(f"model bundle {sha256[:12]}… is missing from the store")
+    return bundle.join(data, part=lambda sha: read_part(session, sha))
+
+
 def load_model(session: Session, sha256: str, cache: PartCache | None = None) -> TactileRecognizer:
     """The recognizer whose bundle (whole, or a split head) is ``sha256``; BundleError when
     it is missing, damaged or unreadable. With ``cache``, parts it holds are not read

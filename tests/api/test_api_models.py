@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from tests.service_fixtures import unused_vectors
+from tests.service_fixtures import problem, unused_vectors
 
 PROBLEM = "application/problem+json"
 
@@ -89,3 +89,78 @@ def test_a_model_handed_over_by_an_embedded_worker_is_served_only_while_active(
 
     client.post("/v1/models/2/activate")
     assert holder.serve(2, built) is True and holder.current.recognizer is built
+
+
+def test_a_downloaded_bundle_recognises_offline_as_the_service_does(client, worker, dataset):
+    """What a robot does before it loses the network: download the active version, then
+    recognise with it alone (``bundle.from_bytes``, as ``tactile-zsl recognize`` does)."""
+    import numpy as np
+
+    from app.framework import bundle
+
+    enroll_and_retrain(client, worker, dataset)  # version 2 knows the novel class "cup"
+    r = client.get("/v1/models/2/bundle")
+    assert r.status_code == 200 and r.headers["content-type"] == "application/zip"
+    assert r.headers["content-disposition"] == 'attachment; filename="tactile-model-v2.bundle"'
+    assert r.headers["etag"] == f'"{client.get("/v1/models/2").json()["sha256"]}"'
+    offline = bundle.from_bytes(r.content)
+    assert "cup" in offline.registry.novel_names
+
+    x = dataset.samples[::7][:12]
+    online = client.post("/v1/recognize", json={"samples": x.tolist()}).json()["results"]
+    answers = offline.recognize_batch(x).records()
+    assert [a["class_name"] for a in answers] == [o["class_name"] for o in online]
+    assert [a["is_novel"] for a in answers] == [o["is_novel"] for o in online]
+    np.testing.assert_allclose([a["novelty_score"] for a in answers], [o["novelty_score"] for o in online],
+                               rtol=1e-5)
+    for a, o in zip(answers, online, strict=True):
+        assert [s["class_name"] for s in a["top_k"]] == [s["class_name"] for s in o["top_k"]]
+        np.testing.assert_allclose([s["probability"] for s in a["top_k"]],
+                                   [s["probability"] for s in o["top_k"]], rtol=1e-5, atol=1e-7)
+
+
+def test_a_robot_holding_the_version_gets_304(client, worker, dataset):
+    enroll_and_retrain(client, worker, dataset)
+    v1, v2 = (client.get(f"/v1/models/{v}/bundle") for v in (1, 2))
+    assert v1.headers["etag"] != v2.headers["etag"] and v1.content != v2.content
+    for held in (v2.headers["etag"], f'W/{v2.headers["etag"]}', f'{v1.headers["etag"]}, {v2.headers["etag"]}', "*"):
+        r = client.get("/v1/models/2/bundle", headers={"If-None-Match": held})
+        assert r.status_code == 304 and r.content == b"" and r.headers["etag"] == v2.headers["etag"], held
+    r = client.get("/v1/models/2/bundle", headers={"If-None-Match": v1.headers["etag"]})
+    assert r.status_code == 200 and r.content == v2.content
+
+
+def test_the_active_bundle_follows_activations_in_one_request(client, app, worker, dataset):
+    from sqlalchemy import update
+
+    from app.store.models import ModelVersion
+
+    enroll_and_retrain(client, worker, dataset)
+    r = client.get("/v1/models/active/bundle")
+    assert r.status_code == 200 and r.headers["x-model-version"] == "2"
+    assert r.content == client.get("/v1/models/2/bundle").content
+    again = client.get("/v1/models/active/bundle", headers={"If-None-Match": r.headers["etag"]})
+    assert again.status_code == 304 and again.headers["x-model-version"] == "2"
+    client.post("/v1/models/1/activate")  # a rollback: the held copy is no longer the active one
+    back = client.get("/v1/models/active/bundle", headers={"If-None-Match": r.headers["etag"]})
+    assert back.status_code == 200 and back.headers["x-model-version"] == "1"
+    with app.state.sessions.begin() as s:
+        s.execute(update(ModelVersion).values(active=False))
+    problem(client.get("/v1/models/active/bundle"), 404, "version")
+
+
+def test_downloading_an_unknown_version_is_404(client):
+    problem(client.get("/v1/models/99/bundle"), 404, "version")
+
+
+def test_downloading_a_damaged_version_is_409(client, app, worker, dataset):
+    from sqlalchemy import update
+
+    from app.store.models import Bundle, ModelVersion
+
+    enroll_and_retrain(client, worker, dataset)
+    with app.state.sessions.begin() as s:
+        sha = s.get(ModelVersion, 2).bundle_sha256
+        s.execute(update(Bundle).where(Bundle.sha256 == sha).values(data=b"garbage"))
+    assert "the store is damaged" in problem(client.get("/v1/models/2/bundle"), 409, "version")["detail"]
+    assert client.get("/v1/models/1/bundle").status_code == 200

@@ -138,6 +138,44 @@ def test_a_split_bundle_round_trips_through_its_parts(fitted):
     np.testing.assert_allclose(loaded.known_proba(x), fitted.known_proba(x), atol=1e-6)
 
 
+def test_a_joined_split_bundle_is_self_contained_and_keeps_its_manifest(with_novel, sim_split):
+    model = with_novel.add_one_shot(sim_split["novel"].class_names[0], sim_split["novel"].samples[:1])
+    head, parts = bundle.split(model, min_bytes=1024)
+    joined = bundle.join(head, part=lambda sha: bundle.decode_part(parts[sha]))
+    loaded = bundle.from_bytes(joined)  # no part loader: everything is in the file
+    x = np.concatenate([sim_split["test"].samples[:8], sim_split["novel"].samples[:8]])
+    ours, theirs = loaded.recognize_batch(x).records(), model.recognize_batch(x).records()
+    assert [r["class_name"] for r in ours] == [r["class_name"] for r in theirs]
+    np.testing.assert_allclose([r["novelty_score"] for r in ours], [r["novelty_score"] for r in theirs],
+                               rtol=1e-6)
+    assert set(loaded.registry.novel_samples) == {sim_split["novel"].class_names[0]}
+
+    def manifest(data):
+        with zipfile.ZipFile(io.BytesIO(data)) as zf:
+            return json.loads(zf.read("manifest.json"))
+
+    assert "parts" in manifest(head) and "parts" not in manifest(joined)
+    assert manifest(joined) == {k: v for k, v in manifest(head).items() if k != "parts"}
+
+
+def test_joining_gives_the_same_bytes_whatever_the_clock_says(fitted, monkeypatch):
+    """A download's strong ETag is its head's SHA-256, so joining that head again, a
+    second or a day later, must give the very same bytes."""
+    import time
+
+    head, parts = bundle.split(fitted, min_bytes=1024)
+    joined = [bundle.join(head, part=lambda sha: bundle.decode_part(parts[sha]))]
+    later = time.time() + 86_400 + 3
+    monkeypatch.setattr(time, "time", lambda: later)
+    joined.append(bundle.join(head, part=lambda sha: bundle.decode_part(parts[sha])))
+    assert joined[0] == joined[1]
+
+
+def test_joining_a_damaged_head_is_a_clear_error():
+    with pytest.raises(BundleError, match="not a readable model bundle"):
+        bundle.join(b"garbage", part=bundle.decode_part)
+
+
 def test_a_split_head_alone_is_a_clear_error(fitted):
     head, _ = bundle.split(fitted, min_bytes=1024)
     with pytest.raises(BundleError, match="parts of a model store"):

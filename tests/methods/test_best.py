@@ -326,3 +326,51 @@ def test_recognize_batch_is_recognize_as_arrays(enrolled, data):
     # rankings from the 4 novel classes are padded with -1 and come back 4 long
     assert (batch.top_index[novel, 4:] == -1).all() and (batch.top_index[~novel] >= 0).all()
     assert {len(a.top_k) for a in answers if a.kind == "novel"} == {len(names)}
+
+
+def _run_python(code: str) -> dict:
+    import json
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_recognising_from_a_bundle_loads_neither_torch_nor_scikit_learn(enrolled, data, tmp_path):
+    """A robot (``tactile-zsl recognize``) and every API process serving ``best`` load the
+    bundle and answer without the fitting libraries, and with one BLAS thread."""
+    model, _ = enrolled
+    ds, _, _, _, is_test = data
+    x = ds.samples[is_test][:8]
+    path = tmp_path / "best.bundle"
+    bundle.save(model, path)
+    np.save(tmp_path / "x.npy", x)
+    seen = _run_python(f"""
+import json, sys
+import numpy as np
+from threadpoolctl import threadpool_info
+from app.framework import bundle
+model = bundle.load({str(path)!r})
+answers = model.recognize_batch(np.load({str(tmp_path / "x.npy")!r})).records()
+print(json.dumps({{"names": [a["class_name"] for a in answers],
+                  "loaded": sorted(m for m in ("torch", "sklearn") if m in sys.modules),
+                  "blas_threads": sorted({{p["num_threads"] for p in threadpool_info()
+                                          if p["user_api"] == "blas"}})}}))
+""")
+    assert seen["loaded"] == [] and seen["blas_threads"] == [1], seen
+    assert seen["names"] == [a["class_name"] for a in model.recognize_batch(x).records()]
+
+
+def test_torch_gets_the_threads_the_process_chose_when_it_loads_later():
+    seen = _run_python("""
+import json
+from app.framework.runtime import configure_threads
+configure_threads(2)  # as serve does from its settings, before any method is loaded
+import app.methods.best  # its default must not undo that choice
+import app.framework.paper  # loads torch
+import torch
+print(json.dumps({"torch_threads": torch.get_num_threads()}))
+""")
+    assert seen["torch_threads"] == 2

@@ -57,6 +57,22 @@ def test_a_backup_taken_while_serving_restores_what_it_had(client, worker, datas
 
 
 @sqlite_only
+def test_a_summary_counts_withdrawn_classes_and_samples_apart(client, worker, dataset, sample, settings,
+                                                            tmp_path):
+    enrol(client, worker, dataset, "cup", 0, sample)
+    enrol(client, worker, dataset, "mug", 1, sample)
+    cup, mug = (c["id"] for c in list_all(client, "/v1/classes", "classes") if c["name"] in ("cup", "mug"))
+    mug_sample = client.get(f"/v1/classes/{mug}/samples").json()["samples"][0]["id"]
+    assert client.post(f"/v1/classes/{mug}/samples", json={"sample": sample}).status_code == 202
+    assert client.delete(f"/v1/classes/{cup}").status_code == 202  # and its one sample
+    assert client.delete(f"/v1/classes/{mug}/samples/{mug_sample}").status_code == 202
+    summary = backup(settings.sqlalchemy_url, tmp_path / "b.db")
+    assert summary.classes == dataset.n_classes + 1 and summary.enrolled_samples == 1
+    assert (summary.withdrawn_classes, summary.withdrawn_samples) == (1, 2)
+    assert f"{dataset.n_classes + 1} classes, 1 enrolled samples (withdrawn: 1 classes, 2 samples)" in str(summary)
+
+
+@sqlite_only
 def test_a_backup_during_enrolments_is_consistent(client, worker, dataset, sample, settings, tmp_path):
     stop = threading.Event()
 

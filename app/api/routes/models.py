@@ -1,4 +1,7 @@
-from fastapi import APIRouter
+from typing import Annotated
+
+from fastapi import APIRouter, Header, Response
+from sqlalchemy.orm import Session
 
 from app.api import problems
 from app.api.deps import AdminAccess, HolderDep, PageDep, ReadAccess, RowId, SessionDep
@@ -6,6 +9,7 @@ from app.api.problems import Problem, not_found
 from app.api.schemas import ModelList, ModelOut, ModelSummary
 from app.framework.errors import BundleError
 from app.store import bundles, repo
+from app.store.models import ModelVersion
 
 router = APIRouter(prefix="/v1/models", tags=["models"], responses=problems.responses(401, 403, 422, 429))
 
@@ -40,6 +44,59 @@ def get_model(version: RowId, session: SessionDep) -> ModelOut:
     if row is None:
         raise not_found("model version", "version", version)
     return ModelOut.model_validate(row)
+
+
+BUNDLE_MEDIA_TYPE = "application/zip"
+BUNDLE_RESPONSES = {
+    200: {"description": "The model bundle (`tactile-zsl recognize --model FILE` reads it); "
+                         "`X-Model-Version` names its version",
+          "content": {BUNDLE_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}}}},
+    304: {"description": "The client's copy, named by `If-None-Match`, is this version already"},
+    **problems.responses(404, 409),
+}
+IfNoneMatch = Annotated[str | None, Header(description="the ETag of a bundle the client holds")]
+
+
+@router.get("/active/bundle", dependencies=[ReadAccess], response_class=Response,
+            responses=BUNDLE_RESPONSES)
+def download_active_model(session: SessionDep, if_none_match: IfNoneMatch = None) -> Response:
+    """The active version as a single bundle file, as `GET /v1/models/{version}/bundle`
+    gives it: one request for a robot to stay current (304 while its copy is the active one)."""
+    row = repo.active_version(session)
+    if row is None:
+        raise Problem(404, "no model version is active yet", "version")
+    return _bundle_response(session, row, if_none_match)
+
+
+@router.get("/{version}/bundle", dependencies=[ReadAccess], response_class=Response,
+            responses=BUNDLE_RESPONSES)
+def download_model(version: RowId, session: SessionDep, if_none_match: IfNoneMatch = None) -> Response:
+    """One stored model version as a single self-contained bundle file, to recognise on a
+    robot without the network (`tactile-zsl recognize --model FILE SAMPLES`) with exactly
+    the answers this service gives. The `ETag` names the version's content: send it back
+    in `If-None-Match` to get 304 instead of the file when nothing changed."""
+    row = repo.get_version(session, version)
+    if row is None:
+        raise not_found("model version", "version", version)
+    return _bundle_response(session, row, if_none_match)
+
+
+def _bundle_response(session: Session, row: ModelVersion, if_none_match: str | None) -> Response:
+    headers = {"ETag": f'"{row.bundle_sha256}"', "X-Model-Version": str(row.version)}
+    if if_none_match is not None and _matches(if_none_match, headers["ETag"]):
+        return Response(status_code=304, headers=headers)
+    try:
+        data = bundles.export_model(session, row.bundle_sha256)
+    except BundleError as exc:
+        raise Problem(409, f"version {row.version} cannot be exported: {exc}", "version") from None
+    return Response(data, media_type=BUNDLE_MEDIA_TYPE, headers={
+        **headers, "Content-Disposition": f'attachment; filename="tactile-model-v{row.version}.bundle"'})
+
+
+def _matches(if_none_match: str, etag: str) -> bool:
+    """RFC 9110 weak comparison of ``etag`` with an ``If-None-Match`` list (or ``*``)."""
+    tags = [t.strip().removeprefix("W/") for t in if_none_match.split(",")]
+    return "*" in tags or etag in tags
 
 
 @router.post(

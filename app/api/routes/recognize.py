@@ -70,24 +70,8 @@ async def recognize(request: Request, recognizing: RecognizingDep) -> Response:
 
 
 def _to_json(version: int, batch: RecognitionBatch, class_ids: dict[str, int]) -> bytes:
-    """The RecognizeResponse body (the schema documents it), built straight from the arrays:
-    building and re-validating pydantic models cost more than the forward pass of a sample."""
-    names, kinds = batch.class_names, batch.class_kinds
-    ids = [class_ids.get(name) for name in names]
-    return orjson.dumps({
-        "model_version": version,
-        "results": [
-            {
-                "class_id": ids[idx[0]], "class_name": names[idx[0]], "kind": kinds[idx[0]],
-                "is_novel": novel, "novelty_score": score,
-                "top_k": [{"class_id": ids[j], "class_name": names[j], "probability": q}
-                          for j, q in zip(idx, top_p, strict=True) if j >= 0],
-            }
-            for idx, top_p, novel, score in zip(
-                batch.top_index.tolist(), batch.top_probability.tolist(), batch.is_novel.tolist(),
-                batch.novelty_score.tolist(), strict=True)
-        ],
-    })
+    """The RecognizeResponse body (the schema documents it), built straight from the arrays."""
+    return orjson.dumps({"model_version": version, "results": batch.records(class_ids)})
 
 
 def _from_json(body: bytes) -> np.ndarray | list:

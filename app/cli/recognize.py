@@ -1,0 +1,107 @@
+"""``tactile-zsl recognize``: recognise samples with a model bundle file, without a service."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Iterable
+from pathlib import Path
+from typing import TextIO
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "recognize",
+        help="recognise samples offline with a model bundle",
+        description="Recognise samples with a model bundle file (written by 'train', or downloaded "
+        "from a service with GET /v1/models/{version}/bundle) and print the answers as JSON, in "
+        "the shape of POST /v1/recognize's results: on a robot without the network, the same "
+        "answers the service gives.",
+    )
+    p.add_argument("--model", required=True, type=Path, help="the model bundle file")
+    p.add_argument("samples",
+                   help="a .npy file (one sample, or N samples of the model's input shape), a .json "
+                        "file ({\"samples\": [...]} as the API takes), or - for that JSON on stdin")
+    p.add_argument("--top-k", type=int, default=3, help="scores to list per sample (default 3)")
+    p.add_argument("--lines", action="store_true",
+                   help="read one JSON request per line from SAMPLES (- for stdin) and answer each "
+                        "on its own line at once, until the input ends: one process serves a robot "
+                        "without paying its start-up per touch. A bad line is answered "
+                        "{\"error\": ...} and the process goes on; the model file is read again "
+                        "whenever it changes (after a sync)")
+    p.set_defaults(handler=run)
+
+
+def read_samples(source: str):
+    """The samples in ``source`` (.npy, .json or - for JSON on stdin) as an array or lists."""
+    import numpy as np
+
+    if source == "-":
+        return _from_json(sys.stdin.read(), "stdin")
+    path = Path(source)
+    if not path.is_file():
+        raise ValueError(f"no samples file at {path}")
+    if path.suffix == ".npy":
+        try:
+            return np.load(path, allow_pickle=False)  # never unpickles: object arrays are refused
+        except (ValueError, EOFError) as exc:
+            raise ValueError(f"{path} is not a readable .npy array: {exc}") from None
+    if path.suffix == ".json":
+        return _from_json(path.read_text(), str(path))
+    raise ValueError(f"{path}: samples must be a .npy or .json file")
+
+
+def _from_json(text: str, where: str):
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{where} is not JSON: {exc}") from None
+    if not isinstance(data, dict) or "samples" not in data:
+        raise ValueError(f'{where} must hold an object {{"samples": [...]}}')
+    return data["samples"]
+
+
+def run(args: argparse.Namespace) -> int:
+    from app.framework import bundle
+
+    if args.top_k < 1:
+        raise ValueError(f"--top-k must be at least 1, got {args.top_k}")
+    if args.lines:
+        if args.samples == "-":
+            return answer_lines(args.model, sys.stdin, sys.stdout, args.top_k)
+        with open(args.samples) as lines:
+            return answer_lines(args.model, lines, sys.stdout, args.top_k)
+    model = bundle.load(args.model)
+    results = model.recognize_batch(read_samples(args.samples), top_k=args.top_k)
+    print(json.dumps({"method": model.method, "results": results.records()}))
+    return 0
+
+
+def answer_lines(model_file: Path, lines: Iterable[str], out: TextIO, top_k: int) -> int:
+    """Answer each JSON line of ``lines`` with one JSON line on ``out``, flushed at once.
+
+    The model file must load at the start. When it changes later (a sync replaces it by a
+    rename) it is read again; if the new file cannot be read, the answers go on with the
+    model read before and carry a ``warning`` until a readable file replaces it."""
+    from app.framework import bundle
+
+    source = bundle.BundleFile(model_file)
+    model, _ = source.load()
+    warning = None
+    for line in lines:
+        if not line.strip():
+            continue
+        try:
+            model, fresh = source.load()
+            warning = None if fresh else warning
+        except (ValueError, OSError) as exc:
+            warning = f"the model file changed and cannot be read ({exc}); answering with the one read before"
+        try:
+            results = model.recognize_batch(_from_json(line, "the line"), top_k=top_k)
+            answer = {"method": model.method, "results": results.records()}
+        except ValueError as exc:  # the framework's errors name the problem
+            answer = {"error": str(exc)}
+        out.write(json.dumps({**answer, **({"warning": warning} if warning else {})}) + "\n")
+        out.flush()
+    return 0

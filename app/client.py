@@ -1,0 +1,200 @@
+"""A robot's client of the service: recognition that goes on when the network does not,
+and enrolments that a retry never doubles.
+
+    client = TactileClient("http://fleet-server:8000", api_key=KEY,
+                           model_file="/var/lib/robot/tactile.bundle")
+    client.sync_model()                      # downloads the active version only when it changed
+    answer = client.recognize(touches)       # the service's answer, or the model file's offline
+    job = client.register_class("teapot", attributes=["hard", "smooth"], wait=20)
+    job = client.add_sample(job["class_id"], touch, wait=20)
+
+``recognize`` answers as ``POST /v1/recognize`` does, plus ``"source"``: ``"service"``, or
+``"offline"`` when the service cannot be reached (connection errors and timeouts, after
+``retries``, or 502 / 503 / 504): then the model file of the last ``sync_model`` answers,
+with the version and class ids of that moment. Input the service refuses (4xx) is not
+answered offline: it raises ``ServiceError`` with the service's explanation. Enrolments
+need the service; every one carries an ``Idempotency-Key``, so a retry after a lost answer
+gets the original job and never enrols twice.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+
+from app.framework import bundle
+from app.framework.recognizer import TactileRecognizer
+
+UNREACHABLE_STATUS = frozenset({502, 503, 504})
+
+
+class ServiceError(RuntimeError):
+    """The service refused a request (``status``, and its problem detail in the message)."""
+
+    def __init__(self, message: str, status: int | None = None) -> None:
+        super().__init__(message)
+        self.status = status
+
+
+class ServiceUnreachable(ServiceError):
+    """The service could not be reached, and no model file could answer instead."""
+
+
+class TactileClient:
+    """``base_url`` and ``api_key`` name the service; ``model_file`` is where ``sync_model``
+    keeps the model for offline recognition (with ``<model_file>.json`` beside it: its
+    version, ETag and class ids). ``http`` replaces the HTTP client (e.g. a TestClient)."""
+
+    def __init__(self, base_url: str = "", api_key: str | None = None,
+                 model_file: str | Path | None = None, timeout: float = 10.0, retries: int = 2,
+                 offline_top_k: int = 3, http: httpx.Client | None = None) -> None:
+        if retries < 0 or offline_top_k < 1 or timeout <= 0:
+            raise ValueError("retries must be ≥ 0, offline_top_k ≥ 1 and timeout > 0")
+        self._owns_http = http is None
+        self.http = http if http is not None else httpx.Client(base_url=base_url, timeout=timeout)
+        self.headers = {"X-API-Key": api_key} if api_key else {}
+        self.model_file = Path(model_file).expanduser() if model_file is not None else None
+        self.timeout, self.retries, self.offline_top_k = timeout, retries, offline_top_k
+        self._offline = bundle.BundleFile(self.model_file) if self.model_file is not None else None
+        self._offline_meta: dict[str, Any] = {}
+
+    def close(self) -> None:
+        """Close the HTTP connections (the client's own; one passed in as ``http`` stays open)."""
+        if self._owns_http:
+            self.http.close()
+
+    def __enter__(self) -> TactileClient:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------ recognition
+    def recognize(self, samples: Any) -> dict[str, Any]:
+        """Recognise one sample or a batch (N, *input shape)."""
+        x = np.asarray(samples, dtype=np.float32)
+        body = io.BytesIO()
+        np.save(body, x, allow_pickle=False)
+        try:
+            r = self._send("POST", "/v1/recognize", content=body.getvalue(),
+                           headers={"Content-Type": "application/x-npy"})
+        except ServiceUnreachable as exc:
+            model, meta = self._offline_model(exc)
+            batch = model.recognize_batch(x, top_k=self.offline_top_k)
+            return {"model_version": meta.get("version"), "results": batch.records(meta.get("class_ids", {})),
+                    "source": "offline"}
+        return {**r.json(), "source": "service"}
+
+    def sync_model(self) -> bool:
+        """Keep ``model_file`` at the service's active version; True when a new one was
+        written. A file is replaced only by a bundle that loads."""
+        if self.model_file is None:
+            raise ValueError("this client has no model_file to keep the model in")
+        held = self._meta().get("etag") if self.model_file.is_file() else None
+        r = self._send("GET", "/v1/models/active/bundle", headers={"If-None-Match": held} if held else {})
+        if r.status_code == 304:
+            return False
+        version = int(r.headers["X-Model-Version"])
+        bundle.from_bytes(r.content)  # raises BundleError rather than keep a file that does not load
+        class_ids = {c["name"]: c["id"] for c in self._every("/v1/classes", "classes")}
+        bundle.write_atomic(self.model_file, r.content)
+        bundle.write_atomic(self._meta_file(), json.dumps({
+            "version": version, "etag": r.headers.get("etag"), "class_ids": class_ids,
+            "sha256": hashlib.sha256(r.content).hexdigest()}).encode())
+        return True
+
+    # --------------------------------------------------------------- enrolment
+    def register_class(self, name: str, attributes: list[str] | None = None,
+                       attribute_vector: list[int] | None = None, wait: float = 0) -> dict[str, Any]:
+        """Register a never-touched object by its attribute names or 0/1 vector; returns its
+        job (``class_id`` names the class), after up to ``wait`` seconds for it to finish."""
+        if (attributes is None) == (attribute_vector is None):
+            raise ValueError("give either attributes or attribute_vector")
+        body = {"name": name, **({"attributes": attributes} if attributes is not None
+                                 else {"attribute_vector": attribute_vector})}
+        job = self._send("POST", "/v1/classes", json=body, idempotency_key=str(uuid.uuid4())).json()["job"]
+        return self.job(job["id"], wait) if wait else job
+
+    def add_sample(self, class_id: int, sample: Any, wait: float = 0) -> dict[str, Any]:
+        """Add one real sample to a class (one-shot learning); returns its job."""
+        body = {"sample": np.asarray(sample, dtype=np.float32).tolist()}
+        job = self._send("POST", f"/v1/classes/{int(class_id)}/samples", json=body,
+                         idempotency_key=str(uuid.uuid4())).json()["job"]
+        return self.job(job["id"], wait) if wait else job
+
+    def job(self, job_id: int, wait: float = 0) -> dict[str, Any]:
+        """A job, after up to ``wait`` seconds (at most 20) for it to succeed or fail."""
+        needed = wait + self.timeout  # the answer may take ``wait`` seconds to come
+        read = self.http.timeout.read
+        extra = {"timeout": needed} if read is not None and read < needed else {}
+        return self._send("GET", f"/v1/jobs/{int(job_id)}", params={"wait": wait}, **extra).json()
+
+    # ----------------------------------------------------------------- helpers
+    def _send(self, method: str, path: str, idempotency_key: str | None = None,
+              **kwargs: Any) -> httpx.Response:
+        """One request, retried after transport errors (the same Idempotency-Key each time)."""
+        headers = {**self.headers, **kwargs.pop("headers", {})}
+        if idempotency_key:
+            headers["Idempotency-Key"] = idempotency_key
+        attempt = 0
+        while True:
+            try:
+                r = self.http.request(method, path, headers=headers, **kwargs)
+            except httpx.TransportError as exc:
+                if attempt == self.retries:
+                    raise ServiceUnreachable(f"{method} {path}: the service cannot be reached: {exc}") from exc
+                time.sleep(0.2 * 2**attempt)
+                attempt += 1
+                continue
+            if r.status_code in UNREACHABLE_STATUS:
+                raise ServiceUnreachable(f"{method} {path}: the service answered {r.status_code}",
+                                         r.status_code)
+            if r.status_code >= 400:
+                raise ServiceError(f"{method} {path}: {r.status_code} {_detail(r)}", r.status_code)
+            return r
+
+    def _every(self, path: str, key: str) -> list[dict[str, Any]]:
+        rows, after = [], None
+        while True:
+            page = self._send("GET", path, params={"limit": 1000, **({"after": after} if after else {})}).json()
+            rows += page[key]
+            after = page.get("next_after")
+            if after is None:
+                return rows
+
+    def _meta_file(self) -> Path:
+        assert self.model_file is not None
+        return self.model_file.with_name(self.model_file.name + ".json")
+
+    def _meta(self) -> dict[str, Any]:
+        try:
+            return json.loads(self._meta_file().read_text())
+        except (OSError, ValueError):
+            return {}
+
+    def _offline_model(self, cause: ServiceUnreachable) -> tuple[TactileRecognizer, dict[str, Any]]:
+        """The model file (read again only when it changed) and what is known of it: its
+        version and class ids only when the sidecar describes this very file."""
+        if self._offline is None or not self.model_file.is_file():
+            raise ServiceUnreachable(f"{cause}; and there is no model file to recognise offline "
+                                     "(call sync_model while the service is reachable)") from cause
+        model, fresh = self._offline.load()
+        if fresh:  # a sidecar of another file: the answers still hold, the labels may not
+            meta = self._meta()
+            self._offline_meta = meta if meta.get("sha256") == self._offline.sha256 else {}
+        return model, self._offline_meta
+
+
+def _detail(r: httpx.Response) -> str:
+    try:
+        return str(r.json().get("detail", r.text))
+    except ValueError:
+        return r.text

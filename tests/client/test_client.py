@@ -1,0 +1,121 @@
+"""The robot's client (app/client.py) against the real API app: it keeps the model file
+current, answers offline when the service is unreachable, and never enrols twice."""
+
+from __future__ import annotations
+
+import json
+
+import httpx
+import numpy as np
+import pytest
+
+from app.client import ServiceError, ServiceUnreachable, TactileClient
+from tests.reliability.harness import free_port
+from tests.service_fixtures import list_all, unused_vectors
+
+
+@pytest.fixture
+def robot(client, tmp_path):
+    return TactileClient(http=client, model_file=tmp_path / "robot" / "model.bundle", retries=0, timeout=2)
+
+
+def unreachable(tmp_path, **kwargs) -> TactileClient:
+    """A client of a port nobody listens on: every request fails to connect."""
+    return TactileClient(f"http://127.0.0.1:{free_port()}", model_file=tmp_path / "robot" / "model.bundle",
+                         timeout=2, **kwargs)
+
+
+def test_the_model_file_follows_the_active_version(robot, client, worker, dataset):
+    assert robot.sync_model() is True
+    assert robot.sync_model() is False  # 304: nothing downloaded
+    meta = json.loads(robot.model_file.with_name("model.bundle.json").read_text())
+    assert meta["version"] == 1 and meta["etag"]
+    job = robot.register_class("cup", attribute_vector=unused_vectors(dataset, 1)[0])
+    assert worker.run_once() == 1
+    assert robot.job(job["id"], wait=2)["status"] == "succeeded"
+    assert robot.sync_model() is True
+    meta = json.loads(robot.model_file.with_name("model.bundle.json").read_text())
+    assert meta["version"] == 2 and meta["class_ids"]["cup"] == job["class_id"]
+    client.post("/v1/models/1/activate")  # a rollback reaches the robot too
+    assert robot.sync_model() is True
+    assert json.loads(robot.model_file.with_name("model.bundle.json").read_text())["version"] == 1
+
+
+def test_offline_answers_are_the_services_answers(robot, client, worker, dataset, tmp_path):
+    job = robot.register_class("cup", attribute_vector=unused_vectors(dataset, 1)[0])
+    worker.run_once()
+    robot.sync_model()
+    x = dataset.samples[::9][:6]
+    online = robot.recognize(x)
+    offline = unreachable(tmp_path, retries=1).recognize(x)
+    assert online["source"] == "service" and offline["source"] == "offline"
+    assert offline["model_version"] == online["model_version"] == 2
+    for a, b in zip(offline["results"], online["results"], strict=True):
+        assert (a["class_id"], a["class_name"], a["is_novel"]) == (b["class_id"], b["class_name"], b["is_novel"])
+        np.testing.assert_allclose(a["novelty_score"], b["novelty_score"], rtol=1e-5)
+    assert all(s["class_id"] is not None for r in offline["results"] for s in r["top_k"])
+    assert robot._meta()["class_ids"]["cup"] == job["class_id"]  # the store's id of the enrolled class
+
+
+def test_without_a_model_file_an_outage_is_a_clear_error(tmp_path, sample):
+    with unreachable(tmp_path, retries=0) as robot, pytest.raises(
+            ServiceUnreachable, match="no model file to recognise offline"):
+        robot.recognize(sample)
+    assert robot.http.is_closed
+
+
+def test_a_model_file_without_its_sidecar_still_answers(robot, dataset, tmp_path):
+    robot.sync_model()
+    robot.model_file.with_name("model.bundle.json").write_text("{}")
+    answer = unreachable(tmp_path, retries=0).recognize(dataset.samples[:2])
+    assert answer["source"] == "offline" and answer["model_version"] is None
+    assert all(r["class_id"] is None and r["class_name"] for r in answer["results"])
+
+
+def test_refused_input_is_an_error_not_an_offline_answer(robot, sample):
+    robot.sync_model()
+    bad = np.asarray(sample, np.float32)
+    bad[0, 0] = np.nan
+    with pytest.raises(ServiceError, match="422") as caught:
+        robot.recognize(bad)
+    assert caught.value.status == 422 and not isinstance(caught.value, ServiceUnreachable)
+    with pytest.raises(ServiceError, match="404"):
+        robot.add_sample(99999, sample)
+
+
+class LoseFirstAnswer(httpx.BaseTransport):
+    """The network loses the first answer after the service has acted on the request."""
+
+    def __init__(self, inner: httpx.BaseTransport) -> None:
+        self.inner, self.lost = inner, 0
+
+    def handle_request(self, request: httpx.Request) -> httpx.Response:
+        response = self.inner.handle_request(request)
+        if self.lost == 0:
+            self.lost += 1
+            response.read()
+            raise httpx.ReadTimeout("the answer was lost", request=request)
+        return response
+
+
+def test_a_retry_after_a_lost_answer_enrols_once(client, worker, dataset, sample):
+    flaky = httpx.Client(transport=LoseFirstAnswer(client._transport), base_url=str(client.base_url))
+    robot = TactileClient(http=flaky, retries=2)
+    job = robot.register_class("teapot", attribute_vector=unused_vectors(dataset, 1)[0])
+    assert robot.http._transport.lost == 1
+    assert [c["name"] for c in list_all(client, "/v1/classes", "classes")].count("teapot") == 1
+    worker.run_once()
+    assert client.get(f"/v1/jobs/{job['id']}").json()["status"] == "succeeded"
+    robot.http._transport.lost = 0  # lose the next answer too
+    sample_job = robot.add_sample(job["class_id"], sample)
+    assert client.get(f"/v1/classes/{job['class_id']}").json()["n_samples"] == 1
+    assert sample_job["sample_id"] is not None
+
+
+def test_bad_client_settings_are_refused(tmp_path):
+    with pytest.raises(ValueError, match="retries"):
+        TactileClient("http://127.0.0.1:1", retries=-1)
+    with pytest.raises(ValueError, match="no model_file"):
+        TactileClient("http://127.0.0.1:1").sync_model()
+    with pytest.raises(ValueError, match="either attributes or attribute_vector"):
+        TactileClient("http://127.0.0.1:1").register_class("x")
