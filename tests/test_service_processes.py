@@ -94,6 +94,8 @@ def test_processes_serve_together_restart_and_stop_together(tmp_path):
         os.kill(victim, signal.SIGKILL)
         again = two_serving(url, 120, without=victim)  # the killed process is replaced
         assert httpx.get(f"{url}/readyz").status_code == 200
+        refused = restore(tmp_path)  # while processes serve, the store is theirs
+        assert refused.returncode == 2 and "in use by a running API process" in refused.stderr, refused.stderr
 
         # a robot waits for a job no worker will take; a stop answers it with the status then
         vector = unused_vectors(quick_dataset(), 1)[0]
@@ -118,6 +120,19 @@ def test_processes_serve_together_restart_and_stop_together(tmp_path):
         for pid in again:
             with pytest.raises(ProcessLookupError):
                 os.kill(pid, 0)
+    # stopped, the store can be restored; running, it could not (checked above)
+    assert restore(tmp_path).returncode == 0
+
+
+def restore(tmp_path: Path) -> subprocess.CompletedProcess:
+    """``tactile-zsl store restore --replace`` of a backup of the store in tmp_path/data."""
+    env = {**os.environ, "TACTILE_DATA_DIR": str(tmp_path / "data")}
+    backup = tmp_path / "backup.db"
+    if not backup.exists():
+        subprocess.run([*tactile_zsl(), "store", "backup", str(backup)], env=env, check=True,
+                       capture_output=True)
+    return subprocess.run([*tactile_zsl(), "store", "restore", str(backup), "--replace"], env=env,
+                          capture_output=True, text=True)
 
 
 def test_a_process_that_cannot_start_stops_the_service(tmp_path):

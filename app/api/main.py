@@ -6,7 +6,7 @@ import gc
 import logging
 import time
 from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
+from contextlib import ExitStack, asynccontextmanager
 
 import swagger_ui_bundle
 from fastapi import FastAPI, Request
@@ -29,6 +29,7 @@ from app.service.keys import KeyRing, RateLimiter
 from app.service.metrics import JobMetricsPoller, Metrics
 from app.service.recognition import RecognitionService
 from app.store.db import make_engine, make_sessionmaker
+from app.store.in_use import opened_by_service
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +55,14 @@ def create_app(
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        # held from before the migration to after the last query: no restore under our feet
+        with ExitStack() as held:
+            await run_in_threadpool(held.enter_context, opened_by_service(settings.sqlalchemy_url))
+            async with serving():
+                yield
+
+    @asynccontextmanager
+    async def serving() -> AsyncIterator[None]:
         await run_in_threadpool(ensure_ready, settings, engine, sessions, trainer)
         await run_in_threadpool(holder.refresh)
         await run_in_threadpool(keys.refresh)

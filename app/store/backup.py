@@ -4,8 +4,9 @@ A copy is taken in one read transaction, so the service keeps recognising and en
 while it runs (WAL readers never block the writer), and it is complete and consistent as
 of one commit. The copy is checked (``integrity.check_store``) under a temporary name and
 only then renamed into place: a failed or interrupted backup leaves no file that looks
-like a good one. A restore checks the backup first and replaces the store in one write
-transaction. PostgreSQL stores are backed up with its own tools (``pg_dump``).
+like a good one. A restore checks the backup first, is refused while an API process or
+worker has the store open (``in_use``), and replaces the store in one write transaction.
+PostgreSQL stores are backed up with its own tools (``pg_dump``).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from pathlib import Path
 from sqlalchemy import create_engine
 from sqlalchemy.engine import make_url
 
+from app.store.in_use import StoreInUseError, closed_to_service
 from app.store.integrity import check_store
 
 BUSY_MS = 30_000
@@ -124,7 +126,11 @@ def restore(backup_file: Path, url: str, replace: bool = False) -> StoreSummary:
         raise StoreBackupError(f"{target} holds a store already; pass --replace to overwrite it "
                                "(stop every API process and worker first)")
     target.parent.mkdir(parents=True, exist_ok=True)
-    with closing(sqlite3.connect(f"file:{backup_file}?mode=ro", uri=True)) as src, \
-            closing(sqlite3.connect(target, timeout=BUSY_MS / 1000)) as dst:
-        src.backup(dst)  # one write transaction: the old store or the new one, never a mix
+    try:
+        with closed_to_service(url), \
+                closing(sqlite3.connect(f"file:{backup_file}?mode=ro", uri=True)) as src, \
+                closing(sqlite3.connect(target, timeout=BUSY_MS / 1000)) as dst:
+            src.backup(dst)  # one write transaction: the old store or the new one, never a mix
+    except StoreInUseError as exc:
+        raise StoreBackupError(f"nothing was restored: {exc}") from None
     return summarize(target)

@@ -3,6 +3,8 @@ restores every class, sample and model version it had, and nothing is half-writt
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import threading
 
 import pytest
@@ -14,6 +16,7 @@ from app.cli import main as cli
 from app.framework import bundle
 from app.store import repo
 from app.store.backup import StoreBackupError, backup, restore
+from app.store.in_use import StoreInUseError, closed_to_service, lock_path, opened_by_service
 from app.store.integrity import check_store
 from app.store.models import Bundle
 from tests.service_fixtures import list_all, quick_settings, unused_vectors
@@ -96,12 +99,70 @@ def test_a_backup_during_enrolments_is_consistent(client, worker, dataset, sampl
 
 
 @sqlite_only
-def test_replace_puts_the_backup_over_a_store_in_use(client, worker, dataset, sample, settings, tmp_path):
+def test_a_restore_is_refused_while_the_service_has_the_store_open(client, worker, dataset, sample,
+                                                                    settings, tmp_path):
     out = tmp_path / "b.db"
-    summary = backup(settings.sqlalchemy_url, out)
-    enrol(client, worker, dataset, "cup", 0, sample)  # the live store moves on (WAL mode)
-    assert restore(out, settings.sqlalchemy_url, replace=True) == summary
+    backup(settings.sqlalchemy_url, out)
+    enrol(client, worker, dataset, "cup", 0, sample)  # the live store moves on
+    before = snapshot(client)
+    with pytest.raises(StoreBackupError, match="nothing was restored: .* in use by a running API process"):
+        restore(out, settings.sqlalchemy_url, replace=True)
+    assert snapshot(client) == before  # untouched: the cup is still there, and still served
+
+
+def test_replace_puts_the_backup_over_a_stopped_service_s_store(base_model, dataset, sample, tmp_path):
+    settings = quick_settings(tmp_path / "data")
+    with TestClient(create_app(settings, trainer=lambda: base_model)) as client:
+        summary = backup(settings.sqlalchemy_url, tmp_path / "b.db")
+        from worker import Worker
+
+        enrol(client, Worker(settings, client.app.state.sessions), dataset, "cup", 0, sample)
+    assert restore(tmp_path / "b.db", settings.sqlalchemy_url, replace=True) == summary
     assert check_store(settings.sqlalchemy_url) == []
+    with TestClient(create_app(settings, trainer=lambda: base_model)) as client:
+        assert "cup" not in {c["name"] for c in list_all(client, "/v1/classes", "classes")}
+
+
+def test_a_killed_process_does_not_hold_the_store(tmp_path):
+    """The kernel drops the lock of a process that dies, even by SIGKILL."""
+    url = f"sqlite:///{tmp_path / 'tactile.db'}"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time; from app.store.in_use import opened_by_service\n"
+         f"with opened_by_service({url!r}):\n print('held', flush=True); time.sleep(600)"],
+        stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with pytest.raises(StoreInUseError, match="in use by a running API process or worker"), \
+                closed_to_service(url):
+            pass
+    finally:
+        holder.kill()
+        holder.wait()
+    with closed_to_service(url):  # free at once, with no expiry to wait for
+        pass
+
+
+def test_a_service_starting_during_a_restore_waits_for_it(tmp_path):
+    url = f"sqlite:///{tmp_path / 'tactile.db'}"
+    opened = threading.Event()
+
+    def start_service():
+        with opened_by_service(url):
+            opened.set()
+
+    with closed_to_service(url):
+        starting = threading.Thread(target=start_service)
+        starting.start()
+        assert not opened.wait(0.5)  # blocked behind the restore
+    assert opened.wait(30)
+    starting.join()
+
+
+def test_stores_that_are_not_sqlite_files_are_not_guarded():
+    for url in ("postgresql://postgres@127.0.0.1:5432/test", "sqlite://", "sqlite:///:memory:"):
+        assert lock_path(url) is None
+        with opened_by_service(url), closed_to_service(url):
+            pass
 
 
 @sqlite_only

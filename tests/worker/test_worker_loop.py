@@ -231,16 +231,30 @@ def test_embedded_worker_thread_processes_jobs(tmp_path, base_model):
         assert c.get(f"/v1/classes/{created['class']['id']}").json()["in_active_model"] is True
 
 
-def test_run_worker_stops_on_request(settings, store):
+def test_run_worker_holds_the_store_until_it_stops_on_request(settings, store):
+    from app.store.in_use import StoreInUseError, closed_to_service, lock_path
     from worker import run_worker
 
+    def restorable() -> bool:
+        try:
+            with closed_to_service(settings.sqlalchemy_url):
+                return True
+        except StoreInUseError:
+            return False
+
+    guarded = lock_path(settings.sqlalchemy_url) is not None  # SQLite files only
     stop = threading.Event()
     thread = threading.Thread(target=run_worker, args=(settings, stop))
     thread.start()
+    deadline = time.monotonic() + 30
+    while guarded and restorable() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not (guarded and restorable())  # a running worker's store is not restored under it
     time.sleep(0.3)
     stop.set()
     thread.join(10)
     assert not thread.is_alive()
+    assert restorable()
 
 
 
