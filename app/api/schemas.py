@@ -128,6 +128,13 @@ class SampleOut(BaseModel):
     )
 
 
+class SampleDetail(SampleOut):
+    """A stored sample with its data, as it was enrolled or read from the dataset."""
+
+    shape: list[int] = Field(description="The sample's shape (the model's input shape).")
+    sample: list = Field(description="The sample's values, nested as its shape.")
+
+
 class SampleList(BaseModel):
     samples: list[SampleOut]
     next_after: int | None = NEXT_AFTER

@@ -10,9 +10,10 @@ import hashlib
 import secrets
 from collections.abc import Iterable, Sequence
 from datetime import datetime
+from typing import Any
 
 import numpy as np
-from sqlalchemy import LargeBinary, Row, delete, func, insert, select, update
+from sqlalchemy import LargeBinary, Row, Select, delete, func, insert, select, update
 from sqlalchemy.orm import Session, aliased, defer, with_expression
 
 from app.framework.errors import BundleError
@@ -160,16 +161,26 @@ def list_samples(
 ) -> list[Row]:
     """Rows of ``id, origin, trial, created_at, enrolled_by`` (who added it) of the class's
     live samples by id; the sample data stay unread."""
-    enrolment = aliased(Job)
-    stmt = (
-        select(Sample.id, Sample.origin, Sample.trial, Sample.created_at,
-               enrolment.requested_by.label("enrolled_by"))
-        .outerjoin(enrolment, (enrolment.sample_id == Sample.id) & (enrolment.kind == "add_sample"))
-        .where(Sample.class_id == class_id, LIVE_SAMPLE).order_by(Sample.id).limit(limit)
-    )
+    stmt = _live_samples(class_id).order_by(Sample.id).limit(limit)
     if after is not None:
         stmt = stmt.where(Sample.id > after)
     return list(session.execute(stmt))
+
+
+def sample_record(session: Session, class_id: int, sample_id: int) -> Row | None:
+    """The ``list_samples`` row of one live sample, with its ``shape`` and ``data``."""
+    stmt = _live_samples(class_id, Sample.shape, Sample.data).where(Sample.id == sample_id)
+    return session.execute(stmt).first()
+
+
+def _live_samples(class_id: int, *columns: Any) -> Select:
+    enrolment = aliased(Job)
+    return (
+        select(Sample.id, Sample.origin, Sample.trial, Sample.created_at,
+               enrolment.requested_by.label("enrolled_by"), *columns)
+        .outerjoin(enrolment, (enrolment.sample_id == Sample.id) & (enrolment.kind == "add_sample"))
+        .where(Sample.class_id == class_id, LIVE_SAMPLE)
+    )
 
 
 def get_sample(session: Session, class_id: int, sample_id: int) -> Sample | None:

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import io
 import re
 
+import numpy as np
 from sqlalchemy import func, select
 
 from app.store.models import Bundle
@@ -215,3 +217,41 @@ def test_an_enrolled_class_lists_its_live_samples_and_who_added_them(client, dat
     assert {s["enrolled_by"] for s in samples} == {"addr:testclient"}
     r = client.get("/v1/classes/424242/samples")
     assert r.status_code == 404 and r.json()["errors"][0]["field"] == "class_id"
+
+
+def test_one_sample_comes_back_with_its_data_as_json_or_npy(client, dataset, sample):
+    cid = client.post("/v1/classes", json={"name": "mug", "attribute_vector": unused_vectors(dataset, 1)[0]}
+                      ).json()["class"]["id"]
+    sid = client.post(f"/v1/classes/{cid}/samples", json={"sample": sample}).json()["sample_id"]
+    got = client.get(f"/v1/classes/{cid}/samples/{sid}").json()
+    assert {k: got[k] for k in ("id", "origin", "trial", "enrolled_by")} == {
+        "id": sid, "origin": "enrolled", "trial": None, "enrolled_by": "addr:testclient"}
+    assert got["shape"] == list(dataset.samples.shape[1:])
+    np.testing.assert_array_equal(np.float32(got["sample"]), np.float32(sample))  # exactly what was sent
+
+    r = client.get(f"/v1/classes/{cid}/samples/{sid}", headers={"Accept": "application/x-npy"})
+    assert r.status_code == 200 and r.headers["content-type"] == "application/x-npy"
+    x = np.load(io.BytesIO(r.content), allow_pickle=False)
+    np.testing.assert_array_equal(x, np.float32(sample))
+    again = client.post("/v1/recognize", content=r.content, headers={"Content-Type": "application/x-npy"})
+    assert again.status_code == 200 and len(again.json()["results"]) == 1  # sent back as it came
+
+    first = client.get("/v1/classes/1/samples", params={"limit": 1}).json()["samples"][0]
+    trial = client.get(f"/v1/classes/1/samples/{first['id']}").json()
+    assert trial["origin"] == "dataset" and trial["trial"] == first["trial"]
+    np.testing.assert_array_equal(np.float32(trial["sample"]), dataset.samples[dataset.trials == trial["trial"]][0])
+
+
+def test_a_sample_that_is_not_there_is_a_named_404(client, dataset, sample):
+    cid = client.post("/v1/classes", json={"name": "mug", "attribute_vector": unused_vectors(dataset, 1)[0]}
+                      ).json()["class"]["id"]
+    sid = client.post(f"/v1/classes/{cid}/samples", json={"sample": sample}).json()["sample_id"]
+    for path, field in ((f"/v1/classes/424242/samples/{sid}", "class_id"),
+                        (f"/v1/classes/1/samples/{sid}", "sample_id"),  # another class's
+                        (f"/v1/classes/{cid}/samples/424242", "sample_id")):
+        r = client.get(path)
+        assert r.status_code == 404 and r.headers["content-type"] == PROBLEM, path
+        assert r.json()["errors"][0]["field"] == field, path
+    assert client.delete(f"/v1/classes/{cid}/samples/{sid}").status_code == 202
+    r = client.get(f"/v1/classes/{cid}/samples/{sid}")  # withdrawn: no longer live
+    assert r.status_code == 404 and r.json()["errors"][0]["field"] == "sample_id"

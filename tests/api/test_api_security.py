@@ -84,7 +84,7 @@ def test_every_v1_operation_needs_a_key_once_one_exists(client, app):
          .replace("{version}", "1").replace("{sample_id}", "1"))
         for path, item in paths.items() if path.startswith("/v1") for method in item
     ]
-    assert len(operations) == 17
+    assert len(operations) == 18
     for path, item in paths.items():
         for method, operation in item.items():
             if path.startswith("/v1"):

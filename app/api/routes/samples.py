@@ -1,4 +1,8 @@
-from fastapi import APIRouter, Response
+import io
+from typing import Annotated
+
+import numpy as np
+from fastapi import APIRouter, Header, Response
 from sqlalchemy.exc import IntegrityError
 
 from app.api import problems
@@ -14,7 +18,16 @@ from app.api.deps import (
     SessionDep,
 )
 from app.api.problems import Problem, blame, not_found
-from app.api.schemas import JobOut, SampleCreate, SampleCreated, SampleList, SampleOut, Withdrawal
+from app.api.routes.recognize import NPY
+from app.api.schemas import (
+    JobOut,
+    SampleCreate,
+    SampleCreated,
+    SampleDetail,
+    SampleList,
+    SampleOut,
+    Withdrawal,
+)
 from app.api.withdrawals import queue_withdrawal
 from app.store import repo
 
@@ -36,6 +49,32 @@ def list_samples(class_id: RowId, session: SessionDep, page: PageDep) -> SampleL
     rows, next_after = page.cut(repo.list_samples(session, class_id, page.after, page.limit + 1),
                                 lambda r: r.id)
     return SampleList(samples=[SampleOut(**r._mapping) for r in rows], next_after=next_after)
+
+
+@router.get(
+    "/{class_id}/samples/{sample_id}", response_model=SampleDetail, dependencies=[ReadAccess],
+    responses={200: {"content": {NPY: {"schema": {"type": "string", "format": "binary"}}},
+                     "description": f"The sample as JSON, or as `.npy` with `Accept: {NPY}`"},
+               **problems.responses(404)},
+)
+def get_sample(class_id: RowId, sample_id: RowId, session: SessionDep,
+               accept: Annotated[str, Header(description=f"`{NPY}` for a `.npy` body")] = "application/json",
+               ) -> SampleDetail | Response:
+    """One live sample with its data, e.g. to look at an enrolment before withdrawing it,
+    or to send it to `POST /v1/recognize` again. With `Accept: application/x-npy` the body
+    is the sample saved with `numpy.save`, as `POST /v1/recognize` accepts it."""
+    if repo.get_class(session, class_id) is None:
+        raise not_found("class", "class_id", class_id)
+    row = repo.sample_record(session, class_id, sample_id)
+    if row is None:
+        raise not_found("sample", "sample_id", sample_id)
+    x = repo.decode_sample(row.data, row.shape)
+    if NPY in accept.lower():
+        body = io.BytesIO()
+        np.save(body, x, allow_pickle=False)
+        return Response(body.getvalue(), media_type=NPY)
+    fields = {k: v for k, v in row._mapping.items() if k != "data"}
+    return SampleDetail(**fields, sample=x.tolist())
 
 
 @router.post(
