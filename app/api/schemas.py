@@ -114,6 +114,11 @@ class SampleCreate(Strict):
 class SampleCreated(BaseModel):
     sample_id: int
     job: JobOut
+    recognized_as: RecognitionOut = Field(
+        description="What the model served when the sample arrived said of it, before learning "
+        "from it (as `POST /v1/recognize` answers). Advisory: a sample recognised confidently as "
+        "another class may be of the wrong object (withdraw it with `DELETE`).")
+    model_version: int = Field(description="The version that gave `recognized_as`.")
 
 
 class SampleOut(BaseModel):

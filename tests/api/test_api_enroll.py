@@ -135,6 +135,16 @@ def test_add_sample_is_committed_before_202(client, app, novel_class, sample):
     assert client.get(f"/v1/classes/{novel_class}").json()["n_samples"] == 1
 
 
+def test_the_answer_says_what_the_served_model_made_of_the_sample(client, novel_class, sample, dataset):
+    """A sample of a known object enrolled into a novel class by mistake is named for what it is."""
+    body = client.post(f"/v1/classes/{novel_class}/samples", json={"sample": sample}).json()
+    served = client.post("/v1/recognize", json={"samples": [sample]}).json()
+    assert body["model_version"] == served["model_version"] == 1
+    assert body["recognized_as"] == served["results"][0]  # before learning from it: as recognize says
+    assert body["recognized_as"]["class_name"] == dataset.class_names[0]  # the sample's own object
+    assert body["recognized_as"]["is_novel"] is False
+
+
 def test_sample_wrong_shape(client, novel_class, sample):
     problem(client.post(f"/v1/classes/{novel_class}/samples", json={"sample": sample[:-1]}), 422, "sample")
     problem(client.post(f"/v1/classes/{novel_class}/samples", json={"sample": [row[:-1] for row in sample]}),

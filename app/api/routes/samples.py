@@ -86,7 +86,8 @@ def add_sample(
     metrics: MetricsDep, response: Response, idempotency: IdempotencyDep, principal: Enroller,
 ) -> SampleCreated:
     """Add one real sample of a novel class (one-shot learning). Stored and queued
-    before the 202; the job says when a model including it is live. With an
+    before the 202; the job says when a model including it is live. The answer says what
+    the served model made of the sample before learning from it (`recognized_as`). With an
     ``Idempotency-Key``, a retry gets the first answer and adds nothing."""
     idempotency.replay(session)
     cls = repo.get_class(session, class_id)
@@ -102,10 +103,12 @@ def add_sample(
         x = rec.validate_samples(body.sample)  # ragged lists become a named 422 too
     if x.shape[1:] != rec.input_shape or len(x) != 1:
         raise Problem(422, f"expected one sample of shape {list(rec.input_shape)}", "sample")
+    recognized_as = rec.recognize_batch(x).records(model.class_ids)[0]
     try:
         row = repo.add_sample(session, class_id, x[0])
         job = repo.add_job(session, "add_sample", class_id, row.id, requested_by=principal.id)
-        out = SampleCreated(sample_id=row.id, job=JobOut.model_validate(job))
+        out = SampleCreated(sample_id=row.id, job=JobOut.model_validate(job),
+                            recognized_as=recognized_as, model_version=model.version)
         location = f"/v1/jobs/{job.id}"
         idempotency.save(session, 202, out, location)
         session.commit()
