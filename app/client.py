@@ -6,7 +6,8 @@ and enrolments that a retry never doubles.
     client.sync_model()                      # downloads the active version only when it changed
     answer = client.recognize(touches)       # the service's answer, or the model file's offline
     job = client.register_class("teapot", attributes=["hard", "smooth"], wait=20)
-    job = client.add_sample(job["class_id"], touch, wait=20)
+    added = client.add_sample(job["class_id"], touch, wait=20)  # added["recognized_as"]: what
+                                             # the model made of the touch before learning it
 
 ``recognize`` answers as ``POST /v1/recognize`` does, plus ``"source"``: ``"service"``, or
 ``"offline"`` when the service cannot be reached (connection errors and timeouts, after
@@ -124,11 +125,19 @@ class TactileClient:
         return self.job(job["id"], wait) if wait else job
 
     def add_sample(self, class_id: int, sample: Any, wait: float = 0) -> dict[str, Any]:
-        """Add one real sample to a class (one-shot learning); returns its job."""
+        """Add one real sample to a class (one-shot learning); returns the service's answer:
+        ``sample_id``, ``job`` (after up to ``wait`` seconds for it to finish) and what the
+        served model made of the sample before learning from it (``recognized_as``)."""
         body = {"sample": np.asarray(sample, dtype=np.float32).tolist()}
-        job = self._send("POST", f"/v1/classes/{int(class_id)}/samples", json=body,
-                         idempotency_key=str(uuid.uuid4())).json()["job"]
-        return self.job(job["id"], wait) if wait else job
+        added = self._send("POST", f"/v1/classes/{int(class_id)}/samples", json=body,
+                           idempotency_key=str(uuid.uuid4())).json()
+        return {**added, "job": self.job(added["job"]["id"], wait)} if wait else added
+
+    def sample(self, class_id: int, sample_id: int) -> np.ndarray:
+        """A stored sample's data, e.g. to look at an enrolment again."""
+        r = self._send("GET", f"/v1/classes/{int(class_id)}/samples/{int(sample_id)}",
+                       headers={"Accept": "application/x-npy"})
+        return np.load(io.BytesIO(r.content), allow_pickle=False)
 
     def job(self, job_id: int, wait: float = 0) -> dict[str, Any]:
         """A job, after up to ``wait`` seconds (at most 20) for it to succeed or fail."""

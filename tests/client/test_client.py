@@ -107,9 +107,13 @@ def test_a_retry_after_a_lost_answer_enrols_once(client, worker, dataset, sample
     worker.run_once()
     assert client.get(f"/v1/jobs/{job['id']}").json()["status"] == "succeeded"
     robot.http._transport.lost = 0  # lose the next answer too
-    sample_job = robot.add_sample(job["class_id"], sample)
+    added = robot.add_sample(job["class_id"], sample)
     assert client.get(f"/v1/classes/{job['class_id']}").json()["n_samples"] == 1
-    assert sample_job["sample_id"] is not None
+    assert added["job"]["sample_id"] == added["sample_id"] and added["recognized_as"]["class_name"]
+    np.testing.assert_array_equal(robot.sample(job["class_id"], added["sample_id"]), np.float32(sample))
+    worker.run_once()
+    done = robot.add_sample(job["class_id"], sample, wait=0.5)  # nobody runs this job: still queued
+    assert done["job"]["status"] == "queued" and done["job"]["sample_id"] == done["sample_id"]
 
 
 def test_bad_client_settings_are_refused(tmp_path):
