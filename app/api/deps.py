@@ -23,6 +23,7 @@ from app.service.keys import Principal, retry_after
 from app.service.metrics import Metrics
 from app.service.recognition import RecognitionService
 from app.store import repo
+from app.store.bundles import ExportCache
 
 # async: trivial dependencies then run on the event loop, not in the thread pool
 
@@ -41,6 +42,10 @@ async def get_job_watch(request: Request) -> JobWatch:
 
 async def get_metrics(request: Request) -> Metrics:
     return request.app.state.metrics
+
+
+async def get_exports(request: Request) -> ExportCache:
+    return request.app.state.exports
 
 
 async def get_session(request: Request) -> AsyncIterator[Session]:
@@ -228,6 +233,7 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 SessionDep = Annotated[Session, Depends(get_session)]
 HolderDep = Annotated[ModelHolder, Depends(get_holder)]
 MetricsDep = Annotated[Metrics, Depends(get_metrics)]
+ExportsDep = Annotated[ExportCache, Depends(get_exports)]
 JobWatchDep = Annotated[JobWatch, Depends(get_job_watch)]
 RecognizingDep = Annotated[Recognizing, Depends(get_recognizing)]
 ModelDep = Annotated[LoadedModel, Depends(get_model)]

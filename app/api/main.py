@@ -28,6 +28,7 @@ from app.service.job_watch import JobWatch
 from app.service.keys import KeyRing, RateLimiter
 from app.service.metrics import JobMetricsPoller, Metrics
 from app.service.recognition import RecognitionService
+from app.store.bundles import ExportCache
 from app.store.db import make_engine, make_sessionmaker
 from app.store.in_use import opened_by_service
 
@@ -114,6 +115,7 @@ def create_app(
     app.state.recognition = RecognitionService(metrics, settings.top_k, settings.batch_limit)
     app.state.keys = keys
     app.state.job_watch = job_watch
+    app.state.exports = ExportCache()  # model files robots download, joined once per version
     app.state.limiter = RateLimiter(settings.rate_limit, settings.rate_burst)
     problems.install(app)
     app.add_exception_handler(Replay, replay_handler)

@@ -79,6 +79,20 @@ def test_the_cache_keeps_only_the_served_models_parts(two_versions, base_model):
     assert len(cache) == 0
 
 
+def test_exported_files_are_joined_once_per_version_and_the_oldest_leaves(two_versions, monkeypatch):
+    sessions, v1, v2, _ = two_versions
+    joined = []
+    real_join = bundle.join
+    monkeypatch.setattr(bundle, "join", lambda *a, **k: joined.append(1) or real_join(*a, **k))
+    cache = bundles.ExportCache(size=1)
+    with sessions() as s:
+        first = cache.export(s, v1)
+        assert cache.export(s, v1) is first and len(joined) == 1  # a fleet's downloads: one join
+        assert bundle.from_bytes(first).registry.novel_names == []
+        assert bundle.from_bytes(cache.export(s, v2)).registry.novel_names == ["mug"]
+        assert cache.export(s, v1) == first and len(joined) == 3  # v2 took v1's place
+
+
 def test_the_reliability_check_finds_a_version_whose_parts_are_gone(store, settings):
     from app.store.integrity import check_store
 

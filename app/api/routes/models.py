@@ -4,11 +4,12 @@ from fastapi import APIRouter, Header, Response
 from sqlalchemy.orm import Session
 
 from app.api import problems
-from app.api.deps import AdminAccess, HolderDep, PageDep, ReadAccess, RowId, SessionDep
+from app.api.deps import AdminAccess, ExportsDep, HolderDep, PageDep, ReadAccess, RowId, SessionDep
 from app.api.problems import Problem, not_found
 from app.api.schemas import ModelList, ModelOut, ModelSummary
 from app.framework.errors import BundleError
 from app.store import bundles, repo
+from app.store.bundles import ExportCache
 from app.store.models import ModelVersion
 
 router = APIRouter(prefix="/v1/models", tags=["models"], responses=problems.responses(401, 403, 422, 429))
@@ -59,18 +60,20 @@ IfNoneMatch = Annotated[str | None, Header(description="the ETag of a bundle the
 
 @router.get("/active/bundle", dependencies=[ReadAccess], response_class=Response,
             responses=BUNDLE_RESPONSES)
-def download_active_model(session: SessionDep, if_none_match: IfNoneMatch = None) -> Response:
+def download_active_model(session: SessionDep, exports: ExportsDep, if_none_match: IfNoneMatch = None,
+                          ) -> Response:
     """The active version as a single bundle file, as `GET /v1/models/{version}/bundle`
     gives it: one request for a robot to stay current (304 while its copy is the active one)."""
     row = repo.active_version(session)
     if row is None:
         raise Problem(404, "no model version is active yet", "version")
-    return _bundle_response(session, row, if_none_match)
+    return _bundle_response(session, exports, row, if_none_match)
 
 
 @router.get("/{version}/bundle", dependencies=[ReadAccess], response_class=Response,
             responses=BUNDLE_RESPONSES)
-def download_model(version: RowId, session: SessionDep, if_none_match: IfNoneMatch = None) -> Response:
+def download_model(version: RowId, session: SessionDep, exports: ExportsDep,
+                   if_none_match: IfNoneMatch = None) -> Response:
     """One stored model version as a single self-contained bundle file, to recognise on a
     robot without the network (`tactile-zsl recognize --model FILE SAMPLES`) with exactly
     the answers this service gives. The `ETag` names the version's content: send it back
@@ -78,15 +81,16 @@ def download_model(version: RowId, session: SessionDep, if_none_match: IfNoneMat
     row = repo.get_version(session, version)
     if row is None:
         raise not_found("model version", "version", version)
-    return _bundle_response(session, row, if_none_match)
+    return _bundle_response(session, exports, row, if_none_match)
 
 
-def _bundle_response(session: Session, row: ModelVersion, if_none_match: str | None) -> Response:
+def _bundle_response(session: Session, exports: ExportCache, row: ModelVersion,
+                     if_none_match: str | None) -> Response:
     headers = {"ETag": f'"{row.bundle_sha256}"', "X-Model-Version": str(row.version)}
     if if_none_match is not None and _matches(if_none_match, headers["ETag"]):
         return Response(status_code=304, headers=headers)
     try:
-        data = bundles.export_model(session, row.bundle_sha256)
+        data = exports.export(session, row.bundle_sha256)
     except BundleError as exc:
         raise Problem(409, f"version {row.version} cannot be exported: {exc}", "version") from None
     return Response(data, media_type=BUNDLE_MEDIA_TYPE, headers={
