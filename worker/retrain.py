@@ -7,7 +7,7 @@ Usually that is an incremental update (new FC_Z, one-shot samples); when a novel
 class has gathered ``promotion_threshold`` real samples it becomes a known class
 and the whole model is retrained from the stored samples. So is it when the base
 model holds something the store has withdrawn (a class, a sample, or a class's old
-attributes) in its known part, or in its novel part where one-shot samples may have
+attributes, after a withdrawal or a PATCH of them) in its known part, or in its novel part where one-shot samples may have
 fine-tuned shared parts (the paper's generator): a fresh fit is the one way to leave no
 trace of it. Methods whose novel part is rebuilt from the registry alone
 (``novel_part_separable``, e.g. ``best``) drop their novel classes and add the live
@@ -46,6 +46,7 @@ class Plan:
     novel: list[ObjectClass] = field(default_factory=list)  # every novel class of the new model
     samples: dict[int, list[Sample]] = field(default_factory=dict)  # its enrolled samples by class
     rejected: dict[int, str] = field(default_factory=dict)  # job id -> why it cannot succeed
+    redescribed: bool = False  # an operator changed a class's attributes (PATCH)
 
     @property
     def changes_model(self) -> bool:
@@ -53,10 +54,11 @@ class Plan:
 
     @property
     def reason(self) -> str:
-        """The new model version's ``reason``."""
-        if self.withdrawal and not self.promote:
-            return "withdrawal"
-        return "promotion" if self.full_retrain else "update"
+        """The new model version's ``reason``. Changed attributes make the base model hold a
+        class as it no longer is, as a withdrawal does; asked for by PATCH, that is an update."""
+        if self.promote or (self.full_retrain and not self.withdrawal):
+            return "promotion"
+        return "withdrawal" if self.withdrawal and not self.redescribed else "update"
 
     @property
     def sample_ids(self) -> list[int]:
@@ -74,8 +76,12 @@ def make_plan(
     live_classes = _live_registrations(s, claimed_ids)
     live_samples = set()
     for job in claimed:
-        if job.kind in ("register_class", "add_sample") and job.class_id not in by_id:
+        if job.kind in ("register_class", "add_sample", "update_class") and job.class_id not in by_id:
             plan.rejected[job.id] = f"class {job.class_id} was withdrawn"
+        elif job.kind == "update_class" and job.class_id not in live_classes:
+            plan.rejected[job.id] = f"class '{by_id[job.class_id].name}' is not enrolled: its registration failed"
+        elif job.kind == "update_class":
+            plan.redescribed = True
     added = s.execute(
         select(Job.id, Job.class_id, Sample.id, Sample.withdrawn_at)
         .join(Sample, Sample.id == Job.sample_id)

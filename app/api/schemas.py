@@ -30,8 +30,9 @@ class AttributeList(BaseModel):
 
 
 # --------------------------------------------------------------------- classes
-class ClassCreate(Strict):
-    name: ClassName
+class ClassDescription(Strict):
+    """How an operator describes an object: by attribute names or by a 0/1 vector."""
+
     attributes: list[str] | None = Field(
         None, description="Attribute names that describe the object.", examples=[["hard", "smooth"]]
     )
@@ -40,10 +41,14 @@ class ClassCreate(Strict):
     )
 
     @model_validator(mode="after")
-    def _one_description(self) -> ClassCreate:
+    def _one_description(self) -> ClassDescription:
         if (self.attributes is None) == (self.attribute_vector is None):
             raise ValueError("give exactly one of 'attributes' or 'attribute_vector'")
         return self
+
+
+class ClassCreate(ClassDescription):
+    name: ClassName
 
 
 class ClassOut(BaseModel):
@@ -68,7 +73,7 @@ class ClassList(BaseModel):
 
 # ------------------------------------------------------------------------ jobs
 JobStatus = Literal["queued", "running", "succeeded", "failed"]
-JobKind = Literal["register_class", "add_sample", "withdraw_class", "withdraw_sample"]
+JobKind = Literal["register_class", "add_sample", "update_class", "withdraw_class", "withdraw_sample"]
 
 
 class JobOut(BaseModel):

@@ -85,10 +85,12 @@ def class_by_name(session: Session, name: str, withdrawn: bool = False) -> Objec
     return session.scalar(select(ObjectClass).where(ObjectClass.name == name, state))
 
 
-def class_by_key(session: Session, key: str) -> ObjectClass | None:
-    return session.scalar(
-        select(ObjectClass).where(ObjectClass.attribute_key == key, LIVE_CLASS).limit(1)
-    )
+def class_by_key(session: Session, key: str, other_than: int | None = None) -> ObjectClass | None:
+    """A live class described by ``key`` (other than class ``other_than``)."""
+    stmt = select(ObjectClass).where(ObjectClass.attribute_key == key, LIVE_CLASS)
+    if other_than is not None:
+        stmt = stmt.where(ObjectClass.id != other_than)
+    return session.scalar(stmt.limit(1))
 
 
 def list_classes(session: Session, after: int | None = None, limit: int | None = None) -> list[ObjectClass]:
@@ -205,6 +207,12 @@ def withdraw_class(session: Session, cls: ObjectClass) -> None:
 
 def withdraw_sample(session: Session, row: Sample) -> None:
     row.withdrawn_at = utcnow()
+    session.flush()
+
+
+def redescribe_class(session: Session, cls: ObjectClass, key: str) -> None:
+    """New attributes for a live class; its samples stay (the worker's next round)."""
+    cls.attribute_key = key
     session.flush()
 
 

@@ -84,7 +84,7 @@ def test_every_v1_operation_needs_a_key_once_one_exists(client, app):
          .replace("{version}", "1").replace("{sample_id}", "1"))
         for path, item in paths.items() if path.startswith("/v1") for method in item
     ]
-    assert len(operations) == 18
+    assert len(operations) == 19
     for path, item in paths.items():
         for method, operation in item.items():
             if path.startswith("/v1"):
@@ -92,7 +92,7 @@ def test_every_v1_operation_needs_a_key_once_one_exists(client, app):
     for method, path in operations:
         problem(client.request(method, path), 401, "X-API-Key")
         r = client.request(method, path, headers={"X-API-Key": read})
-        writes = method in ("POST", "DELETE") and path != "/v1/recognize"
+        writes = method in ("POST", "PATCH", "DELETE") and path != "/v1/recognize"
         assert (r.status_code == 403) == writes, (method, path, r.status_code)
 
 
@@ -184,6 +184,12 @@ def test_cors_opens_only_to_configured_origins(settings, base_model):
         assert ok.headers["access-control-allow-origin"] == "https://ops.example"
         other = c.get("/v1/attributes", headers={"Origin": "https://evil.example"})
         assert "access-control-allow-origin" not in other.headers
+        for method in ("POST", "PATCH", "DELETE"):  # an operators' page may enrol, correct, withdraw
+            preflight = c.options("/v1/classes/1", headers={
+                "Origin": "https://ops.example", "Access-Control-Request-Method": method,
+                "Access-Control-Request-Headers": "X-API-Key, Idempotency-Key"})
+            assert preflight.status_code == 200, (method, preflight.text)
+            assert method in preflight.headers["access-control-allow-methods"]
 
 
 # ------------------------------------------------------- nothing internal leaks

@@ -6,13 +6,10 @@ import numpy as np
 import pytest
 
 from app.framework.errors import UnsupportedOperationError
-from app.framework.registry import make_method
 from app.store import repo
 from tests.service_fixtures import (
     add_sample,
     job,
-    quick_dataset,
-    quick_settings,
     register,
     unused_vectors,
 )
@@ -131,29 +128,6 @@ def test_a_promoted_class_below_the_threshold_again_is_novel_again(client, app, 
     assert len(reg.novel_samples["promoted"]) == 1
     assert len(reg.known_names) == dataset.n_classes
     assert client.get("/v1/models/active").json()["reason"] == "withdrawal"
-
-
-BEST_PARAMS = {"seed": 0, "n_estimators": 10, "tuning_rounds": 1, "distance_components": 8}
-
-
-@pytest.fixture(scope="module")
-def best_base():
-    dataset = quick_dataset()
-    return make_method("best", **BEST_PARAMS).fit(dataset), dataset
-
-
-@pytest.fixture
-def best_service(tmp_path, best_base):
-    """(client, app, worker) of a service whose method is ``best`` (SQLite)."""
-    from fastapi.testclient import TestClient
-
-    from app.api.main import create_app
-    from worker import Worker
-
-    app = create_app(quick_settings(tmp_path, method="best", method_params=BEST_PARAMS),
-                     trainer=lambda: best_base)
-    with TestClient(app) as client:
-        yield client, app, Worker(app.state.settings, app.state.sessions, on_activate=app.state.holder.serve)
 
 
 def test_best_withdraws_from_its_novel_part_without_fitting_again(best_service, best_base, monkeypatch):

@@ -18,7 +18,15 @@ from app.api.deps import (
     SessionDep,
 )
 from app.api.problems import Problem, blame, not_found
-from app.api.schemas import ClassCreate, ClassCreated, ClassList, ClassOut, JobOut, Withdrawal
+from app.api.schemas import (
+    ClassCreate,
+    ClassCreated,
+    ClassDescription,
+    ClassList,
+    ClassOut,
+    JobOut,
+    Withdrawal,
+)
 from app.api.withdrawals import queue_withdrawal
 from app.service.holder import LoadedModel
 from app.store import repo
@@ -106,7 +114,52 @@ def register_class(
     return out
 
 
-def _attribute_vector(body: ClassCreate, model: LoadedModel) -> np.ndarray:
+@router.patch(
+    "/{class_id}", status_code=202, response_model=ClassCreated, dependencies=[EnrollAccess],
+    responses=problems.responses(404, 409),
+)
+def redescribe_class(
+    class_id: RowId, body: ClassDescription, session: SessionDep, model: ModelDep, metrics: MetricsDep,
+    response: Response, idempotency: IdempotencyDep, principal: Enroller,
+) -> ClassCreated:
+    """Correct the attributes an enrolled class was described by (say, *hard* where the
+    object is *soft*), keeping the samples robots enrolled for it. Committed before the
+    202; the served model describes the class anew when the job succeeds (the novel
+    classes rebuilt, or a full retrain for a promoted class). The attributes of the
+    training dataset's classes cannot be changed. With an ``Idempotency-Key``, a retry
+    gets the first answer."""
+    idempotency.replay(session)
+    cls = repo.get_class(session, class_id)
+    if cls is None:
+        raise not_found("class", "class_id", class_id)
+    if cls.origin != "enrolled":
+        raise Problem(
+            409, f"class '{cls.name}' comes from the training dataset; only the attributes of "
+            "enrolled classes can be changed", "class_id",
+        )
+    key = repo.vector_key(_attribute_vector(body, model))
+    field = "attributes" if body.attributes is not None else "attribute_vector"
+    try:
+        _check_unique_vector(session, key, field, other_than=cls.id)
+        repo.redescribe_class(session, cls, key)
+        job = repo.add_job(session, "update_class", cls.id, requested_by=principal.id)
+        n = repo.sample_counts(session, [cls.id]).get(cls.id, 0)
+        out = ClassCreated(class_=class_out(cls, repo.attribute_names(session), n, model),
+                           job=JobOut.model_validate(job))
+        location = f"/v1/jobs/{job.id}"
+        idempotency.save(session, 202, out, location)
+        session.commit()
+    except IntegrityError:  # a concurrent registration of this vector (or retry with this key) won
+        session.rollback()
+        idempotency.replay(session)
+        _check_unique_vector(session, key, field, other_than=cls.id)
+        raise
+    metrics.enrollments.labels("redescription").inc()
+    response.headers["Location"] = location
+    return out
+
+
+def _attribute_vector(body: ClassDescription, model: LoadedModel) -> np.ndarray:
     rec = model.recognizer
     if body.attributes is not None:
         with blame("attributes"):
@@ -125,7 +178,11 @@ def _failed_registration(session: Session, name: str, key: str) -> ObjectClass |
 def _check_unique(session: Session, name: str, key: str, field: str) -> None:
     if repo.class_by_name(session, name) is not None:
         raise Problem(409, f"a class named '{name}' already exists", "name")
-    other = repo.class_by_key(session, key)
+    _check_unique_vector(session, key, field)
+
+
+def _check_unique_vector(session: Session, key: str, field: str, other_than: int | None = None) -> None:
+    other = repo.class_by_key(session, key, other_than)
     if other is not None:
         raise Problem(
             409,
