@@ -14,8 +14,9 @@ GMM the score is the negated weighted log-likelihood and the threshold is
 from __future__ import annotations
 
 import copy
+import difflib
 from abc import ABC, abstractmethod
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, NamedTuple, Self
 
@@ -391,7 +392,8 @@ class TactileRecognizer(ABC):
         vocab = self.registry.attribute_names
         unknown = [a for a in attribute_names if a not in vocab]
         if unknown:
-            raise AttributeVectorError(f"unknown attribute(s): {', '.join(map(str, unknown))}")
+            raise AttributeVectorError(f"unknown attribute(s): {'; '.join(map(_suggest(vocab), unknown))}; "
+                                       f"the attributes are: {', '.join(vocab)}")
         return np.array([1.0 if a in set(attribute_names) else 0.0 for a in vocab], np.float32)
 
     def _require_fitted(self) -> None:
@@ -406,3 +408,11 @@ class TactileRecognizer(ABC):
     @abstractmethod
     def set_state(self, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
         """Restore what ``get_state`` returned."""
+
+
+def _suggest(vocabulary: Sequence[str]) -> Callable[[Any], str]:
+    """An unknown attribute name with the vocabulary's closest ones, for a typo."""
+    def named(name: Any) -> str:
+        close = difflib.get_close_matches(str(name), vocabulary, n=2, cutoff=0.6)
+        return f"{name!r} (did you mean {' or '.join(map(repr, close))}?)" if close else repr(name)
+    return named

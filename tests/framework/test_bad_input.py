@@ -43,8 +43,15 @@ def test_non_numeric_samples(fitted):
 
 
 def test_unknown_attribute_names(fitted):
-    with pytest.raises(AttributeVectorError, match="unknown attribute.*glowing"):
+    with pytest.raises(AttributeVectorError, match="unknown attribute.*glowing") as raised:
         fitted.attribute_vector(["hard", "glowing"])
+    assert "did you mean" not in str(raised.value)  # nothing like it in the vocabulary
+    assert str(raised.value).endswith(", ".join(fitted.registry.attribute_names))
+
+
+def test_a_misspelt_attribute_gets_the_closest_names(fitted):
+    with pytest.raises(AttributeVectorError, match=r"'hrad' \(did you mean 'hard'\?\)"):
+        fitted.attribute_vector(["hrad", "smooth"])
 
 
 def test_attribute_vector_of_wrong_length(fitted):
