@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from app.client import ServiceError, ServiceUnreachable, TactileClient
+from app.framework import bundle
 from tests.reliability.harness import free_port
 from tests.service_fixtures import list_all, unused_vectors
 
@@ -123,3 +124,18 @@ def test_bad_client_settings_are_refused(tmp_path):
         TactileClient("http://127.0.0.1:1").sync_model()
     with pytest.raises(ValueError, match="either attributes or attribute_vector"):
         TactileClient("http://127.0.0.1:1").register_class("x")
+    with pytest.raises(ValueError, match="either attributes or attribute_vector"):
+        TactileClient("http://127.0.0.1:1").redescribe_class(1, ["hard"], [1, 0])
+
+
+def test_a_class_described_anew_reaches_the_model_file(robot, worker, dataset):
+    job = robot.register_class("cup", attribute_vector=unused_vectors(dataset, 1)[0])
+    worker.run_once()
+    vector = unused_vectors(dataset, 2)[1]
+    update = robot.redescribe_class(job["class_id"], attribute_vector=vector)
+    assert update["kind"] == "update_class" and update["status"] == "queued"
+    worker.run_once()
+    assert robot.job(update["id"])["status"] == "succeeded"
+    assert robot.sync_model() is True
+    reg = bundle.load(robot.model_file).registry
+    assert reg.novel_attributes[reg.novel_names.index("cup")].tolist() == vector
