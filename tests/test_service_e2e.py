@@ -183,5 +183,16 @@ def test_robot_session_survives_a_restart(tmp_path):
             assert active["version"] == job["model_version"] and active["reason"] == "withdrawal"
             teapot_now = client.get(f"/v1/classes/{teapot}").json()
             assert teapot_now["n_samples"] == 0 and teapot_now["in_active_model"] is True
+
+            # and the operator's description missed an attribute: corrected, the model follows
+            taken = {tuple(c["attributes"]) for c in list_all(client, "/v1/classes", "classes")}
+            fixed = next(f for a in attributes if a not in names
+                         and tuple(f := sorted([*names, a], key=attributes.index)) not in taken)
+            r = client.patch(f"/v1/classes/{teapot}", json={"attributes": fixed})
+            assert r.status_code == 202, r.text
+            job = wait_job(client, r.json()["job"]["id"], service)
+            assert job["status"] == "succeeded", job
+            assert client.get("/v1/models/active").json()["reason"] == "update"
+            assert client.get(f"/v1/classes/{teapot}").json()["attributes"] == fixed
     finally:
         service.stop()
