@@ -12,6 +12,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import httpx
 
+from app.framework import bundle
 from app.store.integrity import check_store
 from tests.reliability.harness import Cluster, wait_jobs_settled
 from tests.service_fixtures import list_all, quick_dataset
@@ -33,9 +34,9 @@ def _vectors(n: int) -> list[list[int]]:
 
 
 class Enroller:
-    """A robot fleet in one thread: registers classes, adds samples and now and then
-    withdraws one, retrying a timed-out or cut request with the same Idempotency-Key,
-    round-robin over the APIs."""
+    """A robot fleet in one thread: registers classes, adds samples, now and then
+    withdraws one or describes a class anew, retrying a timed-out or cut request with the
+    same Idempotency-Key, round-robin over the APIs."""
 
     def __init__(self, urls: list[str], seed: int = 0, max_classes: int = 400) -> None:
         self.urls = itertools.cycle(urls)
@@ -46,6 +47,8 @@ class Enroller:
         self.sample_ids: list[int] = []  # 202'd sample ids
         self.sample_class: dict[int, int] = {}
         self.withdrawn: list[int] = []  # sample ids whose withdrawal got a 202
+        self.described: dict[int, list[int]] = {}  # class id -> vector of its last 202'd PATCH
+        self.vectors_used = 0
         self.per_class: dict[int, int] = {}
         self.retries = self.replays = self.bad = 0
         self.statuses: dict[int, int] = {}
@@ -72,7 +75,8 @@ class Enroller:
 
     def step(self) -> None:
         kept = sorted(set(self.sample_ids) - set(self.withdrawn))
-        if kept and self.rng.random() < 0.1:  # a sample of the wrong object: withdrawn
+        # each kind of request at least once, so a short run checks them all
+        if kept and (self.rng.random() < 0.1 or not self.withdrawn):  # a sample of the wrong object
             sid = self.rng.choice(kept)
             r = self.send("DELETE", f"/v1/classes/{self.sample_class[sid]}/samples/{sid}")
             if r is not None and r.status_code == 202:
@@ -80,11 +84,20 @@ class Enroller:
             elif r is not None:
                 self.bad += 1
             return
+        if self.classes and self.vectors_used < len(self.vectors) and (
+                self.rng.random() < 0.05 or not self.described):
+            cid = self.rng.choice(sorted(self.classes))  # described wrongly: corrected
+            vector = self._next_vector()
+            r = self.send("PATCH", f"/v1/classes/{cid}", {"attribute_vector": vector})
+            if r is not None and r.status_code == 202:
+                self.described[cid] = vector
+            elif r is not None:
+                self.bad += 1
+            return
         open_classes = [c for c, n in self.per_class.items() if n < 3]
-        if not open_classes or (len(self.classes) < len(self.vectors) and self.rng.random() < 0.5):
-            i = len(self.classes)
-            name = f"crash-{i}-{uuid.uuid4().hex[:6]}"
-            r = self.send("POST", "/v1/classes", {"name": name, "attribute_vector": self.vectors[i]})
+        if not open_classes or (self.vectors_used < len(self.vectors) and self.rng.random() < 0.5):
+            name = f"crash-{len(self.classes)}-{uuid.uuid4().hex[:6]}"
+            r = self.send("POST", "/v1/classes", {"name": name, "attribute_vector": self._next_vector()})
             if r is not None and r.status_code == 202:
                 cid = r.json()["class"]["id"]
                 self.classes[cid] = name
@@ -102,6 +115,10 @@ class Enroller:
         elif r is not None:
             self.bad += 1
 
+    def _next_vector(self) -> list[int]:
+        self.vectors_used += 1
+        return self.vectors[self.vectors_used - 1]
+
     def run(self) -> None:
         while not self.stop.is_set():
             self.step()
@@ -109,15 +126,22 @@ class Enroller:
 
 
 def verify(cluster: Cluster, classes: dict[int, str], sample_ids: list[int], timeout: float,
-           withdrawn: list[int] = ()) -> dict:
+           withdrawn: list[int] = (), described: dict[int, list[int]] | None = None) -> dict:
     """Every 202'd class and sample is in the store and in the active model, except the
-    samples whose withdrawal got a 202, which are in neither; jobs settled."""
+    samples whose withdrawal got a 202, which are in neither; a class described anew has
+    its last 202'd vector in both; jobs settled."""
     counts = wait_jobs_settled(cluster.sqlalchemy_url, timeout)
     url = cluster.urls[0]
     active = httpx.get(f"{url}/v1/models/active", timeout=30).json()
     model_names = {c["name"] for c in active["classes"]}
     with httpx.Client(base_url=url, timeout=30) as client:
         stored = {c["id"]: c for c in list_all(client, "/v1/classes", "classes")}
+        vocabulary = client.get("/v1/attributes").json()["attributes"]
+        served = bundle.from_bytes(client.get("/v1/models/active/bundle").content).registry
+    served_vectors = dict(zip(served.known_names + served.novel_names,
+                              [v.tolist() for v in (*served.known_attributes, *served.novel_attributes)],
+                              strict=True))
+    described = described or {}
     from app.store import repo
     from app.store.db import make_engine, make_sessionmaker
 
@@ -144,6 +168,12 @@ def verify(cluster: Cluster, classes: dict[int, str], sample_ids: list[int], tim
         "withdrawn_202": len(withdrawn),
         "withdrawn_still_live": sorted(set(withdrawn) & present),
         "withdrawn_in_model": sorted(set(withdrawn) & in_model),
+        "described_202": len(described),
+        "descriptions_not_stored": sorted(
+            c for c, v in described.items()
+            if stored.get(c, {}).get("attributes") != [a for a, bit in zip(vocabulary, v, strict=True) if bit]),
+        "descriptions_not_served": sorted(
+            c for c, v in described.items() if served_vectors.get(classes[c]) != [float(b) for b in v]),
         "active_version": active["version"],
         # the one failure that is right: a sample withdrawn before a model took it in
         "unexpected_failures": [
@@ -177,7 +207,8 @@ def crash(cluster: Cluster, kills: int, seed: int = 0, gap: tuple[float, float] 
         fleet.stop.set()
         thread.join(120)
     cluster.wait_ready()
-    report = verify(cluster, fleet.classes, fleet.sample_ids, settle_timeout, fleet.withdrawn)
+    report = verify(cluster, fleet.classes, fleet.sample_ids, settle_timeout, fleet.withdrawn,
+                    fleet.described)
     report.update(kills=killed, seconds=round(time.monotonic() - started, 1),
                   retries=fleet.retries, replays=fleet.replays, statuses=fleet.statuses,
                   non_202=fleet.bad)

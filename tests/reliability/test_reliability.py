@@ -1,5 +1,5 @@
 """Real processes under faults and load, in CI sizes (the bench/ scripts run them big):
-SIGKILLs lose no 202'd enrollment nor withdrawal, 100 concurrent robots on 2 APIs + 2 workers, and
+SIGKILLs lose no 202'd enrollment, withdrawal nor new description, 100 concurrent robots on 2 APIs + 2 workers, and
 zero failed recognitions while 20 versions go live."""
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ def assert_nothing_lost(report: dict) -> None:
     assert report["classes_missing"] == [] and report["samples_missing"] == [], report
     assert report["classes_not_in_model"] == [] and report["samples_not_in_model"] == [], report
     assert report.get("withdrawn_in_model", []) == report.get("withdrawn_still_live", []) == [], report
+    assert report.get("descriptions_not_stored", []) == report.get("descriptions_not_served", []) == [], report
     assert set(report["jobs"]) <= {"succeeded", "failed"}, report  # none left queued
     assert report["unexpected_failures"] == [], report
 
@@ -40,7 +41,7 @@ def run_crash(tmp_path, database_url: str = "") -> None:
         cluster.stop()
     print(report)
     assert sum(report["kills"].values()) == CI_KILLS
-    assert report["classes_202"] > 0 and report["withdrawn_202"] > 0
+    assert report["classes_202"] > 0 and report["withdrawn_202"] > 0 and report["described_202"] > 0
     assert_nothing_lost(report)
 
 
