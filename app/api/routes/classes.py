@@ -129,14 +129,7 @@ def redescribe_class(
     training dataset's classes cannot be changed. With an ``Idempotency-Key``, a retry
     gets the first answer."""
     idempotency.replay(session)
-    cls = repo.get_class(session, class_id)
-    if cls is None:
-        raise not_found("class", "class_id", class_id)
-    if cls.origin != "enrolled":
-        raise Problem(
-            409, f"class '{cls.name}' comes from the training dataset; only the attributes of "
-            "enrolled classes can be changed", "class_id",
-        )
+    cls = _enrolled_class(session, class_id, "described anew")
     key = repo.vector_key(_attribute_vector(body, model))
     field = "attributes" if body.attributes is not None else "attribute_vector"
     try:
@@ -157,6 +150,19 @@ def redescribe_class(
     metrics.enrollments.labels("redescription").inc()
     response.headers["Location"] = location
     return out
+
+
+def _enrolled_class(session: Session, class_id: int, done: str) -> ObjectClass:
+    """The live class ``class_id``, one an operator enrolled: what can be ``done`` to it."""
+    cls = repo.get_class(session, class_id)
+    if cls is None:
+        raise not_found("class", "class_id", class_id)
+    if cls.origin != "enrolled":
+        raise Problem(
+            409, f"class '{cls.name}' comes from the training dataset; only enrolled classes "
+            f"can be {done}", "class_id",
+        )
+    return cls
 
 
 def _attribute_vector(body: ClassDescription, model: LoadedModel) -> np.ndarray:
@@ -206,14 +212,7 @@ def withdraw_class(
     Classes of the training dataset cannot be withdrawn. Its name can then be registered
     again."""
     idempotency.replay(session)
-    cls = repo.get_class(session, class_id)
-    if cls is None:
-        raise not_found("class", "class_id", class_id)
-    if cls.origin != "enrolled":
-        raise Problem(
-            409, f"class '{cls.name}' comes from the training dataset; only enrolled classes "
-            "can be withdrawn", "class_id",
-        )
+    cls = _enrolled_class(session, class_id, "withdrawn")
     repo.withdraw_class(session, cls)
     return queue_withdrawal(session, idempotency, metrics, response, principal, cls.id, None)
 
