@@ -5,14 +5,16 @@ from __future__ import annotations
 import hashlib
 import hmac
 import json
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable, Iterator
+from contextlib import contextmanager
 from typing import Annotated, NamedTuple
 
-from fastapi import Depends, Header, Path, Query, Request, Security
+from fastapi import Depends, Header, Path, Query, Request, Response, Security
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 from fastapi.security import APIKeyHeader
 from pydantic import BaseModel
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.api.problems import Problem
@@ -173,6 +175,28 @@ class Idempotency:
             repo.add_idempotency(
                 session, self.principal, self.key, self.fingerprint, status, data, location
             )
+
+    @contextmanager
+    def writing(self, session: Session, recheck: Callable[[], None] | None = None) -> Iterator[None]:
+        """Around a write route's changes: a unique constraint broken by a concurrent request
+        replays that request's answer when it was a retry with this key, or lets ``recheck``
+        name the conflict (a 409), before the error is raised as it is."""
+        try:
+            yield
+        except IntegrityError:
+            session.rollback()
+            self.replay(session)
+            if recheck is not None:
+                recheck()
+            raise
+
+    def accept(self, session: Session, body: BaseModel, job_id: int, response: Response) -> None:
+        """Commit the changes with their 202 answer (kept for retries with this key), which
+        points at the job."""
+        location = f"/v1/jobs/{job_id}"
+        self.save(session, 202, body, location)
+        session.commit()
+        response.headers["Location"] = location
 
 
 class Replay(Exception):  # noqa: N818 - not an error: carries the stored answer

@@ -4,7 +4,6 @@ takes it out of the served model, in the same transaction."""
 from __future__ import annotations
 
 from fastapi import Response
-from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.api.deps import Idempotency
@@ -20,16 +19,9 @@ def queue_withdrawal(
 ) -> Withdrawal:
     """Queue the withdrawal's job and commit it with the change; the 202's body."""
     kind = "withdraw_class" if sample_id is None else "withdraw_sample"
-    job = repo.add_job(session, kind, class_id, sample_id, requested_by=principal.id)
-    out = Withdrawal(class_id=class_id, sample_id=sample_id, job=JobOut.model_validate(job))
-    location = f"/v1/jobs/{job.id}"
-    idempotency.save(session, 202, out, location)
-    try:
-        session.commit()
-    except IntegrityError:  # a concurrent retry with the same Idempotency-Key won
-        session.rollback()
-        idempotency.replay(session)
-        raise
+    with idempotency.writing(session):  # a concurrent retry with this key may win
+        job = repo.add_job(session, kind, class_id, sample_id, requested_by=principal.id)
+        out = Withdrawal(class_id=class_id, sample_id=sample_id, job=JobOut.model_validate(job))
+        idempotency.accept(session, out, job.id, response)
     metrics.withdrawals.labels("class" if sample_id is None else "sample").inc()
-    response.headers["Location"] = location
     return out

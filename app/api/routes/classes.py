@@ -2,7 +2,6 @@ from collections.abc import Sequence
 
 import numpy as np
 from fastapi import APIRouter, Response
-from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.api import problems
@@ -30,7 +29,7 @@ from app.api.schemas import (
 from app.api.withdrawals import queue_withdrawal
 from app.service.holder import LoadedModel
 from app.store import repo
-from app.store.models import ObjectClass
+from app.store.models import Job, ObjectClass
 
 router = APIRouter(
     prefix="/v1/classes", tags=["classes"], responses=problems.responses(401, 403, 422, 429)
@@ -92,25 +91,16 @@ def register_class(
     cls = _failed_registration(session, body.name, key)
     if cls is None:
         _check_unique(session, body.name, key, field)
-    try:
+    # a concurrent registration of this name or vector (or a retry with this key) may win
+    with idempotency.writing(session, recheck=lambda: _check_unique(session, body.name, key, field)):
         if cls is None:
             withdrawn = repo.class_by_name(session, body.name, withdrawn=True)
             cls = (repo.revive_class(session, withdrawn, key) if withdrawn is not None
                    else repo.add_class(session, body.name, key))
         job = repo.add_job(session, "register_class", cls.id, requested_by=principal.id)
-        vocab = repo.attribute_names(session)
-        n = repo.sample_counts(session, [cls.id]).get(cls.id, 0)
-        out = ClassCreated(class_=class_out(cls, vocab, n, model), job=JobOut.model_validate(job))
-        location = f"/v1/jobs/{job.id}"
-        idempotency.save(session, 202, out, location)
-        session.commit()
-    except IntegrityError:  # a concurrent registration (or retry with this key) won the race
-        session.rollback()
-        idempotency.replay(session)
-        _check_unique(session, body.name, key, field)
-        raise
+        out = _class_accepted(session, cls, job, model)
+        idempotency.accept(session, out, job.id, response)
     metrics.enrollments.labels("class").inc()
-    response.headers["Location"] = location
     return out
 
 
@@ -132,24 +122,21 @@ def redescribe_class(
     cls = _enrolled_class(session, class_id, "described anew")
     key = repo.vector_key(_attribute_vector(body, model))
     field = "attributes" if body.attributes is not None else "attribute_vector"
-    try:
-        _check_unique_vector(session, key, field, other_than=cls.id)
+    _check_unique_vector(session, key, field, other_than=cls.id)
+    # a concurrent registration of this vector (or a retry with this key) may win
+    with idempotency.writing(session, recheck=lambda: _check_unique_vector(session, key, field, cls.id)):
         repo.redescribe_class(session, cls, key)
         job = repo.add_job(session, "update_class", cls.id, requested_by=principal.id)
-        n = repo.sample_counts(session, [cls.id]).get(cls.id, 0)
-        out = ClassCreated(class_=class_out(cls, repo.attribute_names(session), n, model),
-                           job=JobOut.model_validate(job))
-        location = f"/v1/jobs/{job.id}"
-        idempotency.save(session, 202, out, location)
-        session.commit()
-    except IntegrityError:  # a concurrent registration of this vector (or retry with this key) won
-        session.rollback()
-        idempotency.replay(session)
-        _check_unique_vector(session, key, field, other_than=cls.id)
-        raise
+        out = _class_accepted(session, cls, job, model)
+        idempotency.accept(session, out, job.id, response)
     metrics.enrollments.labels("redescription").inc()
-    response.headers["Location"] = location
     return out
+
+
+def _class_accepted(session: Session, cls: ObjectClass, job: Job, model: LoadedModel) -> ClassCreated:
+    n = repo.sample_counts(session, [cls.id]).get(cls.id, 0)
+    return ClassCreated(class_=class_out(cls, repo.attribute_names(session), n, model),
+                        job=JobOut.model_validate(job))
 
 
 def _enrolled_class(session: Session, class_id: int, done: str) -> ObjectClass:

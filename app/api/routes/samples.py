@@ -3,7 +3,6 @@ from typing import Annotated
 
 import numpy as np
 from fastapi import APIRouter, Header, Response
-from sqlalchemy.exc import IntegrityError
 
 from app.api import problems
 from app.api.deps import (
@@ -104,20 +103,13 @@ def add_sample(
     if x.shape[1:] != rec.input_shape or len(x) != 1:
         raise Problem(422, f"expected one sample of shape {list(rec.input_shape)}", "sample")
     recognized_as = rec.recognize_batch(x).records(model.class_ids)[0]
-    try:
+    with idempotency.writing(session):  # a concurrent retry with this key may win
         row = repo.add_sample(session, class_id, x[0])
         job = repo.add_job(session, "add_sample", class_id, row.id, requested_by=principal.id)
         out = SampleCreated(sample_id=row.id, job=JobOut.model_validate(job),
                             recognized_as=recognized_as, model_version=model.version)
-        location = f"/v1/jobs/{job.id}"
-        idempotency.save(session, 202, out, location)
-        session.commit()
-    except IntegrityError:  # a concurrent retry with the same Idempotency-Key won
-        session.rollback()
-        idempotency.replay(session)
-        raise
+        idempotency.accept(session, out, job.id, response)
     metrics.enrollments.labels("sample").inc()
-    response.headers["Location"] = location
     return out
 
 
