@@ -1,4 +1,5 @@
-"""How long a withdrawal takes to reach the served model, against an enrolment.
+"""How long a withdrawal, or a class's new description, takes to reach the served model,
+against an enrolment.
 
     .venv/bin/python bench/withdrawal.py [--dataset simulated] [--method best] [--repeats 3]
     .venv/bin/python bench/withdrawal.py --dataset phac2:../shared/data/phac2
@@ -6,12 +7,13 @@
 A fresh SQLite store is bootstrapped on ``--dataset`` (the embedded default: the built-in
 simulator) with ``--method``, in process (the API app under TestClient and a worker run by
 hand, as the tests do). Per repeat: a class is registered and given two samples, then one
-sample is withdrawn, then the class; and a second class is given ``PROMOTION`` samples,
-which promotes it to a known class, and loses one of them again, which makes it novel
-again. Printed: the worker's round (claim to active) for each step. Enrolments are
-incremental updates; a withdrawal from the novel part rebuilds the novel classes on the
-base's known part where the method allows it (``novel_part_separable``: ``best``), else
-it is a full retrain, as a promotion and a withdrawal from the known part always are.
+sample is withdrawn, the class described anew (``PATCH``), and withdrawn; and a second
+class is given ``PROMOTION`` samples, which promotes it to a known class, and loses one of
+them again, which makes it novel again. Printed: the worker's round (claim to active) for
+each step. Enrolments are incremental updates; a withdrawal or a new description in the
+novel part rebuilds the novel classes on the base's known part where the method allows it
+(``novel_part_separable``: ``best``), else it is a full retrain, as a promotion and a
+withdrawal from the known part always are.
 """
 
 from __future__ import annotations
@@ -77,7 +79,7 @@ def main() -> int:
         started = time.perf_counter()
         app = create_app(settings)
         times: dict[str, list[float]] = {k: [] for k in (
-            "register", "add sample", "withdraw sample", "withdraw class",
+            "register", "add sample", "withdraw sample", "describe anew", "withdraw class",
             "promotion (full retrain)", "withdraw a promoted class's sample (full retrain)")}
         with TestClient(app) as client:
             print(f"bootstrapped in {time.perf_counter() - started:.1f} s", file=sys.stderr)
@@ -98,6 +100,8 @@ def main() -> int:
                     times["add sample"].append(timed_round(worker, client, r.json()["job"]["id"]))
                 r = client.delete(f"/v1/classes/{cid}/samples/{sample_ids[0]}")
                 times["withdraw sample"].append(timed_round(worker, client, r.json()["job"]["id"]))
+                r = client.patch(f"/v1/classes/{cid}", json={"attributes": unused_attributes(client, i + 1)})
+                times["describe anew"].append(timed_round(worker, client, r.json()["job"]["id"]))
                 r = client.delete(f"/v1/classes/{cid}")
                 times["withdraw class"].append(timed_round(worker, client, r.json()["job"]["id"]))
 

@@ -22,6 +22,8 @@ def test_new_attributes_are_committed_before_the_202_and_the_samples_stay(client
     job = body["job"]
     assert job["kind"] == "update_class" and job["status"] == "queued" and job["class_id"] == cid
     assert r.headers["location"] == f"/v1/jobs/{job['id']}"
+    listed = client.get("/v1/jobs", params={"kind": "update_class"}).json()["jobs"]
+    assert [j["id"] for j in listed] == [job["id"]]
     assert client.get(f"/v1/classes/{cid}").json()["attributes"] == names_of(vector, dataset)
     with app.state.sessions() as s:  # a fresh session sees both: they are committed
         assert s.get(ObjectClass, cid).attribute_key == "".join(map(str, vector))
