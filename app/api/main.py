@@ -14,6 +14,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import HTMLResponse
+from fastapi.routing import APIRoute
 from fastapi.staticfiles import StaticFiles
 from starlette.datastructures import Headers
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
@@ -105,6 +106,7 @@ def create_app(
         telemetry=None if settings.opentelemetry else {"tracing": False, "metrics": False, "logs": False},
         docs_url=None,  # served below from the package: no CDN
         redoc_url=None,
+        generate_unique_id_function=operation_id,
     )
     app.state.settings = settings
     app.state.sessions = sessions
@@ -132,6 +134,12 @@ def create_app(
         )
     app.add_middleware(RequestMetrics, metrics=metrics)
     return app
+
+
+def operation_id(route: APIRoute) -> str:
+    """``classes-register_class`` rather than ``register_class_v1_classes_post``: what client
+    generators turn into method names (the FastAPI full-stack template's convention)."""
+    return f"{route.tags[0]}-{route.name}" if route.tags else route.name  # the docs page has none
 
 
 def _mount_docs(app: FastAPI) -> None:

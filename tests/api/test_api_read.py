@@ -119,6 +119,16 @@ def test_openapi_documents_problem_responses_and_npy(client):
     assert "202" in register["responses"] and "409" in register["responses"]
 
 
+def test_operation_ids_name_the_operation_for_client_generators(client):
+    spec = client.get("/openapi.json").json()
+    ids = [op["operationId"] for item in spec["paths"].values() for op in item.values()]
+    assert len(ids) == len(set(ids))
+    assert spec["paths"]["/v1/classes"]["post"]["operationId"] == "classes-register_class"
+    assert spec["paths"]["/v1/classes/{class_id}/samples"]["post"]["operationId"] == "samples-add_sample"
+    assert spec["paths"]["/v1/recognize"]["post"]["operationId"] == "recognize-recognize"
+    assert not [i for i in ids if "_v1_" in i]  # no path-and-method names left
+
+
 def test_unknown_route_and_method_are_problems(client):
     r = client.get("/v1/nothing-here")
     assert r.status_code == 404 and r.headers["content-type"] == PROBLEM
