@@ -172,12 +172,22 @@ class ScoreOut(BaseModel):
 
 
 class RecognitionOut(BaseModel):
-    class_id: int | None
+    """One sample's answer. The novelty detector routes it to the known classes or, when
+    it is novel and novel classes are registered, to those; the answer is the most
+    probable class of that group."""
+
+    class_id: int | None = Field(description="The store's id of the answered class.")
     class_name: str
-    kind: Literal["known", "novel"]
-    is_novel: bool
-    novelty_score: float
-    top_k: list[ScoreOut]
+    kind: Literal["known", "novel"] = Field(description="Whether the answered class is known or novel.")
+    is_novel: bool = Field(
+        description="The novelty detector's verdict: the sample is unlike every known class. "
+        "While no novel class is registered, a novel sample is still answered with the closest "
+        "known class (`kind` `known`): a cue to register the object.")
+    novelty_score: float = Field(
+        description="How unlike the known classes the sample is; above the model's tuned "
+        "threshold it is novel. Comparable within one model version only.")
+    top_k: list[ScoreOut] = Field(
+        description="The most probable classes of the group answered from, best first.")
 
 
 class RecognizeResponse(BaseModel):
