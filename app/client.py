@@ -82,10 +82,8 @@ class TactileClient:
     def recognize(self, samples: Any) -> dict[str, Any]:
         """Recognise one sample or a batch (N, *input shape)."""
         x = np.asarray(samples, dtype=np.float32)
-        body = io.BytesIO()
-        np.save(body, x, allow_pickle=False)
         try:
-            r = self._send("POST", "/v1/recognize", content=body.getvalue(),
+            r = self._send("POST", "/v1/recognize", content=_npy(x),
                            headers={"Content-Type": "application/x-npy"})
         except ServiceUnreachable as exc:
             model, meta = self._offline_model(exc)
@@ -93,6 +91,12 @@ class TactileClient:
             return {"model_version": meta.get("version"), "results": batch.records(meta.get("class_ids", {})),
                     "source": "offline"}
         return {**r.json(), "source": "service"}
+
+    def describe(self, samples: Any) -> dict[str, Any]:
+        """What each touch feels like (``POST /v1/describe``): every attribute's probability
+        and a suggested description, for a person to check before registering the object."""
+        return self._send("POST", "/v1/describe", content=_npy(samples),
+                          headers={"Content-Type": "application/x-npy"}).json()
 
     def sync_model(self) -> bool:
         """Keep ``model_file`` at the service's active version; True when a new one was
@@ -205,6 +209,12 @@ class TactileClient:
             meta = self._meta()
             self._offline_meta = meta if meta.get("sha256") == self._offline.sha256 else {}
         return model, self._offline_meta
+
+
+def _npy(samples: Any) -> bytes:
+    body = io.BytesIO()
+    np.save(body, np.asarray(samples, dtype=np.float32), allow_pickle=False)
+    return body.getvalue()
 
 
 def _description(attributes: list[str] | None, attribute_vector: list[int] | None) -> dict[str, Any]:

@@ -276,3 +276,25 @@ def dataset(base_model) -> TactileDataset:
 def sample(dataset) -> list:
     """One valid sample as JSON-ready nested lists."""
     return copy.deepcopy(dataset.samples[0].tolist())
+
+
+# a small service on ``best`` (the service's default method; the fixtures above use ``paper``)
+BEST_PARAMS = {"seed": 0, "n_estimators": 10, "tuning_rounds": 1, "distance_components": 8}
+
+
+@pytest.fixture(scope="module")
+def best_base():
+    dataset = quick_dataset()
+    return make_method("best", **BEST_PARAMS).fit(dataset), dataset
+
+
+@pytest.fixture
+def best_service(tmp_path, best_base):
+    """(client, app, worker) of a service whose method is ``best`` (SQLite)."""
+    from app.api.main import create_app
+    from worker import Worker
+
+    app = create_app(quick_settings(tmp_path, method="best", method_params=BEST_PARAMS),
+                     trainer=lambda: best_base)
+    with TestClient(app) as client:
+        yield client, app, Worker(app.state.settings, app.state.sessions, on_activate=app.state.holder.serve)

@@ -21,7 +21,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.api import problems
 from app.api.deps import Replay, replay_handler
-from app.api.routes import attributes, classes, health, jobs, models, recognize, samples
+from app.api.routes import attributes, classes, describe, health, jobs, models, recognize, samples
 from app.config import Settings
 from app.service.bootstrap import Trainer, ensure_ready
 from app.service.holder import ModelHolder
@@ -123,7 +123,7 @@ def create_app(
     app.add_exception_handler(Replay, replay_handler)
     # recognize first: routes are matched in order, and it is the hot path (robots call it
     # hundreds of times a second; matching each earlier route cost ~20 µs per request)
-    for module in (recognize, health, attributes, classes, samples, jobs, models):
+    for module in (recognize, health, describe, attributes, classes, samples, jobs, models):
         app.include_router(module.router)
     _mount_docs(app)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)

@@ -28,6 +28,7 @@ from app.framework.errors import (
     NonFiniteInputError,
     NotFittedError,
     UnknownClassError,
+    UnsupportedOperationError,
 )
 
 log = logging.getLogger(__name__)
@@ -43,6 +44,7 @@ FRAMEWORK_STATUS: dict[type[FrameworkError], tuple[int, str]] = {
     UnknownClassError: (404, "class"),
     BundleError: (409, "version"),
     NotFittedError: (503, "model"),
+    UnsupportedOperationError: (409, "model"),  # the served method cannot do it
 }
 
 

@@ -195,6 +195,25 @@ class RecognizeResponse(BaseModel):
     results: list[RecognitionOut]
 
 
+class AttributeScore(BaseModel):
+    name: str
+    probability: float = Field(description="That the attribute describes the touched object.")
+
+
+class Description(BaseModel):
+    """What one touch feels like."""
+
+    attributes: list[AttributeScore] = Field(description="Every attribute, the most probable first.")
+    suggested: list[str] = Field(
+        description="The attributes more probable than not (at least the most probable one), in "
+        "`GET /v1/attributes` order: a starting point for `POST /v1/classes`, for a person to check.")
+
+
+class DescribeResponse(BaseModel):
+    model_version: int
+    results: list[Description]
+
+
 # ---------------------------------------------------------------------- models
 class ModelClass(BaseModel):
     name: str

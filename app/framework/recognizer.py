@@ -236,6 +236,16 @@ class TactileRecognizer(ABC):
     def is_novel(self, samples: np.ndarray) -> np.ndarray:
         return self.novelty_score(samples) > self.novelty_threshold
 
+    def attribute_proba(self, samples: np.ndarray) -> np.ndarray:
+        """(N, M) probability that each attribute describes each sample's object, in the
+        registry's attribute order: what a touch feels like, to help describe an object
+        nobody registered yet. Only methods that predict attributes from a sample have it."""
+        return self._attribute_proba(self.validate_samples(samples))
+
+    def _attribute_proba(self, samples: np.ndarray) -> np.ndarray:
+        raise UnsupportedOperationError(
+            f"method '{self.method}' does not predict attributes from a sample (method 'best' does)")
+
     def recognize(self, samples: np.ndarray, top_k: int = 3) -> list[Recognition]:
         """Fig. 1: ND(x) routes each sample to FC_Y or FC_Z."""
         return self.recognize_batch(samples, top_k).answers()

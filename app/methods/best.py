@@ -254,6 +254,10 @@ class BestRecognizer(TactileRecognizer):
         out[:, has] = (1.0 - p_zsl[:, ~has].sum(axis=1, keepdims=True)) * p_shot
         return out
 
+    def _attribute_proba(self, samples: np.ndarray) -> np.ndarray:
+        # DAP's per-attribute classifiers: the same probabilities its zero-shot scores use
+        return self.attributes_.predict_proba(self.known_.cues_model.scaled(flatten(samples)))
+
     def _all_scores(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         z, known, novelty = self.known_.scores(flatten(samples))
         novel = self._novel_from(z, known) if self.registry.novel_names else None

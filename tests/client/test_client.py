@@ -139,3 +139,12 @@ def test_a_class_described_anew_reaches_the_model_file(robot, worker, dataset):
     assert robot.sync_model() is True
     reg = bundle.load(robot.model_file).registry
     assert reg.novel_attributes[reg.novel_names.index("cup")].tolist() == vector
+
+
+def test_a_touch_is_described_for_the_operator(best_service, best_base):
+    client, _, _ = best_service
+    _, dataset = best_base
+    robot = TactileClient(http=client, retries=0)
+    answer = robot.describe(dataset.samples[:2])
+    assert answer == client.post("/v1/describe", json={"samples": dataset.samples[:2].tolist()}).json()
+    assert len(answer["results"]) == 2 and answer["results"][0]["suggested"]

@@ -50,23 +50,28 @@ async def recognize(request: Request, recognizing: RecognizingDep) -> Response:
     with `Content-Type: application/x-npy`.
     """
     model, service = recognizing
+    samples, n = await read_samples(request, model.recognizer.input_shape, service.batch_limit)
+    with blame("samples"):
+        results = await service.recognize(model, samples, n)
+    return Response(_to_json(model.version, results, model.class_ids), media_type="application/json")
+
+
+async def read_samples(request: Request, input_shape: tuple[int, ...], batch_limit: int,
+                       ) -> tuple[np.ndarray | list, int]:
+    """The body's samples (JSON, or .npy by its Content-Type) and how many there are, at
+    most ``batch_limit``; the model validates them."""
     body = await request.body()
     content_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
-    rec = model.recognizer
     if content_type == NPY:
         samples = _from_npy(body)
-        n = 1 if samples.ndim <= len(rec.input_shape) else len(samples)  # one bare sample
+        n = 1 if samples.ndim <= len(input_shape) else len(samples)  # one bare sample
     else:
         samples = await run_in_threadpool(_from_json, body) if len(body) > PARSE_INLINE_BYTES \
             else _from_json(body)
         n = len(samples)
-    if n > service.batch_limit:
-        raise Problem(
-            422, f"{n} samples is more than the batch limit of {service.batch_limit}", "samples"
-        )
-    with blame("samples"):
-        results = await service.recognize(model, samples, n)
-    return Response(_to_json(model.version, results, model.class_ids), media_type="application/json")
+    if n > batch_limit:
+        raise Problem(422, f"{n} samples is more than the batch limit of {batch_limit}", "samples")
+    return samples, n
 
 
 def _to_json(version: int, batch: RecognitionBatch, class_ids: dict[str, int]) -> bytes:
