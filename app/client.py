@@ -92,10 +92,11 @@ class TactileClient:
                     "source": "offline"}
         return {**r.json(), "source": "service"}
 
-    def describe(self, samples: Any) -> dict[str, Any]:
+    def describe(self, samples: Any, same_object: bool = False) -> dict[str, Any]:
         """What each touch feels like (``POST /v1/describe``): every attribute's probability
-        and a suggested description, for a person to check before registering the object."""
-        return self._send("POST", "/v1/describe", content=_npy(samples),
+        and a suggested description, for a person to check before registering the object;
+        with ``same_object``, also one description from all the touches (``"object"``)."""
+        return self._send("POST", "/v1/describe", content=_npy(samples), params={"same_object": same_object},
                           headers={"Content-Type": "application/x-npy"}).json()
 
     def sync_model(self) -> bool:

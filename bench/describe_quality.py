@@ -12,8 +12,8 @@ fixed in the service. Measured against each novel object's PHAC-2 adjectives:
 - per-attribute AUC over all novel test trials of all splits (how well each attribute
   classifier ranks touches of objects it never saw), drawn as ``attribute_auc.png``;
 - per touch, the suggestion's precision and recall and how often it is exactly right;
-- the same for a suggestion from an object's mean probability over its test trials (a
-  person describing an object from several touches).
+- the same for a suggestion from an object's mean probability over its test trials (what
+  ``?same_object=true`` answers for several touches of one object).
 
 Progress goes to stderr; one JSON report to stdout and to ``--out``/describe.json.
 """
@@ -32,16 +32,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from dev_splits import add_split_arguments, splits  # noqa: E402
 
+from app.api.routes.describe import suggestion  # noqa: E402  (the service's rule)
 from app.data.phac2 import load_phac2  # noqa: E402
 from app.evaluation.protocol import make_recognizer  # noqa: E402
 from app.framework.registry import DEFAULT_METHOD  # noqa: E402
-
-
-def suggest(proba: np.ndarray) -> np.ndarray:
-    """The service's rule (app/api/routes/describe.py): above 0.5, at least the top one."""
-    likely = proba > 0.5
-    likely[np.arange(len(proba)), proba.argmax(axis=1)] = True
-    return likely
 
 
 def agreement(suggested: np.ndarray, truth: np.ndarray) -> dict[str, float]:
@@ -88,11 +82,11 @@ def main() -> int:
         "touches": int(len(proba)), "objects": len(object_probas),
         "mean_attribute_auc": round(float(np.mean(list(auc.values()))), 3),
         "attribute_auc": dict(sorted(auc.items(), key=lambda kv: -kv[1])),
-        "per_touch": agreement(suggest(proba), truth),
-        "per_object_from_its_touches": agreement(suggest(np.stack(object_probas)), np.stack(object_truths)),
+        "per_touch": agreement(suggestion(proba), truth),
+        "per_object_from_its_touches": agreement(suggestion(np.stack(object_probas)), np.stack(object_truths)),
         # the same rule on the attributes' frequencies alone, the same for every touch
         "per_touch_if_always_the_commonest": agreement(
-            np.broadcast_to(suggest(truth.mean(axis=0, keepdims=True)), truth.shape), truth),
+            np.broadcast_to(suggestion(truth.mean(axis=0, keepdims=True)), truth.shape), truth),
     }
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "describe.json").write_text(json.dumps(report, indent=2) + "\n")

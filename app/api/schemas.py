@@ -212,6 +212,9 @@ class Description(BaseModel):
 class DescribeResponse(BaseModel):
     model_version: int
     results: list[Description]
+    object: Description | None = Field(
+        None, description="With `same_object`: the object described from all its touches together "
+        "(their mean probabilities), right more often than any one touch (docs/RESULTS.md).")
 
 
 # ---------------------------------------------------------------------- models

@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 
 import numpy as np
+import pytest
 
 from tests.service_fixtures import problem
 
@@ -26,6 +27,17 @@ def test_each_touch_gets_every_attribute_and_a_suggestion(best_service, best_bas
         assert {s["name"]: s["probability"] for s in scores} == {n: float(p) for n, p in zip(names, proba, strict=True)}
         likely = [n for n, p in zip(names, proba, strict=True) if p > 0.5] or [names[int(proba.argmax())]]
         assert result["suggested"] == likely  # in vocabulary order, ready to register with
+    assert body["object"] is None  # unless the touches are said to be of one object
+
+    # several touches of one object: one description from their mean too
+    one = client.post("/v1/describe", params={"same_object": "true"},
+                      json={"samples": dataset.samples[:3].tolist()}).json()["object"]
+    mean = model.attribute_proba(dataset.samples[:3]).mean(axis=0)
+    assert {s["name"]: s["probability"] for s in one["attributes"]} == pytest.approx(
+        {n: float(p) for n, p in zip(names, mean, strict=True)})
+    assert one["suggested"] == ([n for n, p in zip(names, mean, strict=True) if p > 0.5]
+                                or [names[int(mean.argmax())]])
+
     # the same touches as .npy answer the same
     buf = io.BytesIO()
     np.save(buf, touches.astype(np.float32))

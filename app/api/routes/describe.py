@@ -1,5 +1,7 @@
+from typing import Annotated
+
 import numpy as np
-from fastapi import APIRouter, Request
+from fastapi import APIRouter, Query, Request
 from fastapi.concurrency import run_in_threadpool
 
 from app.api import problems
@@ -15,11 +17,16 @@ router = APIRouter(prefix="/v1", tags=["describe"], responses=problems.responses
     "/describe", response_model=DescribeResponse, openapi_extra=OPENAPI_EXTRA,
     responses=problems.responses(409, 413, 422, 503),
 )
-async def describe(request: Request, recognizing: RecognizingDep) -> DescribeResponse:
+async def describe(
+    request: Request, recognizing: RecognizingDep,
+    same_object: Annotated[bool, Query(description="The samples are touches of one object: describe "
+                                                   "it from all of them together too (`object`).")] = False,
+) -> DescribeResponse:
     """What each touch feels like: the probability of every attribute, from the served
     model's attribute classifiers. For an object the robot found novel that nobody has
     registered: a person checks the `suggested` attributes and registers the object with
-    them. Takes the samples as `POST /v1/recognize` does. Only methods that predict
+    them; with `same_object`, several touches of the object give one description too. Takes
+    the samples as `POST /v1/recognize` does. Only methods that predict
     attributes from a sample answer (`best` does; otherwise 409). On objects the model was
     never trained on these predictions are far from certain: docs/RESULTS.md measures them."""
     model, service = recognizing
@@ -29,12 +36,21 @@ async def describe(request: Request, recognizing: RecognizingDep) -> DescribeRes
         x = rec.validate_samples(samples)
     proba = await run_in_threadpool(rec.attribute_proba, x)  # a method without them: 409, "model"
     names = rec.registry.attribute_names
-    return DescribeResponse(model_version=model.version, results=[_description(p, names) for p in proba])
+    return DescribeResponse(model_version=model.version, results=[_description(p, names) for p in proba],
+                            object=_description(proba.mean(axis=0), names) if same_object else None)
+
+
+def suggestion(proba: np.ndarray) -> np.ndarray:
+    """Which attributes to suggest from (..., M) probabilities: those more probable than
+    not, and at least the most probable one (a class needs one). bench/describe_quality.py
+    measures this rule."""
+    likely = proba > 0.5
+    np.put_along_axis(likely, proba.argmax(axis=-1)[..., None], True, axis=-1)
+    return likely
 
 
 def _description(proba: np.ndarray, names: list[str]) -> Description:
-    likely = (proba > 0.5) | (np.arange(len(proba)) == proba.argmax())
     return Description(
         attributes=[AttributeScore(name=names[i], probability=float(proba[i])) for i in np.argsort(-proba)],
-        suggested=[n for n, keep in zip(names, likely, strict=True) if keep],
+        suggested=[n for n, keep in zip(names, suggestion(proba), strict=True) if keep],
     )
