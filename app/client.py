@@ -122,7 +122,7 @@ class TactileClient:
                        attribute_vector: list[int] | None = None, wait: float = 0) -> dict[str, Any]:
         """Register a never-touched object by its attribute names or 0/1 vector; returns its
         job (``class_id`` names the class), after up to ``wait`` seconds for it to finish."""
-        body = {"name": name, **_description(attributes, attribute_vector)}
+        body = {"name": name, **_attributes_body(attributes, attribute_vector)}
         job = self._send("POST", "/v1/classes", json=body, idempotency_key=str(uuid.uuid4())).json()["job"]
         return self.job(job["id"], wait) if wait else job
 
@@ -130,7 +130,7 @@ class TactileClient:
                          attribute_vector: list[int] | None = None, wait: float = 0) -> dict[str, Any]:
         """Correct the attributes a class was registered with, keeping its samples; returns
         its job, after up to ``wait`` seconds for it to finish."""
-        job = self._send("PATCH", f"/v1/classes/{int(class_id)}", json=_description(attributes, attribute_vector),
+        job = self._send("PATCH", f"/v1/classes/{int(class_id)}", json=_attributes_body(attributes, attribute_vector),
                          idempotency_key=str(uuid.uuid4())).json()["job"]
         return self.job(job["id"], wait) if wait else job
 
@@ -218,7 +218,7 @@ def _npy(samples: Any) -> bytes:
     return body.getvalue()
 
 
-def _description(attributes: list[str] | None, attribute_vector: list[int] | None) -> dict[str, Any]:
+def _attributes_body(attributes: list[str] | None, attribute_vector: list[int] | None) -> dict[str, Any]:
     if (attributes is None) == (attribute_vector is None):
         raise ValueError("give either attributes or attribute_vector")
     return {"attributes": attributes} if attributes is not None else {"attribute_vector": attribute_vector}

@@ -63,13 +63,19 @@ def not_found(what: str, field: str, value: Any) -> Problem:
     return Problem(404, f"no {what} with {field} {value}", field)
 
 
+# errors about the served model, not about the request: they keep naming the model
+ABOUT_THE_MODEL = (NotFittedError, UnsupportedOperationError, BundleError)
+
+
 @contextlib.contextmanager
 def blame(field: str) -> Iterator[None]:
-    """Framework errors raised inside name ``field`` (e.g. 'sample' rather than 'samples')."""
+    """Framework errors about the request raised inside name ``field`` (e.g. 'sample'
+    rather than 'samples')."""
     try:
         yield
     except FrameworkError as exc:
-        exc.field = field
+        if not isinstance(exc, ABOUT_THE_MODEL):
+            exc.field = field
         raise
 
 

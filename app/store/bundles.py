@@ -62,8 +62,8 @@ def read_part(session: Session, sha256: str) -> np.ndarray:
 class ExportCache:
     """The last ``size`` models exported, by their bundle's SHA-256. A bundle's content is
     what its SHA-256 names, so an entry is never stale: after an activation, the robots of
-    a fleet that download the new version cost each API process one join (~60 ms for the
-    embedded default), not one each."""
+    a fleet that download the new version cost each API process one join (~70 ms for the
+    embedded default, BENCHMARKS), not one each."""
 
     def __init__(self, size: int = 2) -> None:
         self.size = size
