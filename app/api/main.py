@@ -7,8 +7,8 @@ import logging
 import time
 from collections.abc import AsyncIterator
 from contextlib import ExitStack, asynccontextmanager
+from importlib.resources import files
 
-import swagger_ui_bundle
 from fastapi import FastAPI, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.middleware.cors import CORSMiddleware
@@ -143,8 +143,10 @@ def operation_id(route: APIRoute) -> str:
 
 
 def _mount_docs(app: FastAPI) -> None:
+    # Swagger UI 5 from the fastapi-swagger package: it reads OpenAPI 3.1, which FastAPI writes
     app.mount(
-        "/static/swagger-ui", StaticFiles(directory=swagger_ui_bundle.swagger_ui_path), name="swagger-ui"
+        "/static/swagger-ui", StaticFiles(directory=str(files("fastapi_swagger") / "resources")),
+        name="swagger-ui",
     )
 
     @app.get("/docs", include_in_schema=False)
