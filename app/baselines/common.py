@@ -67,8 +67,14 @@ class ForestBaseline(TactileRecognizer):
     ) -> None:
         super().__init__()
         _check(int(n_estimators) >= 1, f"n_estimators must be at least 1, got {n_estimators}")
-        _check(int(min_samples_leaf) >= 1, f"min_samples_leaf must be at least 1, got {min_samples_leaf}")
-        _check(0 < novelty_val_fraction < 1, f"novelty_val_fraction must lie in (0, 1), got {novelty_val_fraction}")
+        _check(
+            int(min_samples_leaf) >= 1,
+            f"min_samples_leaf must be at least 1, got {min_samples_leaf}",
+        )
+        _check(
+            0 < novelty_val_fraction < 1,
+            f"novelty_val_fraction must lie in (0, 1), got {novelty_val_fraction}",
+        )
         _check(int(novelty_holdout_trials) >= 1, "novelty_holdout_trials must be at least 1")
         self.n_estimators = int(n_estimators)
         self.max_features = max_features

@@ -36,14 +36,18 @@ C_GRID = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0)
 class AttributePredictor:
     """p(a_m = 1 | z) for every attribute m, from scaled flat inputs z."""
 
-    def __init__(self, model: str, C: float, n_estimators: int, seed: int, n_jobs: int | None) -> None:
+    def __init__(
+        self, model: str, C: float, n_estimators: int, seed: int, n_jobs: int | None
+    ) -> None:
         self.model = model
         self.C = C
         self.n_estimators = n_estimators
         self.seed = seed
         self.n_jobs = n_jobs
 
-    def fit(self, z: np.ndarray, targets: np.ndarray, warm: AttributePredictor | None = None) -> AttributePredictor:
+    def fit(
+        self, z: np.ndarray, targets: np.ndarray, warm: AttributePredictor | None = None
+    ) -> AttributePredictor:
         """``warm``: a logistic predictor fitted on the same data with another C, to start from."""
         targets = (np.asarray(targets) > 0.5).astype(np.int64)
         m = targets.shape[1]
@@ -90,7 +94,10 @@ class AttributePredictor:
 
 
 def fit_logistic(
-    x: np.ndarray, targets: np.ndarray, C: float, max_iter: int = 500,
+    x: np.ndarray,
+    targets: np.ndarray,
+    C: float,
+    max_iter: int = 500,
     init: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Independent L2-regularised logistic regressions, one per target column, fitted
@@ -106,7 +113,9 @@ def fit_logistic(
         w, b = theta[: d * m].reshape(d, m), theta[d * m :]
         logits = x @ w + b
         # log(1 + e^l) - t·l, stably
-        loss = C * float(np.sum(np.logaddexp(0.0, logits) - t * logits)) + 0.5 * float(np.sum(w * w))
+        loss = C * float(np.sum(np.logaddexp(0.0, logits) - t * logits)) + 0.5 * float(
+            np.sum(w * w)
+        )
         r = C * (expit(logits) - t)
         return loss, np.concatenate([(x.T @ r + w).ravel(), r.sum(axis=0)])
 
@@ -131,8 +140,14 @@ class DAPRecognizer(ForestBaseline):
         **base,
     ) -> None:
         super().__init__(**base)
-        _check(attribute_model in ATTRIBUTE_MODELS, f"attribute_model must be one of {ATTRIBUTE_MODELS}, got {attribute_model!r}")
-        _check(C == "auto" or (isinstance(C, int | float) and C > 0), f"C must be positive or 'auto', got {C!r}")
+        _check(
+            attribute_model in ATTRIBUTE_MODELS,
+            f"attribute_model must be one of {ATTRIBUTE_MODELS}, got {attribute_model!r}",
+        )
+        _check(
+            C == "auto" or (isinstance(C, int | float) and C > 0),
+            f"C must be positive or 'auto', got {C!r}",
+        )
         _check(0 < clip < 0.5, f"clip must lie in (0, 0.5), got {clip}")
         _check(int(val_folds) >= 1, f"val_folds must be at least 1, got {val_folds}")
         _check(0 < val_fraction < 1, f"val_fraction must lie in (0, 1), got {val_fraction}")
@@ -161,8 +176,12 @@ class DAPRecognizer(ForestBaseline):
             previous = None
             for C in sorted(C_GRID):  # along the regularisation path, warm-started
                 previous = self._predictor(C).fit(z[fit], attrs[y[fit]], warm=previous)
-                s = dap_log_scores(previous.predict_proba(z[val]), attrs[val_c],
-                                   attrs[fit_c].mean(axis=0), self.clip)
+                s = dap_log_scores(
+                    previous.predict_proba(z[val]),
+                    attrs[val_c],
+                    attrs[fit_c].mean(axis=0),
+                    self.clip,
+                )
                 accs[C].append(float(np.mean(s.argmax(axis=1) == truth)))
         scores = {C: float(np.mean(a)) for C, a in accs.items()}
         best = max(scores, key=lambda c: (scores[c], -abs(np.log10(c) + 1)))

@@ -31,14 +31,19 @@ LAMBDA_GRID = (1e-2, 1e-1, 1.0, 1e1, 1e2, 1e3)
 SIGNATURE_MODES = ("raw", "centered", "l2", "centered_l2")
 
 
-def eszsl_fit(x: np.ndarray, labels: np.ndarray, signatures: np.ndarray, gamma: float, lam: float) -> np.ndarray:
+def eszsl_fit(
+    x: np.ndarray, labels: np.ndarray, signatures: np.ndarray, gamma: float, lam: float
+) -> np.ndarray:
     """V (d × M) from samples x (n × d), labels in [0, K) and signatures (K × M)."""
     return next(iter(eszsl_path(x, labels, signatures, (gamma,), (lam,)).values()))
 
 
 def eszsl_path(
-    x: np.ndarray, labels: np.ndarray, signatures: np.ndarray,
-    gammas: Sequence[float], lambdas: Sequence[float],
+    x: np.ndarray,
+    labels: np.ndarray,
+    signatures: np.ndarray,
+    gammas: Sequence[float],
+    lambdas: Sequence[float],
 ) -> dict[tuple[float, float], np.ndarray]:
     """V for every (γ, λ) pair, sharing one eigendecomposition of X^T X and of S S^T."""
     x = np.asarray(x, np.float64)
@@ -96,12 +101,17 @@ class ESZSLRecognizer(ForestBaseline):
     ) -> None:
         super().__init__(**base)
         for name, value in (("gamma", gamma), ("lam", lam)):
-            _check(value is None or value > 0, f"{name} must be positive or None (chosen on validation), got {value}")
+            _check(
+                value is None or value > 0,
+                f"{name} must be positive or None (chosen on validation), got {value}",
+            )
         _check(len(gammas) > 0 and min(gammas) > 0, "gammas must be positive values")
         _check(len(lambdas) > 0 and min(lambdas) > 0, "lambdas must be positive values")
         modes = (signature,) if signature is not None else tuple(signature_modes)
-        _check(len(modes) > 0 and all(m in SIGNATURE_MODES for m in modes),
-               f"signature modes must be among {SIGNATURE_MODES}, got {modes}")
+        _check(
+            len(modes) > 0 and all(m in SIGNATURE_MODES for m in modes),
+            f"signature modes must be among {SIGNATURE_MODES}, got {modes}",
+        )
         _check(int(val_folds) >= 1, f"val_folds must be at least 1, got {val_folds}")
         _check(0 < val_fraction < 1, f"val_fraction must lie in (0, 1), got {val_fraction}")
         self.gamma = gamma
@@ -138,9 +148,12 @@ class ESZSLRecognizer(ForestBaseline):
                         acc[k, i, j] += np.mean(pred == truth) / len(folds)
         # ties go to the later grid entries (the strongest regularisation)
         k, i, j = np.unravel_index(np.flatnonzero(acc == acc.max())[-1], acc.shape)
-        grid = {f"signature={mode},gamma={g:g},lambda={lam:g}": float(acc[c, a, b])
-                for c, mode in enumerate(modes) for a, g in enumerate(gammas)
-                for b, lam in enumerate(lambdas)}
+        grid = {
+            f"signature={mode},gamma={g:g},lambda={lam:g}": float(acc[c, a, b])
+            for c, mode in enumerate(modes)
+            for a, g in enumerate(gammas)
+            for b, lam in enumerate(lambdas)
+        }
         return modes[k], gammas[i], lambdas[j], grid
 
     def _fit_zsl(self, z: np.ndarray, dataset: TactileDataset) -> None:

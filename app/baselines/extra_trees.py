@@ -19,5 +19,8 @@ class ExtraTreesRecognizer(DAPRecognizer):
 
     def __init__(self, attribute_estimators: int = 300, clip: float = 0.02, **base) -> None:
         super().__init__(
-            attribute_model="extratrees", attribute_estimators=attribute_estimators, clip=clip, **base
+            attribute_model="extratrees",
+            attribute_estimators=attribute_estimators,
+            clip=clip,
+            **base,
         )

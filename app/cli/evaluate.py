@@ -48,13 +48,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="dataset spec: 'phac2:PATH' (PHAC-2 static features folder), 'simulated' or "
         "'simulated:N' (built-in simulator with N objects); default: %(default)s",
     )
-    p.add_argument("--novel", type=_positive, default=6,
-                   help="number of novel (zero-shot) objects per split; the paper uses 6 and 12 "
-                   "(default: %(default)s)")
-    p.add_argument("--splits", type=_positive, default=7,
-                   help="number of random known/novel splits; the paper uses 7 (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0,
-                   help="seed of the split draws and of the methods' own randomness (default: %(default)s)")
+    p.add_argument(
+        "--novel",
+        type=_positive,
+        default=6,
+        help="number of novel (zero-shot) objects per split; the paper uses 6 and 12 "
+        "(default: %(default)s)",
+    )
+    p.add_argument(
+        "--splits",
+        type=_positive,
+        default=7,
+        help="number of random known/novel splits; the paper uses 7 (default: %(default)s)",
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of the split draws and of the methods' own randomness (default: %(default)s)",
+    )
     p.add_argument(
         "--methods",
         type=_methods,
@@ -62,20 +74,40 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help=f"comma-separated methods to measure on the same splits, from: "
         f"{', '.join(sorted(METHODS))} (default: the service's default method, {DEFAULT_METHOD})",
     )
-    p.add_argument("--out", type=Path, default=Path("results.json"),
-                   help="where to write the results JSON (default: %(default)s)")
-    p.add_argument("--report", type=Path, default=None, metavar="DIR",
-                   help="also write report.md (our figures beside the paper's tables) and the "
-                   "Fig. 7/8 PNGs into this folder")
-    p.add_argument("--test-trials", type=_positive, default=2,
-                   help="trials held out per known object as its test data, the rest train "
-                   "(default: %(default)s)")
-    p.add_argument("--distinct-from-known", action="store_true",
-                   help="also require every novel object's attribute vector to differ from every "
-                   "known object's (by default novel vectors need only differ from each other, "
-                   "as in the paper)")
-    p.add_argument("--data-seed", type=int, default=0,
-                   help="seed of the simulated dataset, ignored for PHAC-2 (default: %(default)s)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path("results.json"),
+        help="where to write the results JSON (default: %(default)s)",
+    )
+    p.add_argument(
+        "--report",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="also write report.md (our figures beside the paper's tables) and the "
+        "Fig. 7/8 PNGs into this folder",
+    )
+    p.add_argument(
+        "--test-trials",
+        type=_positive,
+        default=2,
+        help="trials held out per known object as its test data, the rest train "
+        "(default: %(default)s)",
+    )
+    p.add_argument(
+        "--distinct-from-known",
+        action="store_true",
+        help="also require every novel object's attribute vector to differ from every "
+        "known object's (by default novel vectors need only differ from each other, "
+        "as in the paper)",
+    )
+    p.add_argument(
+        "--data-seed",
+        type=int,
+        default=0,
+        help="seed of the simulated dataset, ignored for PHAC-2 (default: %(default)s)",
+    )
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p.set_defaults(handler=run)
 
@@ -125,6 +157,8 @@ def summary_table(results: dict) -> str:
             v = results["methods"][m]["mean"].get(f)
             cells.append(("—" if v is None else f"{v:.3f}").rjust(width))
         lines.append(f.ljust(18) + "".join(cells))
-    lines.append("seconds".ljust(18) + "".join(
-        f"{results['methods'][m]['elapsed_s']:.0f}".rjust(width) for m in methods))
+    lines.append(
+        "seconds".ljust(18)
+        + "".join(f"{results['methods'][m]['elapsed_s']:.0f}".rjust(width) for m in methods)
+    )
     return "\n".join(lines)

@@ -20,16 +20,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         "answers the service gives.",
     )
     p.add_argument("--model", required=True, type=Path, help="the model bundle file")
-    p.add_argument("samples",
-                   help="a .npy file (one sample, or N samples of the model's input shape), a .json "
-                        "file ({\"samples\": [...]} as the API takes), or - for that JSON on stdin")
+    p.add_argument(
+        "samples",
+        help="a .npy file (one sample, or N samples of the model's input shape), a .json "
+        'file ({"samples": [...]} as the API takes), or - for that JSON on stdin',
+    )
     p.add_argument("--top-k", type=int, default=3, help="scores to list per sample (default 3)")
-    p.add_argument("--lines", action="store_true",
-                   help="read one JSON request per line from SAMPLES (- for stdin) and answer each "
-                        "on its own line at once, until the input ends: one process serves a robot "
-                        "without paying its start-up per touch. A bad line is answered "
-                        "{\"error\": ...} and the process goes on; the model file is read again "
-                        "whenever it changes (after a sync)")
+    p.add_argument(
+        "--lines",
+        action="store_true",
+        help="read one JSON request per line from SAMPLES (- for stdin) and answer each "
+        "on its own line at once, until the input ends: one process serves a robot "
+        "without paying its start-up per touch. A bad line is answered "
+        '{"error": ...} and the process goes on; the model file is read again '
+        "whenever it changes (after a sync)",
+    )
     p.set_defaults(handler=run)
 
 

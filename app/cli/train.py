@@ -15,14 +15,32 @@ def register(sub: argparse._SubParsersAction) -> None:
         "threshold tuned on validation objects, generator G with Algorithms 1 and 2) on every "
         "class of a dataset, and write a versioned model bundle.",
     )
-    p.add_argument("--dataset", default="simulated",
-                   help="'simulated', 'simulated:N' (N objects) or 'phac2:PATH' (default: simulated)")
-    p.add_argument("--out", required=True, help="path of the model bundle to write (written atomically)")
-    p.add_argument("--method", default=None,
-                   help="recognition method (default: the service's default method); see 'evaluate --help'")
-    p.add_argument("--seed", type=int, default=0, help="random seed for data simulation and training (default 0)")
-    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
-                   help="method hyper-parameter, e.g. --param encoder_epochs=30 (repeatable; value parsed as JSON)")
+    p.add_argument(
+        "--dataset",
+        default="simulated",
+        help="'simulated', 'simulated:N' (N objects) or 'phac2:PATH' (default: simulated)",
+    )
+    p.add_argument(
+        "--out", required=True, help="path of the model bundle to write (written atomically)"
+    )
+    p.add_argument(
+        "--method",
+        default=None,
+        help="recognition method (default: the service's default method); see 'evaluate --help'",
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="random seed for data simulation and training (default 0)",
+    )
+    p.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="method hyper-parameter, e.g. --param encoder_epochs=30 (repeatable; value parsed as JSON)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(handler=run)
 
@@ -51,8 +69,11 @@ def run(args: argparse.Namespace) -> int:
         model = make_method(args.method or DEFAULT_METHOD, **params)
     except TypeError as exc:
         raise ValueError(f"bad --param: {exc}") from None
-    print(f"training '{model.method}' on {dataset.name}: {len(dataset)} samples, "
-          f"{dataset.n_classes} classes, input {dataset.input_shape}", file=sys.stderr)
+    print(
+        f"training '{model.method}' on {dataset.name}: {len(dataset)} samples, "
+        f"{dataset.n_classes} classes, input {dataset.input_shape}",
+        file=sys.stderr,
+    )
     model.fit(dataset, progress=not args.quiet)
     digest = bundle.save(model, args.out)
     summary = {k: v for k, v in model.metrics.items() if k != "params"}

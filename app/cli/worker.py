@@ -26,7 +26,9 @@ def run(args: argparse.Namespace) -> int:
     from worker import run_worker
 
     settings = Settings(**({"data_dir": args.data_dir} if args.data_dir else {}))
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
+    )
     stop = threading.Event()
     # finish the round in progress, then leave; a kill instead leaves jobs for re-queueing
     signal.signal(signal.SIGTERM, lambda *_: stop.set())

@@ -213,7 +213,12 @@ def evaluate(
         method_class(m)  # fail before any work on an unknown name
     method_params = method_params or {}
     splits = make_zsl_splits(
-        dataset, n_novel, n_splits, seed, test_trials=test_trials, distinct_from_known=distinct_from_known
+        dataset,
+        n_novel,
+        n_splits,
+        seed,
+        test_trials=test_trials,
+        distinct_from_known=distinct_from_known,
     )
     results: dict[str, Any] = {
         "dataset": dataset_label or dataset.name,

@@ -110,8 +110,13 @@ def markdown(results: dict[str, Any], images: dict[str, list[str]] | None = None
         "| --- | --- | " + " | ".join("---" for _ in methods) + " |",
     ]
     for f in figures:
-        cells = [_fmt(results["methods"][m].get("mean", {}).get(f), results["methods"][m].get("std", {}).get(f))
-                 for m in methods]
+        cells = [
+            _fmt(
+                results["methods"][m].get("mean", {}).get(f),
+                results["methods"][m].get("std", {}).get(f),
+            )
+            for m in methods
+        ]
         lines.append(f"| `{f}` | {_fmt(paper.get(f))} | " + " | ".join(cells) + " |")
     lines += [
         "",
@@ -119,7 +124,8 @@ def markdown(results: dict[str, Any], images: dict[str, list[str]] | None = None
         "32 × 30 samples, known test samples sharing trials with training): "
         + "; ".join(f"`{f}` {PAPER_SOURCE[f]}" for f in PAPER_SOURCE if f in paper)
         + ". The paper's reference [38] (attribute-based haptic ZSL) averages 0.36 (Table VII)."
-        if paper else "The paper reports no figures for this number of novel objects.",
+        if paper
+        else "The paper reports no figures for this number of novel objects.",
         "",
         "## Wall time",
         "",
@@ -139,12 +145,21 @@ def markdown(results: dict[str, Any], images: dict[str, list[str]] | None = None
     for m in methods:
         splits = results["methods"][m]["splits"]
         method_figs = [f for f in figures if f in results["methods"][m].get("mean", {})]
-        lines += [f"### {m}", "", "| split | novel objects | " + " | ".join(f"`{f}`" for f in method_figs) + " |",
-                  "| --- | --- | " + " | ".join("---" for _ in method_figs) + " |"]
+        lines += [
+            f"### {m}",
+            "",
+            "| split | novel objects | " + " | ".join(f"`{f}`" for f in method_figs) + " |",
+            "| --- | --- | " + " | ".join("---" for _ in method_figs) + " |",
+        ]
         for i, s in enumerate(splits):
-            objs = ", ".join(f"{o} {n}" for o, n in zip(s["novel_objects"], s["novel_names"], strict=True))
-            lines.append(f"| {s.get('split', i + 1)} | {objs} | "
-                         + " | ".join(_fmt(s.get(f)) for f in method_figs) + " |")
+            objs = ", ".join(
+                f"{o} {n}" for o, n in zip(s["novel_objects"], s["novel_names"], strict=True)
+            )
+            lines.append(
+                f"| {s.get('split', i + 1)} | {objs} | "
+                + " | ".join(_fmt(s.get(f)) for f in method_figs)
+                + " |"
+            )
         lines.append("")
     if images:
         lines += ["## Split 1", ""]
@@ -172,10 +187,19 @@ def plot_tuning_curve(curve: dict[str, Any], path: Path, title: str) -> None:
     t = np.asarray(curve["thresholds"], dtype=float)
     ax.plot(t, curve["known_kept"], color="tab:blue", label="held-out known trials called known")
     ax.plot(t, curve["val_novel"], color="tab:red", label="validation-novel objects called novel")
-    ax.plot(t, (np.asarray(curve["known_kept"]) + np.asarray(curve["val_novel"])) / 2,
-            color="0.5", linestyle=":", label="mean (maximised)")
-    ax.axvline(curve["threshold"], color="k", linestyle="--",
-               label=f"chosen threshold {curve['threshold']:.3g}")
+    ax.plot(
+        t,
+        (np.asarray(curve["known_kept"]) + np.asarray(curve["val_novel"])) / 2,
+        color="0.5",
+        linestyle=":",
+        label="mean (maximised)",
+    )
+    ax.axvline(
+        curve["threshold"],
+        color="k",
+        linestyle="--",
+        label=f"chosen threshold {curve['threshold']:.3g}",
+    )
     ax.set_xlabel("novelty threshold (score above = novel)")
     ax.set_ylabel("accuracy")
     ax.set_ylim(-0.02, 1.02)
@@ -187,8 +211,16 @@ def plot_tuning_curve(curve: dict[str, Any], path: Path, title: str) -> None:
     plt.close(fig)
 
 
-def _matrix_panel(ax, matrix: np.ndarray, labels: list[str], title: str, vmax: float = 1.0,
-                  xlabel: str = "predicted", ylabel: str = "true", ylabels: bool = True) -> Any:
+def _matrix_panel(
+    ax,
+    matrix: np.ndarray,
+    labels: list[str],
+    title: str,
+    vmax: float = 1.0,
+    xlabel: str = "predicted",
+    ylabel: str = "true",
+    ylabels: bool = True,
+) -> Any:
     im = ax.imshow(matrix, cmap="Blues", vmin=0, vmax=vmax)
     n = len(labels)
     ax.set_xticks(range(n), labels, rotation=45, ha="right", fontsize=7)
@@ -197,24 +229,45 @@ def _matrix_panel(ax, matrix: np.ndarray, labels: list[str], title: str, vmax: f
     for i in range(n):
         for j in range(n):
             v = matrix[i, j]
-            ax.text(j, i, f"{v:.2f}", ha="center", va="center", fontsize=fontsize,
-                    color="white" if v > 0.6 * vmax else "black")
+            ax.text(
+                j,
+                i,
+                f"{v:.2f}",
+                ha="center",
+                va="center",
+                fontsize=fontsize,
+                color="white" if v > 0.6 * vmax else "black",
+            )
     ax.set_title(title, fontsize=9)
     ax.set_xlabel(xlabel, fontsize=8)
     ax.set_ylabel(ylabel, fontsize=8)
     return im
 
 
-def plot_confusions(panels: list[tuple[str, np.ndarray]], labels: list[str], path: Path, title: str) -> None:
+def plot_confusions(
+    panels: list[tuple[str, np.ndarray]], labels: list[str], path: Path, title: str
+) -> None:
     plt = _plt()
     n = len(labels)
     size = max(3.6, 0.45 * n + 1.6)
-    fig, axes = plt.subplots(1, len(panels), figsize=(size * len(panels) + 1.5, size + 1.4), dpi=120,
-                             squeeze=False, layout="constrained")
+    fig, axes = plt.subplots(
+        1,
+        len(panels),
+        figsize=(size * len(panels) + 1.5, size + 1.4),
+        dpi=120,
+        squeeze=False,
+        layout="constrained",
+    )
     im = None
     for i, (ax, (name, cm)) in enumerate(zip(axes[0], panels, strict=True)):
-        im = _matrix_panel(ax, row_normalize(np.asarray(cm)), labels, name,
-                           ylabel="true" if i == 0 else "", ylabels=i == 0)
+        im = _matrix_panel(
+            ax,
+            row_normalize(np.asarray(cm)),
+            labels,
+            name,
+            ylabel="true" if i == 0 else "",
+            ylabels=i == 0,
+        )
     fig.colorbar(im, ax=axes[0].tolist(), shrink=0.8, label="fraction of the true class")
     fig.suptitle(title, fontsize=10)
     fig.savefig(path, bbox_inches="tight")
@@ -233,11 +286,14 @@ def plot_jaccard(vectors: np.ndarray, labels: list[str], path: Path, title: str)
 
 
 def _short(labels: list[str]) -> list[str]:
-    return [f"z{i + 1} {n}" if len(n) <= 24 else f"z{i + 1} {n[:22]}…" for i, n in enumerate(labels)]
+    return [
+        f"z{i + 1} {n}" if len(n) <= 24 else f"z{i + 1} {n[:22]}…" for i, n in enumerate(labels)
+    ]
 
 
-def write_report(results: dict[str, Any], out_dir: str | Path,
-                 novel_attributes: np.ndarray | None = None) -> list[Path]:
+def write_report(
+    results: dict[str, Any], out_dir: str | Path, novel_attributes: np.ndarray | None = None
+) -> list[Path]:
     """Write report.md and the PNGs into ``out_dir``; returns the files written.
 
     ``novel_attributes``: split 1's novel objects' attribute vectors for Fig. 8d;
@@ -263,7 +319,9 @@ def write_report(results: dict[str, Any], out_dir: str | Path,
         panels = []
         if "confusion_zsl_genf" in details:
             panels.append(("ZSL GEN-F", details["confusion_zsl_genf"]))
-            panels.append(("ZSL NEIGHB-F", details.get("confusion_zsl_neighbf", details.get("confusion_zsl"))))
+            panels.append(
+                ("ZSL NEIGHB-F", details.get("confusion_zsl_neighbf", details.get("confusion_zsl")))
+            )
         elif "confusion_zsl" in details:
             panels.append(("ZSL", details["confusion_zsl"]))
         if "confusion_osl" in details:
@@ -279,8 +337,12 @@ def write_report(results: dict[str, Any], out_dir: str | Path,
             novel_attributes = np.asarray(defs[0]["novel_attributes"])
     if novel_attributes is not None and first_split is not None:
         path = out / "fig8d_jaccard.png"
-        plot_jaccard(np.asarray(novel_attributes), _short(list(first_split["novel_names"])), path,
-                     "Fig. 8d: attribute similarity of split 1's novel objects")
+        plot_jaccard(
+            np.asarray(novel_attributes),
+            _short(list(first_split["novel_names"])),
+            path,
+            "Fig. 8d: attribute similarity of split 1's novel objects",
+        )
         images["Fig. 8d: attribute similarity of the novel objects"] = [path.name]
         written.append(path)
     md = out / "report.md"

@@ -97,10 +97,31 @@ class PaperRecognizer(TactileRecognizer):
         self._check_params()
 
     _PARAMS = (
-        "seed", "encoder_epochs", "lr", "weight_decay", "batch_size", "mlp_hidden", "mlp_features",
-        "mlp_dropout", "input_clip",        "alg1_epochs", "alg2_epochs", "sigma_d", "sigma_g", "max_phase_steps", "noise_std",
-        "samples_per_class", "fc_z_epochs", "synthesis", "one_shot_k", "finetune_steps",
-        "gmm_components", "gmm_covariance", "novelty_pca_dims", "novelty_space", "novelty_val_fraction",
+        "seed",
+        "encoder_epochs",
+        "lr",
+        "weight_decay",
+        "batch_size",
+        "mlp_hidden",
+        "mlp_features",
+        "mlp_dropout",
+        "input_clip",
+        "alg1_epochs",
+        "alg2_epochs",
+        "sigma_d",
+        "sigma_g",
+        "max_phase_steps",
+        "noise_std",
+        "samples_per_class",
+        "fc_z_epochs",
+        "synthesis",
+        "one_shot_k",
+        "finetune_steps",
+        "gmm_components",
+        "gmm_covariance",
+        "novelty_pca_dims",
+        "novelty_space",
+        "novelty_val_fraction",
     )
 
     def get_params(self) -> dict[str, Any]:
@@ -110,7 +131,9 @@ class PaperRecognizer(TactileRecognizer):
         if self.synthesis not in SYNTHESIS:
             raise FrameworkError(f"synthesis must be one of {SYNTHESIS}, got {self.synthesis!r}")
         if self.novelty_space not in NOVELTY_SPACES:
-            raise FrameworkError(f"novelty_space must be one of {NOVELTY_SPACES}, got {self.novelty_space!r}")
+            raise FrameworkError(
+                f"novelty_space must be one of {NOVELTY_SPACES}, got {self.novelty_space!r}"
+            )
         for p in ("batch_size", "samples_per_class", "alg1_epochs", "alg2_epochs", "fc_z_epochs"):
             if int(getattr(self, p)) < 1:
                 raise FrameworkError(f"{p} must be at least 1, got {getattr(self, p)}")
@@ -119,7 +142,9 @@ class PaperRecognizer(TactileRecognizer):
     def _build(self, n_known: int, n_attributes: int) -> None:
         torch.manual_seed(self.seed)
         self.scaler_ = RobustInputScaler(clip=self.input_clip)
-        self.encoder_ = build_encoder(self.input_shape, self.mlp_hidden, self.mlp_features, self.mlp_dropout)
+        self.encoder_ = build_encoder(
+            self.input_shape, self.mlp_hidden, self.mlp_features, self.mlp_dropout
+        )
         feature_shape = self.encoder_.feature_shape
         self.feature_shape_ = tuple(feature_shape)
         self.fc_y_ = FullyConnectedClassifier(self.encoder_.feature_dim, n_known)
@@ -131,7 +156,9 @@ class PaperRecognizer(TactileRecognizer):
         self.finetuned_on_: dict[str, int] = {}
 
     def _new_detector(self) -> GMMNoveltyDetector:
-        return GMMNoveltyDetector(self.gmm_components, self.gmm_covariance, self.novelty_pca_dims, seed=self.seed)
+        return GMMNoveltyDetector(
+            self.gmm_components, self.gmm_covariance, self.novelty_pca_dims, seed=self.seed
+        )
 
     def _epochs(self) -> int:
         if self.encoder_epochs is not None:
@@ -161,19 +188,38 @@ class PaperRecognizer(TactileRecognizer):
         # (2) Algorithm 1, then (3) Algorithm 2
         t = time.perf_counter()
         alg1 = train_generator_through_classifier(
-            self.generator_, self.fc_y_, dataset.class_attributes, self.alg1_epochs, self.noise_std,
-            self.batch_size, seed=self.seed, progress=progress,
+            self.generator_,
+            self.fc_y_,
+            dataset.class_attributes,
+            self.alg1_epochs,
+            self.noise_std,
+            self.batch_size,
+            seed=self.seed,
+            progress=progress,
         )
         self.generator_alg1_ = copy.deepcopy(self.generator_)
         alg2 = train_adversarially(
-            self.generator_, self.discriminator_, self.fc_y_, dataset.class_attributes,
-            self.real_features_, y, self.alg2_epochs, self.sigma_d, self.sigma_g, self.max_phase_steps,
-            self.noise_std, self.batch_size, seed=self.seed, progress=progress,
+            self.generator_,
+            self.discriminator_,
+            self.fc_y_,
+            dataset.class_attributes,
+            self.real_features_,
+            y,
+            self.alg2_epochs,
+            self.sigma_d,
+            self.sigma_g,
+            self.max_phase_steps,
+            self.noise_std,
+            self.batch_size,
+            seed=self.seed,
+            progress=progress,
         )
         timings["generator_s"] = time.perf_counter() - t
         timings["total_s"] = time.perf_counter() - t0
         with torch.no_grad():
-            train_acc = float((self.fc_y_(torch.as_tensor(self.real_features_)).argmax(1).numpy() == y).mean())
+            train_acc = float(
+                (self.fc_y_(torch.as_tensor(self.real_features_)).argmax(1).numpy() == y).mean()
+            )
         self.metrics = {
             "n_train_samples": int(len(dataset)),
             "n_known_classes": int(dataset.n_classes),
@@ -252,12 +298,19 @@ class PaperRecognizer(TactileRecognizer):
         x = self.scaler_.transform(samples)
         feats = self._features(x)  # one encoder pass serves ND, FC_Y and FC_Z
         novel_p = self._softmax(self.fc_z_, feats) if self.registry.novel_names else None
-        return (self.novelty_.novelty_score(self._novelty_input(x, feats)),
-                self._softmax(self.fc_y_, feats), novel_p)
+        return (
+            self.novelty_.novelty_score(self._novelty_input(x, feats)),
+            self._softmax(self.fc_y_, feats),
+            novel_p,
+        )
 
     # -------------------------------------------------------------- enrolment
-    def _refit_novel(self, synthesis: str | None = None, generator: str = "adversarial",
-                     finetune_generator: bool = True) -> None:
+    def _refit_novel(
+        self,
+        synthesis: str | None = None,
+        generator: str = "adversarial",
+        finetune_generator: bool = True,
+    ) -> None:
         """(4) GEN-F / NEIGHB-F and (5) one-shot: rebuild FC_Z over all novel classes.
 
         CONV_XF, FC_Y and the novelty detector are untouched. New real samples first
@@ -272,18 +325,33 @@ class PaperRecognizer(TactileRecognizer):
         if finetune_generator and generator == "adversarial":
             self._finetune_generator()
         g = self.generator_ if generator == "adversarial" else self.generator_alg1_
-        feats, labels = generate_features(g, reg.novel_attributes, self.samples_per_class,
-                                          self.noise_std, seed=self.seed + len(reg.novel_names))
+        feats, labels = generate_features(
+            g,
+            reg.novel_attributes,
+            self.samples_per_class,
+            self.noise_std,
+            seed=self.seed + len(reg.novel_names),
+        )
         if synthesis == "neighbf":
             feats = nearest_real_features(feats, self.real_features_)
         shot_f, shot_y = self._one_shot_features()
         if len(shot_f):
-            osl_f, osl_y = one_shot_training_set(shot_f, shot_y, self.real_features_, self.one_shot_k)
+            osl_f, osl_y = one_shot_training_set(
+                shot_f, shot_y, self.real_features_, self.one_shot_k
+            )
             feats, labels = np.concatenate([feats, osl_f]), np.concatenate([labels, osl_y])
         torch.manual_seed(self.seed)
         self.fc_z_ = FullyConnectedClassifier(feats.shape[1], len(reg.novel_names))
-        fit_classifier(self.fc_z_, feats, labels, self.fc_z_epochs, lr=self.lr * 10,
-                       weight_decay=self.weight_decay, batch_size=self.batch_size, seed=self.seed)
+        fit_classifier(
+            self.fc_z_,
+            feats,
+            labels,
+            self.fc_z_epochs,
+            lr=self.lr * 10,
+            weight_decay=self.weight_decay,
+            batch_size=self.batch_size,
+            seed=self.seed,
+        )
 
     def _one_shot_features(self) -> tuple[np.ndarray, np.ndarray]:
         reg = self.registry
@@ -299,14 +367,20 @@ class PaperRecognizer(TactileRecognizer):
         """Pull G(a_z + ns) towards the real features of newly arrived samples, while the
         Algorithm 1 loss on known classes keeps G from forgetting them."""
         reg = self.registry
-        fresh = {n: s for n, s in reg.novel_samples.items() if len(s) > self.finetuned_on_.get(n, 0)}
+        fresh = {
+            n: s for n, s in reg.novel_samples.items() if len(s) > self.finetuned_on_.get(n, 0)
+        }
         if not fresh or self.finetune_steps <= 0:
             return
         gen = torch.Generator().manual_seed(self.seed + sum(len(s) for s in fresh.values()))
         targets, attrs = [], []
         for name, samples in fresh.items():
             targets.append(torch.as_tensor(self._features(self.scaler_.transform(samples))))
-            attrs.append(torch.as_tensor(reg.novel_attributes[reg.novel_names.index(name)]).expand(len(samples), -1))
+            attrs.append(
+                torch.as_tensor(reg.novel_attributes[reg.novel_names.index(name)]).expand(
+                    len(samples), -1
+                )
+            )
         f_t, a_t = torch.cat(targets), torch.cat(attrs)
         a_known = torch.as_tensor(reg.known_attributes)
         y_known = torch.arange(len(a_known))
@@ -318,7 +392,9 @@ class PaperRecognizer(TactileRecognizer):
         for _ in range(self.finetune_steps):
             opt.zero_grad()
             loss = nn.functional.l1_loss(self.generator_(noisy(a_t, self.noise_std, gen)), f_t)
-            loss = loss + ce(self.fc_y_(self.generator_(noisy(a_known, self.noise_std, gen))), y_known)
+            loss = loss + ce(
+                self.fc_y_(self.generator_(noisy(a_known, self.noise_std, gen))), y_known
+            )
             loss.backward()
             opt.step()
         self.generator_.eval()
@@ -329,7 +405,8 @@ class PaperRecognizer(TactileRecognizer):
 
     def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         arrays: dict[str, np.ndarray] = {
-            "real_features": self.real_features_, "real_labels": self.real_labels_,
+            "real_features": self.real_features_,
+            "real_labels": self.real_labels_,
         }
         for key, value in self.scaler_.get_state().items():
             arrays[f"scaler/{key}"] = value
@@ -354,7 +431,9 @@ class PaperRecognizer(TactileRecognizer):
         self._check_params()
         reg = self.registry
         self._build(len(reg.known_names), len(reg.attribute_names))
-        self.generator_alg1_ = build_generator(len(reg.attribute_names), self.encoder_.feature_shape)
+        self.generator_alg1_ = build_generator(
+            len(reg.attribute_names), self.encoder_.feature_shape
+        )
         if meta["has_fc_z"]:
             self.fc_z_ = FullyConnectedClassifier(self.encoder_.feature_dim, len(reg.novel_names))
         for name in self._MODULES:
@@ -363,7 +442,9 @@ class PaperRecognizer(TactileRecognizer):
                 continue
             prefix = name.rstrip("_") + "/"
             # a copy: the arrays may be read-only parts shared with another loaded version
-            state = {k[len(prefix):]: torch.tensor(v) for k, v in arrays.items() if k.startswith(prefix)}
+            state = {
+                k[len(prefix) :]: torch.tensor(v) for k, v in arrays.items() if k.startswith(prefix)
+            }
             module.load_state_dict(state)
             module.eval()
         self.scaler_.set_state({k[7:]: v for k, v in arrays.items() if k.startswith("scaler/")})

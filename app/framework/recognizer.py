@@ -70,8 +70,14 @@ class RecognitionBatch:
         return len(self.novelty_score)
 
     def __getitem__(self, rows: slice) -> RecognitionBatch:
-        return RecognitionBatch(self.class_names, self.n_known, self.top_index[rows],
-                                self.top_probability[rows], self.is_novel[rows], self.novelty_score[rows])
+        return RecognitionBatch(
+            self.class_names,
+            self.n_known,
+            self.top_index[rows],
+            self.top_probability[rows],
+            self.is_novel[rows],
+            self.novelty_score[rows],
+        )
 
     @property
     def class_kinds(self) -> list[str]:
@@ -89,22 +95,47 @@ class RecognitionBatch:
         ``class_id`` too. Built straight from the arrays: building pydantic models first cost
         more than the forward pass of a sample."""
         names, kinds = self.class_names, self.class_kinds
-        label = ([{"class_name": n} for n in names] if class_ids is None
-                 else [{"class_id": class_ids.get(n), "class_name": n} for n in names])
+        label = (
+            [{"class_name": n} for n in names]
+            if class_ids is None
+            else [{"class_id": class_ids.get(n), "class_name": n} for n in names]
+        )
         return [
-            dict(label[idx[0]], kind=kinds[idx[0]], is_novel=novel, novelty_score=score,
-                 top_k=[dict(label[j], probability=q) for j, q in zip(idx, top_p, strict=True) if j >= 0])
-            for idx, top_p, novel, score in zip(self.top_index.tolist(), self.top_probability.tolist(),
-                                                self.is_novel.tolist(), self.novelty_score.tolist(), strict=True)
+            dict(
+                label[idx[0]],
+                kind=kinds[idx[0]],
+                is_novel=novel,
+                novelty_score=score,
+                top_k=[
+                    dict(label[j], probability=q) for j, q in zip(idx, top_p, strict=True) if j >= 0
+                ],
+            )
+            for idx, top_p, novel, score in zip(
+                self.top_index.tolist(),
+                self.top_probability.tolist(),
+                self.is_novel.tolist(),
+                self.novelty_score.tolist(),
+                strict=True,
+            )
         ]
 
     def answers(self) -> list[Recognition]:
         names, kinds = self.class_names, self.class_kinds
         return [
-            Recognition(names[idx[0]], kinds[idx[0]], nov, score,
-                        tuple(ClassScore(names[j], q) for j, q in zip(idx, tp, strict=True) if j >= 0))
-            for idx, tp, nov, score in zip(self.top_index.tolist(), self.top_probability.tolist(),
-                                           self.is_novel.tolist(), self.novelty_score.tolist(), strict=True)
+            Recognition(
+                names[idx[0]],
+                kinds[idx[0]],
+                nov,
+                score,
+                tuple(ClassScore(names[j], q) for j, q in zip(idx, tp, strict=True) if j >= 0),
+            )
+            for idx, tp, nov, score in zip(
+                self.top_index.tolist(),
+                self.top_probability.tolist(),
+                self.is_novel.tolist(),
+                self.novelty_score.tolist(),
+                strict=True,
+            )
         ]
 
 
@@ -244,7 +275,8 @@ class TactileRecognizer(ABC):
 
     def _attribute_proba(self, samples: np.ndarray) -> np.ndarray:
         raise UnsupportedOperationError(
-            f"method '{self.method}' does not predict attributes from a sample (method 'best' does)")
+            f"method '{self.method}' does not predict attributes from a sample (method 'best' does)"
+        )
 
     def recognize(self, samples: np.ndarray, top_k: int = 3) -> list[Recognition]:
         """Fig. 1: ND(x) routes each sample to FC_Y or FC_Z."""
@@ -267,10 +299,11 @@ class TactileRecognizer(ABC):
                 continue
             p = probs[rows]
             order = np.argsort(-p, axis=1)[:, :k]
-            top_index[rows, :order.shape[1]] = order + offset
-            top_p[rows, :order.shape[1]] = np.take_along_axis(p, order, axis=1)
-        return RecognitionBatch(tuple(reg.all_names), n_known, top_index, top_p, novel,
-                                scores.astype(np.float64))
+            top_index[rows, : order.shape[1]] = order + offset
+            top_p[rows, : order.shape[1]] = np.take_along_axis(p, order, axis=1)
+        return RecognitionBatch(
+            tuple(reg.all_names), n_known, top_index, top_p, novel, scores.astype(np.float64)
+        )
 
     # --------------------------------------------------------------- enrolment
     def add_novel_classes(
@@ -296,8 +329,10 @@ class TactileRecognizer(ABC):
             raise AttributeVectorError(f"{len(names)} names but {len(vectors)} attribute vectors")
         reg = self.registry
         existing = set(reg.all_names)
-        all_vectors = reg.novel_attributes if allow_known_vectors else np.concatenate(
-            [reg.known_attributes, reg.novel_attributes]
+        all_vectors = (
+            reg.novel_attributes
+            if allow_known_vectors
+            else np.concatenate([reg.known_attributes, reg.novel_attributes])
         )
         existing_names = reg.novel_names if allow_known_vectors else reg.all_names
         for i, name in enumerate(names):
@@ -318,7 +353,9 @@ class TactileRecognizer(ABC):
                 )
         new = copy.deepcopy(self)
         new.registry.novel_names = reg.novel_names + names
-        new.registry.novel_attributes = np.concatenate([reg.novel_attributes, vectors]).astype(np.float32)
+        new.registry.novel_attributes = np.concatenate([reg.novel_attributes, vectors]).astype(
+            np.float32
+        )
         new._refit_novel(**options)
         return new
 
@@ -390,7 +427,9 @@ class TactileRecognizer(ABC):
         if v.ndim == 1:
             v = v[None]
         if v.ndim != 2 or v.shape[1] != m:
-            raise AttributeVectorError(f"expected attribute vectors of length {m}, got shape {v.shape}")
+            raise AttributeVectorError(
+                f"expected attribute vectors of length {m}, got shape {v.shape}"
+            )
         if not np.isin(v, (0.0, 1.0)).all():
             raise AttributeVectorError("attribute vectors must contain only 0 and 1")
         if (v.sum(axis=1) == 0).any():
@@ -402,8 +441,10 @@ class TactileRecognizer(ABC):
         vocab = self.registry.attribute_names
         unknown = [a for a in attribute_names if a not in vocab]
         if unknown:
-            raise AttributeVectorError(f"unknown attribute(s): {'; '.join(map(_suggest(vocab), unknown))}; "
-                                       f"the attributes are: {', '.join(vocab)}")
+            raise AttributeVectorError(
+                f"unknown attribute(s): {'; '.join(map(_suggest(vocab), unknown))}; "
+                f"the attributes are: {', '.join(vocab)}"
+            )
         return np.array([1.0 if a in set(attribute_names) else 0.0 for a in vocab], np.float32)
 
     def _require_fitted(self) -> None:
@@ -422,7 +463,9 @@ class TactileRecognizer(ABC):
 
 def _suggest(vocabulary: Sequence[str]) -> Callable[[Any], str]:
     """An unknown attribute name with the vocabulary's closest ones, for a typo."""
+
     def named(name: Any) -> str:
         close = difflib.get_close_matches(str(name), vocabulary, n=2, cutoff=0.6)
         return f"{name!r} (did you mean {' or '.join(map(repr, close))}?)" if close else repr(name)
+
     return named

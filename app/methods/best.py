@@ -72,9 +72,23 @@ class BestRecognizer(TactileRecognizer):
     method = "best"
     novel_part_separable = True  # enrolments never touch the forest or the attribute models
 
-    _PARAMS = ("seed", "n_estimators", "max_features", "attribute_C", "dap_clip", "shot_temperature",
-               "knn_weight", "top_weight", "novelty_val_fraction", "novelty_holdout_trials",
-               "tuning_rounds", "distance_components", "sae_lambda", "sae_temperature", "n_jobs")
+    _PARAMS = (
+        "seed",
+        "n_estimators",
+        "max_features",
+        "attribute_C",
+        "dap_clip",
+        "shot_temperature",
+        "knn_weight",
+        "top_weight",
+        "novelty_val_fraction",
+        "novelty_holdout_trials",
+        "tuning_rounds",
+        "distance_components",
+        "sae_lambda",
+        "sae_temperature",
+        "n_jobs",
+    )
 
     def __init__(
         self,
@@ -117,35 +131,64 @@ class BestRecognizer(TactileRecognizer):
         return {p: getattr(self, p) for p in self._PARAMS}
 
     def _check_params(self) -> None:
-        _check(isinstance(self.n_estimators, int | np.integer) and self.n_estimators >= 1,
-               f"n_estimators must be a positive integer, got {self.n_estimators!r}")
+        _check(
+            isinstance(self.n_estimators, int | np.integer) and self.n_estimators >= 1,
+            f"n_estimators must be a positive integer, got {self.n_estimators!r}",
+        )
         mf = self.max_features
-        _check(mf in ("sqrt", "log2") or (isinstance(mf, int | float) and not isinstance(mf, bool) and mf > 0),
-               f"max_features must be 'sqrt', 'log2' or a positive number, got {mf!r}")
-        _check(isinstance(self.attribute_C, int | float) and self.attribute_C > 0,
-               f"attribute_C must be positive, got {self.attribute_C!r}")
-        _check(isinstance(self.dap_clip, int | float) and 0 < self.dap_clip < 0.5,
-               f"dap_clip must lie in (0, 0.5), got {self.dap_clip!r}")
-        _check(isinstance(self.shot_temperature, int | float) and self.shot_temperature > 0,
-               f"shot_temperature must be positive, got {self.shot_temperature!r}")
-        _check(isinstance(self.novelty_val_fraction, int | float) and 0 < self.novelty_val_fraction < 1,
-               f"novelty_val_fraction must lie in (0, 1), got {self.novelty_val_fraction!r}")
-        _check(isinstance(self.novelty_holdout_trials, int | np.integer) and self.novelty_holdout_trials >= 1,
-               f"novelty_holdout_trials must be a positive integer, got {self.novelty_holdout_trials!r}")
+        _check(
+            mf in ("sqrt", "log2")
+            or (isinstance(mf, int | float) and not isinstance(mf, bool) and mf > 0),
+            f"max_features must be 'sqrt', 'log2' or a positive number, got {mf!r}",
+        )
+        _check(
+            isinstance(self.attribute_C, int | float) and self.attribute_C > 0,
+            f"attribute_C must be positive, got {self.attribute_C!r}",
+        )
+        _check(
+            isinstance(self.dap_clip, int | float) and 0 < self.dap_clip < 0.5,
+            f"dap_clip must lie in (0, 0.5), got {self.dap_clip!r}",
+        )
+        _check(
+            isinstance(self.shot_temperature, int | float) and self.shot_temperature > 0,
+            f"shot_temperature must be positive, got {self.shot_temperature!r}",
+        )
+        _check(
+            isinstance(self.novelty_val_fraction, int | float)
+            and 0 < self.novelty_val_fraction < 1,
+            f"novelty_val_fraction must lie in (0, 1), got {self.novelty_val_fraction!r}",
+        )
+        _check(
+            isinstance(self.novelty_holdout_trials, int | np.integer)
+            and self.novelty_holdout_trials >= 1,
+            f"novelty_holdout_trials must be a positive integer, got {self.novelty_holdout_trials!r}",
+        )
         for name in ("knn_weight", "top_weight"):
             value = getattr(self, name)
-            _check(isinstance(value, int | float) and not isinstance(value, bool) and value >= 0,
-                   f"{name} must be a non-negative number, got {value!r}")
-        _check(isinstance(self.tuning_rounds, int | np.integer) and self.tuning_rounds >= 1,
-               f"tuning_rounds must be a positive integer, got {self.tuning_rounds!r}")
-        _check(isinstance(self.distance_components, int | np.integer) and not isinstance(
-            self.distance_components, bool) and self.distance_components >= 0,
-               f"distance_components must be a non-negative integer (0 = exact), got "
-               f"{self.distance_components!r}")
+            _check(
+                isinstance(value, int | float) and not isinstance(value, bool) and value >= 0,
+                f"{name} must be a non-negative number, got {value!r}",
+            )
+        _check(
+            isinstance(self.tuning_rounds, int | np.integer) and self.tuning_rounds >= 1,
+            f"tuning_rounds must be a positive integer, got {self.tuning_rounds!r}",
+        )
+        _check(
+            isinstance(self.distance_components, int | np.integer)
+            and not isinstance(self.distance_components, bool)
+            and self.distance_components >= 0,
+            f"distance_components must be a non-negative integer (0 = exact), got "
+            f"{self.distance_components!r}",
+        )
         for name in ("sae_lambda", "sae_temperature"):
             value = getattr(self, name)
-            _check(isinstance(value, int | float) and not isinstance(value, bool) and value >= 0
-                   and np.isfinite(value), f"{name} must be a non-negative number, got {value!r}")
+            _check(
+                isinstance(value, int | float)
+                and not isinstance(value, bool)
+                and value >= 0
+                and np.isfinite(value),
+                f"{name} must be a non-negative number, got {value!r}",
+            )
 
     def _cue_weights(self) -> np.ndarray:
         w = np.zeros(len(CUES))
@@ -155,8 +198,15 @@ class BestRecognizer(TactileRecognizer):
         return w
 
     def _known_model(self, dataset: TactileDataset) -> KnownModel:
-        return KnownModel.fit(dataset, self._cue_weights(), int(self.n_estimators), self.max_features,
-                              self.seed, self.n_jobs, int(self.distance_components))
+        return KnownModel.fit(
+            dataset,
+            self._cue_weights(),
+            int(self.n_estimators),
+            self.max_features,
+            self.seed,
+            self.n_jobs,
+            int(self.distance_components),
+        )
 
     # ----------------------------------------------------------------- fitting
     def _fit(self, dataset: TactileDataset, progress: bool) -> None:
@@ -190,7 +240,9 @@ class BestRecognizer(TactileRecognizer):
                 "novelty tuning needs validation objects and held-out trials: give every known "
                 "class at least 2 trials"
             )
-        self.novelty_tuning = tune_threshold(np.concatenate(known_scores), np.concatenate(val_scores))
+        self.novelty_tuning = tune_threshold(
+            np.concatenate(known_scores), np.concatenate(val_scores)
+        )
         self.novelty_threshold = float(self.novelty_tuning.threshold)
         timings["novelty_tuning_s"] = time.perf_counter() - t0
 
@@ -203,8 +255,11 @@ class BestRecognizer(TactileRecognizer):
         attrs = dataset.class_attributes
         self.attributes_ = LinearAttributeModel.fit(z, attrs[y], float(self.attribute_C))
         self.prior_ = attrs.mean(axis=0).astype(np.float64)
-        self.sae_ = (semantic_autoencoder(z, attrs[y], float(self.sae_lambda)).astype(np.float32)
-                     if self.sae_lambda > 0 else None)
+        self.sae_ = (
+            semantic_autoencoder(z, attrs[y], float(self.sae_lambda)).astype(np.float32)
+            if self.sae_lambda > 0
+            else None
+        )
         timings["attributes_s"] = time.perf_counter() - t
         self._reset_novel()
         timings["total_s"] = time.perf_counter() - t0
@@ -240,10 +295,16 @@ class BestRecognizer(TactileRecognizer):
 
     def _novel_from(self, z: np.ndarray, known_p: np.ndarray | None) -> np.ndarray:
         reg = self.registry
-        scores = dap_log_scores(self.attributes_.predict_proba(z), reg.novel_attributes, self.prior_,
-                                float(self.dap_clip))
+        scores = dap_log_scores(
+            self.attributes_.predict_proba(z),
+            reg.novel_attributes,
+            self.prior_,
+            float(self.dap_clip),
+        )
         if self.sae_ is not None:
-            scores = scores + float(self.sae_temperature) * cosine_scores(z, self.sae_, reg.novel_attributes)
+            scores = scores + float(self.sae_temperature) * cosine_scores(
+                z, self.sae_, reg.novel_attributes
+            )
         p_zsl = softmax(scores)
         has = self.shot_has_
         if not has.any():
@@ -266,7 +327,9 @@ class BestRecognizer(TactileRecognizer):
     # --------------------------------------------------------------- enrolment
     def _refit_novel(self, **options: Any) -> None:
         if options:
-            raise FrameworkError(f"method '{self.method}' takes no enrolment options, got {sorted(options)}")
+            raise FrameworkError(
+                f"method '{self.method}' takes no enrolment options, got {sorted(options)}"
+            )
         reg = self.registry
         protos = np.zeros((len(reg.novel_names), len(reg.known_names)), np.float64)
         has = np.zeros(len(reg.novel_names), bool)
@@ -304,23 +367,35 @@ class BestRecognizer(TactileRecognizer):
         self._check_params()
 
         def part(prefix: str) -> dict[str, np.ndarray]:
-            return {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)}
+            return {k[len(prefix) :]: v for k, v in arrays.items() if k.startswith(prefix)}
 
         n_classes = int(meta["n_classes"])
         if n_classes != len(self.registry.known_names):
-            raise ValueError(f"forest has {n_classes} classes but the bundle lists "
-                             f"{len(self.registry.known_names)} known classes")
+            raise ValueError(
+                f"forest has {n_classes} classes but the bundle lists "
+                f"{len(self.registry.known_names)} known classes"
+            )
         n_features = int(np.prod(self.input_shape))
         if int(meta["n_features"]) != n_features:
-            raise ValueError(f"forest expects {meta['n_features']} features, inputs have {n_features}")
-        self.known_ = KnownModel.from_state(part("known/"), self._cue_weights(), n_classes, n_features)
+            raise ValueError(
+                f"forest expects {meta['n_features']} features, inputs have {n_features}"
+            )
+        self.known_ = KnownModel.from_state(
+            part("known/"), self._cue_weights(), n_classes, n_features
+        )
         self.attributes_ = LinearAttributeModel.from_state(part("attributes/"))
         self.prior_ = np.asarray(arrays["prior"], np.float64)
         self.sae_ = np.asarray(arrays["sae"], np.float32) if "sae" in arrays else None
         if self.sae_ is not None and self.sae_.shape != (len(self.prior_), n_features):
-            raise ValueError("semantic autoencoder does not match the inputs or the attribute vocabulary")
-        if self.attributes_.weights.shape[1] != n_features or len(self.prior_) != len(self.registry.attribute_names):
-            raise ValueError("attribute model does not match the inputs or the attribute vocabulary")
+            raise ValueError(
+                "semantic autoencoder does not match the inputs or the attribute vocabulary"
+            )
+        if self.attributes_.weights.shape[1] != n_features or len(self.prior_) != len(
+            self.registry.attribute_names
+        ):
+            raise ValueError(
+                "attribute model does not match the inputs or the attribute vocabulary"
+            )
         self._reset_novel()
         if self.registry.novel_names:
             self._refit_novel()

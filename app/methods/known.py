@@ -54,8 +54,15 @@ def fisher_weights(z: np.ndarray, y: np.ndarray, n_classes: int) -> np.ndarray:
 class ForestCues:
     """Scaler + forest + weighted reference samples: the known-class model and raw cues."""
 
-    def __init__(self, scaler: RobustInputScaler, forest: FlatForest, weights: np.ndarray,
-                 distances: ReferenceDistances, reference_labels: np.ndarray, offsets: np.ndarray) -> None:
+    def __init__(
+        self,
+        scaler: RobustInputScaler,
+        forest: FlatForest,
+        weights: np.ndarray,
+        distances: ReferenceDistances,
+        reference_labels: np.ndarray,
+        offsets: np.ndarray,
+    ) -> None:
         self.scaler = scaler
         self.forest = forest
         self.weights = np.asarray(weights, np.float32)
@@ -64,8 +71,9 @@ class ForestCues:
         self.reference_labels = np.asarray(reference_labels, np.int64)
         if self.reference_labels.shape != (len(self.reference),):
             raise ValueError("novelty reference samples and labels differ in number")
-        if len(self.reference_labels) and (self.reference_labels.min() < 0
-                                           or self.reference_labels.max() >= forest.n_classes):
+        if len(self.reference_labels) and (
+            self.reference_labels.min() < 0 or self.reference_labels.max() >= forest.n_classes
+        ):
             raise ValueError("novelty reference labels are out of range")
         # log-distance offsets: knn3, knn1 (global), then each class's own trial spacing
         self.offsets = np.asarray(offsets, np.float64)
@@ -73,18 +81,35 @@ class ForestCues:
             raise ValueError("novelty distance offsets do not match the classes")
 
     @classmethod
-    def fit(cls, x: np.ndarray, y: np.ndarray, trials: np.ndarray, n_classes: int, n_estimators: int,
-            max_features, seed: int, n_jobs: int | None, components: int = 0) -> ForestCues:
+    def fit(
+        cls,
+        x: np.ndarray,
+        y: np.ndarray,
+        trials: np.ndarray,
+        n_classes: int,
+        n_estimators: int,
+        max_features,
+        seed: int,
+        n_jobs: int | None,
+        components: int = 0,
+    ) -> ForestCues:
         from sklearn.ensemble import ExtraTreesClassifier  # fitting only: loading stays light
 
         scaler = RobustInputScaler().fit(x)
         z = scaler.transform(x)
-        et = ExtraTreesClassifier(n_estimators=n_estimators, max_features=max_features,
-                                  random_state=seed, n_jobs=n_jobs).fit(z, y)
+        et = ExtraTreesClassifier(
+            n_estimators=n_estimators, max_features=max_features, random_state=seed, n_jobs=n_jobs
+        ).fit(z, y)
         w = fisher_weights(z, y, n_classes)
         distances = ReferenceDistances.fit(z * w, components)
-        return cls(scaler, FlatForest.from_sklearn(et), w, distances, y,
-                   _offsets(distances, np.asarray(y), np.asarray(trials), n_classes))
+        return cls(
+            scaler,
+            FlatForest.from_sklearn(et),
+            w,
+            distances,
+            y,
+            _offsets(distances, np.asarray(y), np.asarray(trials), n_classes),
+        )
 
     def scaled(self, x: np.ndarray) -> np.ndarray:
         return self.scaler.transform(x)
@@ -101,8 +126,17 @@ class ForestCues:
         near = self.distances.nearest(z * self.weights, self.reference_labels, best)
         log_d = np.log(near + _EPS)
         off = self.offsets
-        return np.stack([1.0 - top[:, -1], entropy, -gap, log_d[:, 0] - off[0], log_d[:, 1] - off[1],
-                         log_d[:, 2] - off[2 + best]], axis=1)
+        return np.stack(
+            [
+                1.0 - top[:, -1],
+                entropy,
+                -gap,
+                log_d[:, 0] - off[0],
+                log_d[:, 1] - off[1],
+                log_d[:, 2] - off[2 + best],
+            ],
+            axis=1,
+        )
 
     def get_state(self) -> dict[str, np.ndarray]:
         out = {f"forest/{k}": v for k, v in self.forest.get_state().items()}
@@ -114,21 +148,33 @@ class ForestCues:
         return out
 
     @classmethod
-    def from_state(cls, arrays: dict[str, np.ndarray], n_classes: int, n_features: int) -> ForestCues:
+    def from_state(
+        cls, arrays: dict[str, np.ndarray], n_classes: int, n_features: int
+    ) -> ForestCues:
         def part(prefix: str) -> dict[str, np.ndarray]:
-            return {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)}
+            return {k[len(prefix) :]: v for k, v in arrays.items() if k.startswith(prefix)}
 
         scaler = RobustInputScaler()
         scaler.set_state(part("scaler/"))
         forest = FlatForest.from_state(part("forest/"), n_classes, n_features)
         weights, reference = arrays["weights"], arrays["reference"]
-        if weights.shape != (n_features,) or reference.ndim != 2 or reference.shape[1] != n_features:
+        if (
+            weights.shape != (n_features,)
+            or reference.ndim != 2
+            or reference.shape[1] != n_features
+        ):
             raise ValueError("novelty reference samples do not match the inputs")
         basis = arrays.get("basis")  # absent: exact distances (and bundles made before it)
         if basis is not None and (basis.ndim != 2 or basis.shape[0] != n_features):
             raise ValueError("novelty distance basis does not match the inputs")
-        return cls(scaler, forest, weights, ReferenceDistances(reference, basis),
-                   arrays["reference_labels"], arrays["offsets"])
+        return cls(
+            scaler,
+            forest,
+            weights,
+            ReferenceDistances(reference, basis),
+            arrays["reference_labels"],
+            arrays["offsets"],
+        )
 
 
 class ReferenceDistances:
@@ -151,8 +197,9 @@ class ReferenceDistances:
     def __init__(self, reference: np.ndarray, basis: np.ndarray | None = None) -> None:
         self.reference = np.asarray(reference, np.float32)
         self.basis = None if basis is None else np.ascontiguousarray(basis, np.float32)
-        if self.reference.ndim != 2 or (self.basis is not None and
-                                        self.basis.shape[0] != self.reference.shape[1]):
+        if self.reference.ndim != 2 or (
+            self.basis is not None and self.basis.shape[0] != self.reference.shape[1]
+        ):
             raise ValueError("novelty reference samples and distance basis do not match")
         self.center = self.reference.mean(axis=0, dtype=np.float64).astype(np.float32)
         self._ref, self._ref_res = self._split(self.reference)
@@ -183,9 +230,16 @@ class ReferenceDistances:
         p, res = self._split(q)
         g = p @ self._ref.T
         no_res = np.zeros(0, np.float32)
-        return _nearest(g, (p**2).sum(axis=1), self._ref_sq, no_res if res is None else res,
-                        no_res if self._ref_res is None else self._ref_res,
-                        np.asarray(labels, np.int64), np.asarray(top, np.int64), _KNN)
+        return _nearest(
+            g,
+            (p**2).sum(axis=1),
+            self._ref_sq,
+            no_res if res is None else res,
+            no_res if self._ref_res is None else self._ref_res,
+            np.asarray(labels, np.int64),
+            np.asarray(top, np.int64),
+            _KNN,
+        )
 
     def to_reference(self, q: np.ndarray) -> np.ndarray:
         """(N, n_reference) squared distances, floored at 0."""
@@ -237,8 +291,13 @@ def _knn(d2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return part.mean(axis=1), part.min(axis=1)
 
 
-def _offsets(distances: ReferenceDistances, y: np.ndarray, trials: np.ndarray, n_classes: int,
-             block: int = 1024) -> np.ndarray:
+def _offsets(
+    distances: ReferenceDistances,
+    y: np.ndarray,
+    trials: np.ndarray,
+    n_classes: int,
+    block: int = 1024,
+) -> np.ndarray:
     """Typical log distances *within* the reference set, each sample compared with the samples
     of other trials only: median log knn3 and knn1 over all samples, and per class the median
     log distance to the nearest other trial of the same class (the class's trial spacing).
@@ -276,10 +335,27 @@ class KnownModel:
             raise ValueError(f"the novelty score needs {len(CUES)} cue weights")
 
     @classmethod
-    def fit(cls, dataset: TactileDataset, weights: np.ndarray, n_estimators: int, max_features,
-            seed: int, n_jobs: int | None, components: int = 0) -> KnownModel:
-        cues = ForestCues.fit(flatten(dataset.samples), dataset.labels, dataset.trials, dataset.n_classes,
-                              n_estimators, max_features, seed, n_jobs, components)
+    def fit(
+        cls,
+        dataset: TactileDataset,
+        weights: np.ndarray,
+        n_estimators: int,
+        max_features,
+        seed: int,
+        n_jobs: int | None,
+        components: int = 0,
+    ) -> KnownModel:
+        cues = ForestCues.fit(
+            flatten(dataset.samples),
+            dataset.labels,
+            dataset.trials,
+            dataset.n_classes,
+            n_estimators,
+            max_features,
+            seed,
+            n_jobs,
+            components,
+        )
         return cls(cues, weights)
 
     def scores(self, x_flat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -292,8 +368,9 @@ class KnownModel:
         return self.cues_model.get_state()
 
     @classmethod
-    def from_state(cls, arrays: dict[str, np.ndarray], weights: np.ndarray, n_classes: int,
-                   n_features: int) -> KnownModel:
+    def from_state(
+        cls, arrays: dict[str, np.ndarray], weights: np.ndarray, n_classes: int, n_features: int
+    ) -> KnownModel:
         return cls(ForestCues.from_state(arrays, n_classes, n_features), weights)
 
 

@@ -28,8 +28,16 @@ N_NOVEL = 6
 @pytest.fixture(scope="module")
 def protocol_results():
     ds = simulate_dataset(n_objects=30, trials_per_object=6, seed=0)
-    return evaluate(ds, BASELINES, n_novel=N_NOVEL, n_splits=3, seed=0, test_trials=1,
-                    method_params=FAST, progress=False)
+    return evaluate(
+        ds,
+        BASELINES,
+        n_novel=N_NOVEL,
+        n_splits=3,
+        seed=0,
+        test_trials=1,
+        method_params=FAST,
+        progress=False,
+    )
 
 
 @pytest.mark.parametrize("method", BASELINES)
@@ -142,14 +150,24 @@ def test_eszsl_closed_form(n, d):
     sig = rng.integers(0, 2, (4, 3)).astype(float)
     y = -np.ones((n, 4))
     y[np.arange(n), labels] = 1
-    direct = (np.linalg.inv(x.T @ x + 2.0 * np.eye(d)) @ x.T @ y @ sig
-              @ np.linalg.inv(sig.T @ sig + 0.5 * np.eye(3)))
+    direct = (
+        np.linalg.inv(x.T @ x + 2.0 * np.eye(d))
+        @ x.T
+        @ y
+        @ sig
+        @ np.linalg.inv(sig.T @ sig + 0.5 * np.eye(3))
+    )
     assert np.allclose(eszsl_fit(x, labels, sig, 2.0, 0.5), direct)
 
 
 def test_eszsl_hyper_parameters_come_from_the_grid_on_validation_objects(small):
-    model = ESZSLRecognizer(n_estimators=20, gammas=(1.0, 100.0), lambdas=(0.1, 10.0),
-                            signature_modes=("raw", "centered"), val_folds=2)
+    model = ESZSLRecognizer(
+        n_estimators=20,
+        gammas=(1.0, 100.0),
+        lambdas=(0.1, 10.0),
+        signature_modes=("raw", "centered"),
+        val_folds=2,
+    )
     model.fit(small)
     assert model.gamma_ in (1.0, 100.0) and model.lambda_ in (0.1, 10.0)
     assert model.signature_ in ("raw", "centered")
@@ -165,4 +183,6 @@ def test_signature_normalisations():
     assert np.array_equal(signatures(a, "raw", mean), a)
     assert np.allclose(signatures(a, "centered", mean), [[0.5, -0.5, 0], [-0.5, 0.5, 0]])
     assert np.allclose(np.linalg.norm(signatures(a, "l2", mean), axis=1), 1)
-    assert np.allclose(signatures(a, "centered_l2", mean), [[2**-0.5, -(2**-0.5), 0], [-(2**-0.5), 2**-0.5, 0]])
+    assert np.allclose(
+        signatures(a, "centered_l2", mean), [[2**-0.5, -(2**-0.5), 0], [-(2**-0.5), 2**-0.5, 0]]
+    )

@@ -13,14 +13,27 @@ from app.evaluation.report import PAPER_12, markdown, write_report, write_report
 
 @pytest.fixture()
 def results(oracle):
-    return evaluate(oracle, ["oracle"], n_novel=6, n_splits=2, seed=0, test_trials=1,
-                    progress=False, dataset_label="simulated:16")
+    return evaluate(
+        oracle,
+        ["oracle"],
+        n_novel=6,
+        n_splits=2,
+        seed=0,
+        test_trials=1,
+        progress=False,
+        dataset_label="simulated:16",
+    )
 
 
 def test_report_files(results, tmp_path):
     files = write_report(results, tmp_path / "rep")
     names = sorted(p.name for p in files)
-    assert names == ["fig7_novelty_oracle.png", "fig8_confusion_oracle.png", "fig8d_jaccard.png", "report.md"]
+    assert names == [
+        "fig7_novelty_oracle.png",
+        "fig8_confusion_oracle.png",
+        "fig8d_jaccard.png",
+        "report.md",
+    ]
     for p in files:
         data = p.read_bytes()
         assert len(data) > 1000, p

@@ -16,7 +16,9 @@ from app.framework.paper import PaperRecognizer
 
 
 def test_wrong_sample_shape(fitted):
-    with pytest.raises(InputShapeError, match=r"expected samples of shape \(N, 32, 30\), got \(2, 30, 32\)"):
+    with pytest.raises(
+        InputShapeError, match=r"expected samples of shape \(N, 32, 30\), got \(2, 30, 32\)"
+    ):
         fitted.recognize(np.zeros((2, 30, 32)))
 
 
@@ -73,7 +75,10 @@ def test_all_zero_attribute_vector(fitted):
 
 def test_vector_equal_to_an_existing_class(fitted):
     existing = fitted.registry.known_attributes[4]
-    with pytest.raises(DuplicateClassError, match=f"same attribute vector as existing class '{fitted.registry.known_names[4]}'"):
+    with pytest.raises(
+        DuplicateClassError,
+        match=f"same attribute vector as existing class '{fitted.registry.known_names[4]}'",
+    ):
         fitted.add_novel_classes(["copy"], [existing])
     assert fitted.registry.novel_names == []  # nothing half-added
 
@@ -118,7 +123,9 @@ def test_bad_hyper_parameter():
 
 def test_empty_dataset_is_rejected():
     with pytest.raises(DatasetError, match="no samples"):
-        TactileDataset(np.zeros((0, 4)), np.zeros(0), np.zeros(0), np.zeros((1, 2)), ("a", "b"), ("c",))
+        TactileDataset(
+            np.zeros((0, 4)), np.zeros(0), np.zeros(0), np.zeros((1, 2)), ("a", "b"), ("c",)
+        )
 
 
 def test_evaluation_may_allow_a_novel_vector_equal_to_a_known_one(fitted, sim_split):

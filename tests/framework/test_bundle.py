@@ -12,7 +12,9 @@ from app.framework.errors import BundleError
 
 
 def test_round_trip_gives_identical_predictions(with_novel, sim_split, tmp_path):
-    model = with_novel.add_one_shot(sim_split["novel"].class_names[0], sim_split["novel"].samples[:1])
+    model = with_novel.add_one_shot(
+        sim_split["novel"].class_names[0], sim_split["novel"].samples[:1]
+    )
     path = tmp_path / "model.bundle"
     digest = bundle.save(model, path)
     assert len(digest) == 64
@@ -26,7 +28,9 @@ def test_round_trip_gives_identical_predictions(with_novel, sim_split, tmp_path)
     assert set(loaded.registry.novel_samples) == {sim_split["novel"].class_names[0]}
     assert loaded.metrics["n_known_classes"] == 30
     # a loaded model keeps learning
-    again = loaded.add_one_shot(sim_split["novel"].class_names[1], sim_split["novel"].samples[10:11])
+    again = loaded.add_one_shot(
+        sim_split["novel"].class_names[1], sim_split["novel"].samples[10:11]
+    )
     assert len(again.registry.novel_samples) == 2
 
 
@@ -139,15 +143,18 @@ def test_a_split_bundle_round_trips_through_its_parts(fitted):
 
 
 def test_a_joined_split_bundle_is_self_contained_and_keeps_its_manifest(with_novel, sim_split):
-    model = with_novel.add_one_shot(sim_split["novel"].class_names[0], sim_split["novel"].samples[:1])
+    model = with_novel.add_one_shot(
+        sim_split["novel"].class_names[0], sim_split["novel"].samples[:1]
+    )
     head, parts = bundle.split(model, min_bytes=1024)
     joined = bundle.join(head, part=lambda sha: bundle.decode_part(parts[sha]))
     loaded = bundle.from_bytes(joined)  # no part loader: everything is in the file
     x = np.concatenate([sim_split["test"].samples[:8], sim_split["novel"].samples[:8]])
     ours, theirs = loaded.recognize_batch(x).records(), model.recognize_batch(x).records()
     assert [r["class_name"] for r in ours] == [r["class_name"] for r in theirs]
-    np.testing.assert_allclose([r["novelty_score"] for r in ours], [r["novelty_score"] for r in theirs],
-                               rtol=1e-6)
+    np.testing.assert_allclose(
+        [r["novelty_score"] for r in ours], [r["novelty_score"] for r in theirs], rtol=1e-6
+    )
     assert set(loaded.registry.novel_samples) == {sim_split["novel"].class_names[0]}
 
     def manifest(data):
@@ -190,7 +197,9 @@ def test_a_part_that_is_no_array_is_a_clear_error():
 def test_the_part_encoder_does_not_encode_unchanged_arrays_again(with_novel, sim_split):
     encoder = bundle.PartEncoder(min_bytes=1024)
     _, before = encoder.split(with_novel)
-    grown = with_novel.add_one_shot(sim_split["novel"].class_names[0], sim_split["novel"].samples[:1])
+    grown = with_novel.add_one_shot(
+        sim_split["novel"].class_names[0], sim_split["novel"].samples[:1]
+    )
     _, after = encoder.split(grown)
     shared = before.keys() & after.keys()
     assert shared  # the encoder, the known-class classifier, ... are unchanged

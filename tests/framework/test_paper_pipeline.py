@@ -83,7 +83,9 @@ def test_training_is_deterministic_under_a_seed(sim_split):
     params = dict(seed=5, encoder_epochs=3, alg1_epochs=5, alg2_epochs=2)
     a = PaperRecognizer(**params).fit(small)
     b = PaperRecognizer(**params).fit(small)
-    np.testing.assert_allclose(a.known_proba(small.samples[:5]), b.known_proba(small.samples[:5]), rtol=1e-5)
+    np.testing.assert_allclose(
+        a.known_proba(small.samples[:5]), b.known_proba(small.samples[:5]), rtol=1e-5
+    )
 
 
 def test_feature_space_gmm_variant_round_trips(sim_split):
@@ -95,4 +97,6 @@ def test_feature_space_gmm_variant_round_trips(sim_split):
     assert model.novelty_space == "features"
     loaded = bundle.from_bytes(bundle.to_bytes(model))
     assert loaded.method == "paper-fgmm" and loaded.novelty_space == "features"
-    np.testing.assert_allclose(loaded.novelty_score(small.samples[:4]), model.novelty_score(small.samples[:4]), rtol=1e-6)
+    np.testing.assert_allclose(
+        loaded.novelty_score(small.samples[:4]), model.novelty_score(small.samples[:4]), rtol=1e-6
+    )

@@ -31,15 +31,27 @@ from app.methods.attributes import (
 )
 from app.methods.best import BestRecognizer
 
-FAST = {"n_estimators": 40, "tuning_rounds": 2, "distance_components": 8}  # 8 < rank: subspace distances
+FAST = {
+    "n_estimators": 40,
+    "tuning_rounds": 2,
+    "distance_components": 8,
+}  # 8 < rank: subspace distances
 N_NOVEL = 6
 
 
 @pytest.fixture(scope="module")
 def protocol_results():
     ds = simulate_dataset(n_objects=30, trials_per_object=6, seed=0)
-    return evaluate(ds, ["best"], n_novel=N_NOVEL, n_splits=2, seed=0, test_trials=1,
-                    method_params={"best": FAST}, progress=False)
+    return evaluate(
+        ds,
+        ["best"],
+        n_novel=N_NOVEL,
+        n_splits=2,
+        seed=0,
+        test_trials=1,
+        method_params={"best": FAST},
+        progress=False,
+    )
 
 
 def test_full_protocol_beats_chance_on_novel_classes(protocol_results):
@@ -157,7 +169,9 @@ def test_corrupt_bundle_is_refused(enrolled):
     fresh = BestRecognizer()
     fresh.input_shape, fresh.registry = model.input_shape, model.registry
     with pytest.raises((KeyError, ValueError)):
-        fresh.set_state(meta, {k: v for k, v in arrays.items() if not k.startswith("known/forest/")})
+        fresh.set_state(
+            meta, {k: v for k, v in arrays.items() if not k.startswith("known/forest/")}
+        )
 
 
 def test_bad_input_raises_framework_errors(fitted, enrolled, data):
@@ -192,12 +206,24 @@ def test_bad_input_raises_framework_errors(fitted, enrolled, data):
         BestRecognizer().known_proba(x)
 
 
-@pytest.mark.parametrize("params", [
-    {"n_estimators": 0}, {"attribute_C": -1.0}, {"dap_clip": 0.7}, {"shot_temperature": 0},
-    {"max_features": "all"}, {"tuning_rounds": 0}, {"novelty_val_fraction": 1.5}, {"knn_weight": -1},
-    {"distance_components": -1}, {"distance_components": 2.5}, {"sae_lambda": -1},
-    {"sae_temperature": float("nan")}, {"sae_lambda": True},
-])
+@pytest.mark.parametrize(
+    "params",
+    [
+        {"n_estimators": 0},
+        {"attribute_C": -1.0},
+        {"dap_clip": 0.7},
+        {"shot_temperature": 0},
+        {"max_features": "all"},
+        {"tuning_rounds": 0},
+        {"novelty_val_fraction": 1.5},
+        {"knn_weight": -1},
+        {"distance_components": -1},
+        {"distance_components": 2.5},
+        {"sae_lambda": -1},
+        {"sae_temperature": float("nan")},
+        {"sae_lambda": True},
+    ],
+)
 def test_bad_hyper_parameters(params):
     with pytest.raises(FrameworkError):
         BestRecognizer(**params)
@@ -205,8 +231,11 @@ def test_bad_hyper_parameters(params):
 
 def test_datasets_it_cannot_learn_from_are_refused():
     one_trial = TactileDataset(
-        samples=np.random.default_rng(0).normal(size=(6, 4)), labels=np.arange(6),
-        trials=np.arange(6), class_attributes=np.eye(6, 3), attribute_names=("a", "b", "c"),
+        samples=np.random.default_rng(0).normal(size=(6, 4)),
+        labels=np.arange(6),
+        trials=np.arange(6),
+        class_attributes=np.eye(6, 3),
+        attribute_names=("a", "b", "c"),
         class_names=tuple("uvwxyz"),
     )
     with pytest.raises(DatasetError, match="trials"):
@@ -248,11 +277,20 @@ def test_the_autoencoder_adds_to_dap_and_old_bundles_keep_dap_alone(enrolled, da
     ds, *_ = data
     model, names = enrolled
     x = ds.samples
-    assert model.sae_ is not None and model.sae_.shape == (ds.n_attributes, int(np.prod(ds.input_shape)))
+    assert model.sae_ is not None and model.sae_.shape == (
+        ds.n_attributes,
+        int(np.prod(ds.input_shape)),
+    )
     z = model.known_.cues_model.scaled(x.reshape(len(x), -1))
-    dap = dap_log_scores(model.attributes_.predict_proba(z), model.registry.novel_attributes,
-                         model.prior_, model.dap_clip)
-    both = dap + model.sae_temperature * cosine_scores(z, model.sae_, model.registry.novel_attributes)
+    dap = dap_log_scores(
+        model.attributes_.predict_proba(z),
+        model.registry.novel_attributes,
+        model.prior_,
+        model.dap_clip,
+    )
+    both = dap + model.sae_temperature * cosine_scores(
+        z, model.sae_, model.registry.novel_attributes
+    )
     expected = np.exp(both - both.max(1, keepdims=True))
     assert np.allclose(model.novel_proba(x), expected / expected.sum(1, keepdims=True), atol=1e-6)
 
@@ -284,7 +322,9 @@ def test_reference_distances_exact_and_in_a_principal_subspace():
 
     rng = np.random.default_rng(0)
     # 3 strong directions plus small noise in 40 dimensions
-    ref = (rng.normal(size=(60, 3)) * 10) @ rng.normal(size=(3, 40)) + 0.1 * rng.normal(size=(60, 40))
+    ref = (rng.normal(size=(60, 3)) * 10) @ rng.normal(size=(3, 40)) + 0.1 * rng.normal(
+        size=(60, 40)
+    )
     q = np.r_[ref[:5] + 0.05, rng.normal(size=(5, 40)) * 3]  # near references, then off-subspace
     truth = ((q[:, None, :] - ref[None, :, :]) ** 2).sum(axis=2)
     exact = ReferenceDistances.fit(ref, 0)
@@ -305,8 +345,11 @@ def test_reference_distances_exact_and_in_a_principal_subspace():
     for dist in (exact, sub):
         full = dist.to_reference(q)
         near = dist.nearest(q, labels, top)
-        expected = np.c_[np.sort(full, axis=1)[:, :3].mean(axis=1), full.min(axis=1),
-                         [full[i, labels == top[i]].min() for i in range(len(q))]]
+        expected = np.c_[
+            np.sort(full, axis=1)[:, :3].mean(axis=1),
+            full.min(axis=1),
+            [full[i, labels == top[i]].min() for i in range(len(q))],
+        ]
         np.testing.assert_allclose(near, expected, rtol=1e-4, atol=1e-3)
     with pytest.raises(ValueError, match="basis"):
         ReferenceDistances(ref, np.zeros((7, 3)))
