@@ -28,14 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from app.api.routes.describe import suggestion  # the service's rule
+from app.data.phac2 import load_phac2
+from app.evaluation.protocol import make_recognizer
+from app.evaluation.splits import make_zsl_splits
+from app.framework.registry import DEFAULT_METHOD
 
-from dev_splits import add_split_arguments, splits  # noqa: E402
-
-from app.api.routes.describe import suggestion  # noqa: E402  (the service's rule)
-from app.data.phac2 import load_phac2  # noqa: E402
-from app.evaluation.protocol import make_recognizer  # noqa: E402
-from app.framework.registry import DEFAULT_METHOD  # noqa: E402
+DEFAULT_DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "phac2"
 
 
 def agreement(suggested: np.ndarray, truth: np.ndarray) -> dict[str, float]:
@@ -50,8 +49,15 @@ def agreement(suggested: np.ndarray, truth: np.ndarray) -> dict[str, float]:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_split_arguments(ap)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the PHAC-2 folder")
+    ap.add_argument(
+        "--seeds", default="1,2", help="comma-separated split seeds (0: the reported splits)"
+    )
+    ap.add_argument("--novel", type=int, default=6, help="novel objects per split")
+    ap.add_argument("--splits", type=int, default=7, help="splits per seed")
     ap.add_argument("--out", type=Path, default=Path("docs/results/describe"))
     args = ap.parse_args()
     from sklearn.metrics import roc_auc_score
@@ -60,8 +66,14 @@ def main() -> int:
     names = list(dataset.attribute_names)
     probas, truths, object_probas, object_truths = [], [], [], []
     started = time.perf_counter()
-    for seed, split in splits(dataset, args):
-        model = make_recognizer(DEFAULT_METHOD, None, seed).fit(split.train_dataset(dataset))  # as evaluate does
+    every_split = [
+        (int(seed), split)
+        for seed in args.seeds.split(",")
+        for split in make_zsl_splits(dataset, args.novel, args.splits, int(seed))
+    ]
+    for seed, split in every_split:
+        # fitted as evaluate fits it
+        model = make_recognizer(DEFAULT_METHOD, None, seed).fit(split.train_dataset(dataset))
         idx = split.novel_test_idx
         proba = model.attribute_proba(dataset.samples[idx])
         truth = dataset.class_attributes[dataset.labels[idx]] > 0.5
@@ -71,22 +83,34 @@ def main() -> int:
             rows = dataset.labels[idx] == cls
             object_probas.append(proba[rows].mean(axis=0))
             object_truths.append(dataset.class_attributes[cls] > 0.5)
-        print(f"seed {seed} split {split.index}: {len(idx)} touches of {len(split.novel_classes)} "
-              f"novel objects described ({time.perf_counter() - started:.0f} s)", file=sys.stderr)
+        print(
+            f"seed {seed} split {split.index}: {len(idx)} touches of {len(split.novel_classes)} "
+            f"novel objects described ({time.perf_counter() - started:.0f} s)",
+            file=sys.stderr,
+        )
     proba, truth = np.concatenate(probas), np.concatenate(truths)
-    auc = {n: round(float(roc_auc_score(truth[:, j], proba[:, j])), 3)
-           for j, n in enumerate(names) if 0 < truth[:, j].mean() < 1}
+    auc = {
+        n: round(float(roc_auc_score(truth[:, j], proba[:, j])), 3)
+        for j, n in enumerate(names)
+        if 0 < truth[:, j].mean() < 1
+    }
     report = {
         "command": " ".join(["bench/describe_quality.py", *sys.argv[1:]]),
-        "seeds": args.seeds, "novel": args.novel, "splits": args.splits,
-        "touches": int(len(proba)), "objects": len(object_probas),
+        "seeds": args.seeds,
+        "novel": args.novel,
+        "splits": args.splits,
+        "touches": int(len(proba)),
+        "objects": len(object_probas),
         "mean_attribute_auc": round(float(np.mean(list(auc.values()))), 3),
         "attribute_auc": dict(sorted(auc.items(), key=lambda kv: -kv[1])),
         "per_touch": agreement(suggestion(proba), truth),
-        "per_object_from_its_touches": agreement(suggestion(np.stack(object_probas)), np.stack(object_truths)),
+        "per_object_from_its_touches": agreement(
+            suggestion(np.stack(object_probas)), np.stack(object_truths)
+        ),
         # the same rule on the attributes' frequencies alone, the same for every touch
         "per_touch_if_always_the_commonest": agreement(
-            np.broadcast_to(suggestion(truth.mean(axis=0, keepdims=True)), truth.shape), truth),
+            np.broadcast_to(suggestion(truth.mean(axis=0, keepdims=True)), truth.shape), truth
+        ),
     }
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "describe.json").write_text(json.dumps(report, indent=2) + "\n")

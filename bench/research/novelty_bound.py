@@ -8,25 +8,20 @@ method's own validation-tuned threshold gives, on development split seeds (never
 reported seed 0). If the oracle mean is below the target, the score, not the tuning,
 is what limits the figure.
 
-    .venv/bin/python bench/novelty_bound.py --seeds 1,2 --novel 6
-    .venv/bin/python bench/novelty_bound.py --seeds 1,2 --novel 12
+    .venv/bin/python bench/research/novelty_bound.py --seeds 1,2 --novel 6
+    .venv/bin/python bench/research/novelty_bound.py --seeds 1,2 --novel 12
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 import numpy as np
+from dev_splits import add_split_arguments, splits, tiny
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from dev_splits import add_split_arguments, splits  # noqa: E402
-
-from app.data.phac2 import load_phac2  # noqa: E402
-from app.framework.registry import DEFAULT_METHOD, make_method  # noqa: E402
+from app.data.phac2 import load_phac2
+from app.framework.registry import DEFAULT_METHOD, make_method
 
 
 def oracle_balance(known: np.ndarray, novel: np.ndarray) -> float:
@@ -38,10 +33,12 @@ def oracle_balance(known: np.ndarray, novel: np.ndarray) -> float:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--method", default=DEFAULT_METHOD)
     add_split_arguments(ap)
-    args = ap.parse_args()
+    args = tiny(ap.parse_args())
 
     dataset = load_phac2(args.data)
     rows = []
@@ -52,9 +49,16 @@ def main() -> int:
         known = model.novelty_score(dataset.samples[split.known_test_idx])
         novel = model.novelty_score(dataset.samples[split.novel_test_idx])
         threshold = model.novelty_threshold
-        row = (np.mean(known <= threshold), np.mean(novel > threshold), oracle_balance(known, novel))
+        row = (
+            np.mean(known <= threshold),
+            np.mean(novel > threshold),
+            oracle_balance(known, novel),
+        )
         rows.append(row)
-        print(f"{seed:4d} {split.index + 1:5d}  {row[0]:.3f}  {row[1]:.3f}     {row[2]:.3f}", flush=True)
+        print(
+            f"{seed:4d} {split.index + 1:5d}  {row[0]:.3f}  {row[1]:.3f}     {row[2]:.3f}",
+            flush=True,
+        )
     mean = np.mean(rows, axis=0)
     print(f"mean        {mean[0]:.3f}  {mean[1]:.3f}     {mean[2]:.3f}")
     return 0

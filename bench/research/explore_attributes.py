@@ -53,17 +53,17 @@ chosen on) and on the novel objects' test trials pooled over all splits (plain v
 ``sel``), and which subsets were chosen how often.
 
 Rules: seeds 1 and 2 only (seed 0 is the reported one); every choice is made on
-known objects only. Splits as in ``bench/explore_zsl.py`` (``make_zsl_splits``);
+known objects only. Splits as in ``bench/research/explore_zsl.py`` (``make_zsl_splits``);
 ``--verify`` also fits ``best`` (``make_recognizer``) on each seed's first split
 and checks that ``dap`` here gives the same novel-class posterior.
 
 ``--cache DIR`` keeps every combo's predictions per split, so a rerun (another
 space sharing the all-features combos, a new selection rule) refits nothing it has.
 
-    .venv/bin/python bench/explore_attributes.py --space ep --Cs 0.1 --seeds 1,2 --novel 6 --cache /tmp/ea/cache --verify
-    .venv/bin/python bench/explore_attributes.py --space all --Cs 0.01,0.03,0.1,0.3,1 --seeds 1,2 --novel 6 --cache /tmp/ea/cache
-    .venv/bin/python bench/explore_attributes.py --space ep --Cs 0.03,0.1,0.3 --seeds 1,2 --novel 6 --cache /tmp/ea/cache
-    .venv/bin/python bench/explore_attributes.py --space group --Cs 0.1 --seeds 1,2 --novel 6 --cache /tmp/ea/cache
+    .venv/bin/python bench/research/explore_attributes.py --space ep --Cs 0.1 --seeds 1,2 --novel 6 --cache /tmp/ea/cache --verify
+    .venv/bin/python bench/research/explore_attributes.py --space all --Cs 0.01,0.03,0.1,0.3,1 --seeds 1,2 --novel 6 --cache /tmp/ea/cache
+    .venv/bin/python bench/research/explore_attributes.py --space ep --Cs 0.03,0.1,0.3 --seeds 1,2 --novel 6 --cache /tmp/ea/cache
+    .venv/bin/python bench/research/explore_attributes.py --space group --Cs 0.1 --seeds 1,2 --novel 6 --cache /tmp/ea/cache
 
 Results (session 3, 2-core machine; 14 splits of seeds 1-2, 6 novel; zsl mean,
 difference to plain DAP's 0.446 +- its standard error over the 14 paired splits;
@@ -108,14 +108,10 @@ from collections import Counter  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
+from dev_splits import add_split_arguments, splits, tiny  # noqa: E402
 from sklearn.linear_model import LogisticRegression  # noqa: E402
 from sklearn.metrics import roc_auc_score  # noqa: E402
 from sklearn.model_selection import GroupKFold  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from dev_splits import add_split_arguments, splits  # noqa: E402
 
 from app.data.phac2 import load_phac2  # noqa: E402
 from app.framework.scaling import RobustInputScaler  # noqa: E402
@@ -124,16 +120,34 @@ from app.methods.known import flatten  # noqa: E402
 
 N_EP, N_FEAT = 4, 47
 EP_NAMES = ("squeeze", "hold", "slide", "movedown")
-GROUPS = {"pdc": range(0, 6), "pac": range(6, 16), "thermal": range(16, 20),
-          "gripper": range(20, 23), "electrode": range(23, 47)}
+GROUPS = {
+    "pdc": range(0, 6),
+    "pac": range(6, 16),
+    "thermal": range(16, 20),
+    "gripper": range(20, 23),
+    "electrode": range(23, 47),
+}
 # Domain-knowledge EP sets, fixed before any run (0 squeeze, 1 hold, 2 slide, 3 move-down).
 PRIOR_EPS = {
-    "compressible": (0, 1), "hard": (0, 1), "soft": (0, 1), "solid": (0, 1), "springy": (0, 1),
-    "squishy": (0, 1), "thick": (0, 1),
-    "cool": (1,), "metallic": (1,),
-    "bumpy": (2, 3), "fuzzy": (2, 3), "hairy": (2, 3), "rough": (2, 3), "scratchy": (2, 3),
-    "slippery": (2, 3), "smooth": (2, 3), "textured": (2, 3),
-    "absorbent": (1, 2), "porous": (1, 2),
+    "compressible": (0, 1),
+    "hard": (0, 1),
+    "soft": (0, 1),
+    "solid": (0, 1),
+    "springy": (0, 1),
+    "squishy": (0, 1),
+    "thick": (0, 1),
+    "cool": (1,),
+    "metallic": (1,),
+    "bumpy": (2, 3),
+    "fuzzy": (2, 3),
+    "hairy": (2, 3),
+    "rough": (2, 3),
+    "scratchy": (2, 3),
+    "slippery": (2, 3),
+    "smooth": (2, 3),
+    "textured": (2, 3),
+    "absorbent": (1, 2),
+    "porous": (1, 2),
 }
 CLIP = 0.02
 BASE_C = 0.1
@@ -192,8 +206,12 @@ def pick(preds: np.ndarray, choice: np.ndarray) -> np.ndarray:
 
 
 def auc_cols(p: np.ndarray, t: np.ndarray) -> np.ndarray:
-    return np.array([roc_auc_score(t[:, m], p[:, m]) if 0 < t[:, m].sum() < len(t) else np.nan
-                     for m in range(t.shape[1])])
+    return np.array(
+        [
+            roc_auc_score(t[:, m], p[:, m]) if 0 < t[:, m].sum() < len(t) else np.nan
+            for m in range(t.shape[1])
+        ]
+    )
 
 
 def zsl_acc(p: np.ndarray, vectors: np.ndarray, prior: np.ndarray, truth: np.ndarray) -> float:
@@ -262,14 +280,24 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     add_split_arguments(p)
     p.add_argument("--space", default="ep", choices=("ep", "group", "all"))
-    p.add_argument("--Cs", default="0.1", help="comma-separated C values searched with every subset")
+    p.add_argument(
+        "--Cs", default="0.1", help="comma-separated C values searched with every subset"
+    )
     p.add_argument("--folds", type=int, default=5, help="GroupKFold folds over the known objects")
-    p.add_argument("--margin", type=float, default=0.05, help="relative log-loss gain a combo needs")
+    p.add_argument(
+        "--margin", type=float, default=0.05, help="relative log-loss gain a combo needs"
+    )
     p.add_argument("--ens", default="3,5", help="ensemble sizes k")
-    p.add_argument("--tstat", default="1,2", help="paired t over known objects a combo needs (sel_t)")
-    p.add_argument("--cache", default="", help="folder for out-of-object and test predictions (reruns reuse them)")
+    p.add_argument(
+        "--tstat", default="1,2", help="paired t over known objects a combo needs (sel_t)"
+    )
+    p.add_argument(
+        "--cache",
+        default="",
+        help="folder for out-of-object and test predictions (reruns reuse them)",
+    )
     p.add_argument("--verify", action="store_true", help="check dap against a fitted best (slow)")
-    args = p.parse_args()
+    args = tiny(p.parse_args(), folds=2)
     warnings.filterwarnings("ignore", category=UserWarning)
     Cs = sorted(float(c) for c in args.Cs.split(","))
     if BASE_C not in Cs:
@@ -305,20 +333,33 @@ def main() -> int:
         p_dap = LinearAttributeModel.fit(z, attrs[y], BASE_C).predict_proba(zn)
         if args.verify and split.index == 0:
             from app.evaluation.protocol import make_recognizer
+
             best = make_recognizer("best", {"sae_lambda": 0}, 0).fit(train)  # its DAP part alone
-            p_best = best.add_novel_classes(list(split.novel_names), vectors,
-                                            allow_known_vectors=True).novel_proba(xn)
+            p_best = best.add_novel_classes(
+                list(split.novel_names), vectors, allow_known_vectors=True
+            ).novel_proba(xn)
             p_here = softmax(dap_log_scores(p_dap, vectors, prior, CLIP))
-            print(json.dumps({"verify_seed": seed, "max_abs_diff": float(np.abs(p_best - p_here).max()),
-                              "same_argmax": bool((p_best.argmax(1) == p_here.argmax(1)).all())}),
-                  file=sys.stderr, flush=True)
+            print(
+                json.dumps(
+                    {
+                        "verify_seed": seed,
+                        "max_abs_diff": float(np.abs(p_best - p_here).max()),
+                        "same_argmax": bool((p_best.argmax(1) == p_here.argmax(1)).all()),
+                    }
+                ),
+                file=sys.stderr,
+                flush=True,
+            )
 
         folds = list(GroupKFold(n_splits=args.folds).split(z, targets, groups=y))
         oof = np.empty((len(combos), len(z), M))
         test = np.empty((len(combos), len(zn), M))
         cache_file, cached = None, {}
         if args.cache:
-            cache_file = Path(args.cache) / f"novel{args.novel}-of{args.splits}-seed{seed}-split{split.index}-folds{args.folds}.npz"
+            cache_file = (
+                Path(args.cache)
+                / f"novel{args.novel}-of{args.splits}-seed{seed}-split{split.index}-folds{args.folds}.npz"
+            )
             if cache_file.exists():
                 cached = dict(np.load(cache_file))
         for k, (s, C) in enumerate(combos):
@@ -328,7 +369,9 @@ def main() -> int:
                 oof[k], test[k] = cached[f"oof/{key}"], cached[f"test/{key}"]
                 continue
             for fit_idx, val_idx in folds:
-                oof[k][val_idx] = fit_predict(z[fit_idx][:, cols], targets[fit_idx], z[val_idx][:, cols], C)
+                oof[k][val_idx] = fit_predict(
+                    z[fit_idx][:, cols], targets[fit_idx], z[val_idx][:, cols], C
+                )
             test[k] = fit_predict(z[:, cols], targets, zn[:, cols], C)
             cached[f"oof/{key}"], cached[f"test/{key}"] = oof[k].copy(), test[k].copy()
         if cache_file is not None:
@@ -338,8 +381,14 @@ def main() -> int:
         loss = np.stack([log_loss_cols(oof[k], targets) for k in range(len(combos))])  # (K, M)
         # per-object mean log-loss (K, objects, M): paired comparisons over known objects
         objects = np.unique(y)
-        obj_loss = np.stack([np.stack([sample_log_loss(oof[k][y == o], targets[y == o]).mean(axis=0)
-                                       for o in objects]) for k in range(len(combos))])
+        obj_loss = np.stack(
+            [
+                np.stack(
+                    [sample_log_loss(oof[k][y == o], targets[y == o]).mean(axis=0) for o in objects]
+                )
+                for k in range(len(combos))
+            ]
+        )
         auc = np.stack([auc_cols(oof[k], targets) for k in range(len(combos))])
         cols_m = np.arange(M)
 
@@ -360,17 +409,23 @@ def main() -> int:
         for crit in ("acc", "lp"):
             zchoice[crit] = greedy_select(oof, objective, crit)
             variants[f"z{crit}"] = pick(test, zchoice[crit])
-        row_extra = {"pseudo_dap": objective(oof[0])[0],
-                     "pseudo_zacc": objective(pick(oof, zchoice["acc"]))[0]}
+        row_extra = {
+            "pseudo_dap": objective(oof[0])[0],
+            "pseudo_zacc": objective(pick(oof, zchoice["acc"]))[0],
+        }
         order = np.argsort(loss, axis=0, kind="stable")
         for kk in ens_ks:
-            variants[f"ens{kk}"] = np.stack([test[order[:kk, m], :, m].mean(axis=0) for m in range(M)], 1)
+            variants[f"ens{kk}"] = np.stack(
+                [test[order[:kk, m], :, m].mean(axis=0) for m in range(M)], 1
+            )
         if args.space == "ep" and BASE_C in Cs:
             by_name = {subs[s][0]: k for k, (s, C) in enumerate(combos) if C == BASE_C}
             prior_choice = []
             for a in names:
                 eps = PRIOR_EPS[a]
-                prior_choice.append(by_name["all" if len(eps) == N_EP else "+".join(EP_NAMES[q] for q in eps)])
+                prior_choice.append(
+                    by_name["all" if len(eps) == N_EP else "+".join(EP_NAMES[q] for q in eps)]
+                )
             variants["prior"] = pick(test, np.array(prior_choice))
 
         row = {"seed": seed, "split": split.index + 1}
@@ -389,33 +444,53 @@ def main() -> int:
             pooled.setdefault(v, []).append(pv)
         pooled["truth"].append(tn)
 
-    keys = [k for k in rows[0] if k not in ("seed", "split", "seconds", "zacc_changed")
-            and not k.startswith("pseudo_")]
-    pseudo = {k: round(float(np.mean([r[k] for r in rows])), 3) for k in rows[0] if k.startswith("pseudo_")}
+    keys = [
+        k
+        for k in rows[0]
+        if k not in ("seed", "split", "seconds", "zacc_changed") and not k.startswith("pseudo_")
+    ]
+    pseudo = {
+        k: round(float(np.mean([r[k] for r in rows])), 3)
+        for k in rows[0]
+        if k.startswith("pseudo_")
+    }
     mean = {k: round(float(np.mean([r[k] for r in rows])), 3) for k in keys}
     diffs = {k: [r[k] - r["dap"] for r in rows] for k in keys if k != "dap"}
-    vs_dap = {k: {"mean_diff": round(float(np.mean(d)), 3), "wins": int(sum(x > 1e-9 for x in d)),
-                  "losses": int(sum(x < -1e-9 for x in d))} for k, d in diffs.items()}
+    vs_dap = {
+        k: {
+            "mean_diff": round(float(np.mean(d)), 3),
+            "wins": int(sum(x > 1e-9 for x in d)),
+            "losses": int(sum(x < -1e-9 for x in d)),
+        }
+        for k, d in diffs.items()
+    }
     truth = np.concatenate(pooled["truth"])
     novel_auc = {v: auc_cols(np.concatenate(pooled[v]), truth) for v in ["dap", *diffs]}
     novel_loss = {v: log_loss_cols(np.concatenate(pooled[v]), truth) for v in ["dap", *diffs]}
     per_attribute = {
-        a: {"oof_auc_dap": round(float(np.nanmean([r[m] for r in oof_auc["dap"]])), 3),
+        a: {
+            "oof_auc_dap": round(float(np.nanmean([r[m] for r in oof_auc["dap"]])), 3),
             "oof_auc_sel": round(float(np.nanmean([r[m] for r in oof_auc["sel"]])), 3),
             "novel_auc_dap": round(float(novel_auc["dap"][m]), 3),
             "novel_auc_sel": round(float(novel_auc["sel"][m]), 3),
             "novel_logloss_dap": round(float(novel_loss["dap"][m]), 3),
             "novel_logloss_sel": round(float(novel_loss["sel"][m]), 3),
-            "chosen": dict(chosen_counts[m].most_common(4))}
+            "chosen": dict(chosen_counts[m].most_common(4)),
+        }
         for m, a in enumerate(names)
     }
     summary = {
-        "zsl_mean": mean, "vs_dap": vs_dap, "n_splits_run": len(rows), "pseudo_zsl_on_known": pseudo,
+        "zsl_mean": mean,
+        "vs_dap": vs_dap,
+        "n_splits_run": len(rows),
+        "pseudo_zsl_on_known": pseudo,
         "zacc_changed_mean": round(float(np.mean([r["zacc_changed"] for r in rows])), 1),
         "novel_auc_mean": {v: round(float(np.nanmean(x)), 3) for v, x in novel_auc.items()},
         "novel_logloss_mean": {v: round(float(np.mean(x)), 4) for v, x in novel_loss.items()},
-        "per_attribute": per_attribute, "combos": len(combos),
-        "seconds": round(time.perf_counter() - t_start, 1), **vars(args),
+        "per_attribute": per_attribute,
+        "combos": len(combos),
+        "seconds": round(time.perf_counter() - t_start, 1),
+        **{k: str(v) for k, v in vars(args).items()},
     }
     print(json.dumps(summary, indent=1))
     return 0

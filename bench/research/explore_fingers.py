@@ -18,27 +18,22 @@ Reported alone, as a product with DAP, and with the out-of-object attribute AUC 
 known training objects (group k-fold over objects), on the novel objects' held-out
 trials of development split seeds (never seed 0):
 
-    .venv/bin/python bench/explore_fingers.py --seeds 1,2 --novel 6
+    .venv/bin/python bench/research/explore_fingers.py --seeds 1,2 --novel 6
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 import numpy as np
+from dev_splits import add_split_arguments, print_zsl_means, tiny, zsl_cases
 from sklearn.metrics import roc_auc_score
 from sklearn.model_selection import GroupKFold
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from dev_splits import add_split_arguments, print_zsl_means, zsl_cases  # noqa: E402
-
-from app.data.phac2 import load_phac2  # noqa: E402
-from app.methods.attributes import LinearAttributeModel, dap_log_scores  # noqa: E402
-from app.methods.known import flatten  # noqa: E402
+from app.data.phac2 import load_phac2
+from app.methods.attributes import LinearAttributeModel, dap_log_scores
+from app.methods.known import flatten
 
 FEATURES = 47
 FINGER_PAIRS = 10  # the first 20 features of each procedure alternate _f0, _f1
@@ -80,15 +75,20 @@ def variant_proba(approach: str, z, targets, z_test, cols, C) -> np.ndarray:
     if approach == "plain":
         return LinearAttributeModel.fit(z, targets, C).predict_proba(z_test)
     if approach in ("swap", "swap-train"):
-        model = LinearAttributeModel.fit(np.vstack([z, swapped(z, cols)]), np.vstack([targets, targets]), C)
+        model = LinearAttributeModel.fit(
+            np.vstack([z, swapped(z, cols)]), np.vstack([targets, targets]), C
+        )
         if approach == "swap-train":
             return model.predict_proba(z_test)
-        mean_logit = (logit(model.predict_proba(z_test)) + logit(model.predict_proba(swapped(z_test, cols)))) / 2
+        mean_logit = (
+            logit(model.predict_proba(z_test)) + logit(model.predict_proba(swapped(z_test, cols)))
+        ) / 2
         return 1 / (1 + np.exp(-mean_logit))
     if approach in ("sym", "mean"):
         with_difference = approach == "sym"
-        return LinearAttributeModel.fit(symmetric(z, cols, with_difference), targets, C).predict_proba(
-            symmetric(z_test, cols, with_difference))
+        return LinearAttributeModel.fit(
+            symmetric(z, cols, with_difference), targets, C
+        ).predict_proba(symmetric(z_test, cols, with_difference))
     raise SystemExit(f"unknown approach {approach!r}")
 
 
@@ -96,8 +96,11 @@ def out_of_object_auc(approach, z, y, targets, cols, C, folds) -> float:
     p = np.zeros(targets.shape)
     for fit, held in GroupKFold(folds).split(z, groups=y):
         p[held] = variant_proba(approach, z[fit], targets[fit], z[held], cols, C)
-    aucs = [roc_auc_score(targets[:, j], p[:, j]) for j in range(targets.shape[1])
-            if 0 < targets[:, j].mean() < 1]
+    aucs = [
+        roc_auc_score(targets[:, j], p[:, j])
+        for j in range(targets.shape[1])
+        if 0 < targets[:, j].mean() < 1
+    ]
     return float(np.mean(aucs))
 
 
@@ -109,7 +112,7 @@ def main() -> int:
     p.add_argument("--clip", type=float, default=0.02, help="probability clip (best's)")
     p.add_argument("--folds", type=int, default=6, help="object folds for the out-of-object AUC")
     p.add_argument("--no-auc", action="store_true", help="skip the out-of-object AUC (faster)")
-    args = p.parse_args()
+    args = tiny(p.parse_args(), folds=2)
     data = load_phac2(args.data)
     cols = finger_columns(flatten(data.samples[:1]).shape[1] // FEATURES)
     cases = []
@@ -121,8 +124,9 @@ def main() -> int:
             proba = variant_proba(approach, case.z, targets, case.zt, cols, args.C)
             case.record(approach, dap_log_scores(proba, case.vectors, prior, args.clip))
             if not args.no_auc:
-                case.row[f"auc_{approach}"] = out_of_object_auc(approach, case.z, train.labels, targets, cols,
-                                                                args.C, args.folds)
+                case.row[f"auc_{approach}"] = out_of_object_auc(
+                    approach, case.z, train.labels, targets, cols, args.C, args.folds
+                )
         case.finish()
         cases.append(case)
     print_zsl_means(cases, args)

@@ -2,7 +2,7 @@
 
 ``best`` scores novelty by the forest's 1 − max-probability plus two distance cues
 (AUROC ~0.98). The targets need both ``nd_known_kept`` and ``nd_novel_detected`` ≥ 0.95,
-which no threshold reaches with that score (``bench/novelty_bound.py``). This measures,
+which no threshold reaches with that score (``bench/research/novelty_bound.py``). This measures,
 per split, the AUROC and the oracle balance (the best min(kept, detected) over all
 thresholds, chosen on the test samples: an upper bound, not a result) of candidate
 scores, each a diagnostic on development seeds only:
@@ -51,33 +51,28 @@ run on untouched seeds 3–4: 6 novel 0.9867 / 0.9458 against 0.9861 / 0.9471 (t
 falls), 12 novel 0.9764 / 0.9234 against 0.9743 / 0.9192. Out of sample the gain shrinks to
 0.001–0.002 AUROC and the balance moves either way; not adopted.
 
-    .venv/bin/python bench/explore_novelty.py --seeds 1,2 --novel 6 --cues phases,proximity
-    .venv/bin/python bench/explore_novelty.py --seeds 1,2 --novel 6 --cues mahalanobis,prototype
-    .venv/bin/python bench/explore_novelty.py --seeds 1,2 --novel 6 --cues attributes,attributes-any
-    .venv/bin/python bench/explore_novelty.py --seeds 1,2 --novel 6 --cues attributes --weights 0.005,0.01,0.015,0.02,0.03
-    .venv/bin/python bench/explore_novelty.py --seeds 1,2 --novel 12 --cues attributes --weights 0.01,0.02,0.03
-    .venv/bin/python bench/explore_novelty.py --seeds 3,4 --novel 6 --cues attributes --weights 0.02   # then --novel 12
+    .venv/bin/python bench/research/explore_novelty.py --seeds 1,2 --novel 6 --cues phases,proximity
+    .venv/bin/python bench/research/explore_novelty.py --seeds 1,2 --novel 6 --cues mahalanobis,prototype
+    .venv/bin/python bench/research/explore_novelty.py --seeds 1,2 --novel 6 --cues attributes,attributes-any
+    .venv/bin/python bench/research/explore_novelty.py --seeds 1,2 --novel 6 --cues attributes --weights 0.005,0.01,0.015,0.02,0.03
+    .venv/bin/python bench/research/explore_novelty.py --seeds 1,2 --novel 12 --cues attributes --weights 0.01,0.02,0.03
+    .venv/bin/python bench/research/explore_novelty.py --seeds 3,4 --novel 6 --cues attributes --weights 0.02   # then --novel 12
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 import numpy as np
+from dev_splits import add_split_arguments, splits, tiny
+from novelty_bound import oracle_balance
 from sklearn.ensemble import ExtraTreesClassifier
 from sklearn.metrics import roc_auc_score
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from dev_splits import add_split_arguments, splits  # noqa: E402
-from novelty_bound import oracle_balance  # noqa: E402
-
-from app.data.phac2 import load_phac2  # noqa: E402
-from app.framework.registry import make_method  # noqa: E402
-from app.methods.known import flatten  # noqa: E402
+from app.data.phac2 import load_phac2
+from app.framework.registry import make_method
+from app.methods.known import flatten
 
 PHASES = 4  # PHAC-2's exploratory procedures, in the order of the flat features
 
@@ -110,21 +105,27 @@ def mahalanobis_novelty(train_z, train_y, test_z) -> np.ndarray:
     return np.einsum("ncd,de,nce->nc", diff, precision, diff).min(axis=1)
 
 
-def prototype_novelty(train_z, train_y, test_z, seed: int, epochs: int = 300,
-                      dim: int = 64, scale: float = 16.0) -> np.ndarray:
+def prototype_novelty(
+    train_z, train_y, test_z, seed: int, epochs: int = 300, dim: int = 64, scale: float = 16.0
+) -> np.ndarray:
     """1 − max cosine to a learned prototype; MLP embedding, normalised-softmax loss."""
     import torch
     from torch import nn
 
     torch.manual_seed(seed)
     classes, y = np.unique(train_y, return_inverse=True)
-    net = nn.Sequential(nn.Linear(train_z.shape[1], 256), nn.ReLU(), nn.Dropout(0.3), nn.Linear(256, dim))
+    net = nn.Sequential(
+        nn.Linear(train_z.shape[1], 256), nn.ReLU(), nn.Dropout(0.3), nn.Linear(256, dim)
+    )
     prototypes = nn.Parameter(torch.randn(len(classes), dim))
     optimiser = torch.optim.Adam([*net.parameters(), prototypes], lr=1e-3, weight_decay=1e-4)
     x, t = torch.as_tensor(train_z, dtype=torch.float32), torch.as_tensor(y)
 
     def cosines(inputs):
-        return nn.functional.normalize(net(inputs), dim=1) @ nn.functional.normalize(prototypes, dim=1).T
+        return (
+            nn.functional.normalize(net(inputs), dim=1)
+            @ nn.functional.normalize(prototypes, dim=1).T
+        )
 
     for _ in range(epochs):
         net.train()
@@ -138,8 +139,9 @@ def prototype_novelty(train_z, train_y, test_z, seed: int, epochs: int = 300,
         return 1 - cosines(torch.as_tensor(test_z, dtype=torch.float32)).max(1).values.numpy()
 
 
-def attribute_mismatch(model, z: np.ndarray, class_attributes: np.ndarray, clip: float = 0.02,
-                       top_class: bool = True) -> np.ndarray:
+def attribute_mismatch(
+    model, z: np.ndarray, class_attributes: np.ndarray, clip: float = 0.02, top_class: bool = True
+) -> np.ndarray:
     """Mean −log p(a_m = a^k_m | x) of ``best``'s attribute classifiers against the attribute
     vector of the forest's top known class k (``top_class``), or of the best-matching one."""
     p = np.clip(model.attributes_.predict_proba(z), clip, 1 - clip)  # (N, M)
@@ -163,14 +165,28 @@ def by_phase(samples: np.ndarray) -> np.ndarray:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     add_split_arguments(ap)
     ap.add_argument("--trees", type=int, default=100)
-    ap.add_argument("--cues", default="mahalanobis,prototype",
-                    help="comma-separated: phases, proximity, mahalanobis, prototype, attributes, attributes-any")
-    ap.add_argument("--weights", default="0.02,0.05,0.1,0.2",
-                    help="comma-separated weights w of each cue added to best's score")
-    args = ap.parse_args()
+    ap.add_argument(
+        "--prototype-epochs",
+        type=int,
+        default=300,
+        help="training epochs of the prototype cue's MLP",
+    )
+    ap.add_argument(
+        "--cues",
+        default="mahalanobis,prototype",
+        help="comma-separated: phases, proximity, mahalanobis, prototype, attributes, attributes-any",
+    )
+    ap.add_argument(
+        "--weights",
+        default="0.02,0.05,0.1,0.2",
+        help="comma-separated weights w of each cue added to best's score",
+    )
+    args = tiny(ap.parse_args(), trees=10, prototype_epochs=3)
     weights = [float(w) for w in args.weights.split(",")]
     dataset = load_phac2(args.data)
     cues = args.cues.split(",")
@@ -190,22 +206,31 @@ def main() -> int:
         z, zt = scaled(flatten(train.samples)), scaled(flatten(x))
         for cue in cues:
             if cue == "phases":
-                scores[cue] = phase_disagreement(by_phase(train.samples), train.labels, by_phase(x),
-                                                 args.trees, seed)
+                scores[cue] = phase_disagreement(
+                    by_phase(train.samples), train.labels, by_phase(x), args.trees, seed
+                )
                 weight = 1.0  # as measured in session 5: the raw cue, weights 0.02–0.2
             elif cue == "proximity":
-                scores[cue] = proximity_novelty(flat(train.samples), train.labels, flat(x), args.trees, seed)
+                scores[cue] = proximity_novelty(
+                    flat(train.samples), train.labels, flat(x), args.trees, seed
+                )
                 weight = 10.0
             elif cue == "mahalanobis":
                 scores[cue] = np.log(mahalanobis_novelty(z, train.labels, zt))
                 weight = 1 / spread(np.log(mahalanobis_novelty(z, train.labels, z)))
             elif cue == "prototype":
-                both = prototype_novelty(z, train.labels, np.concatenate([zt, z]), seed)
-                scores[cue], weight = both[:len(x)], 1 / spread(both[len(x):])
+                both = prototype_novelty(
+                    z, train.labels, np.concatenate([zt, z]), seed, args.prototype_epochs
+                )
+                scores[cue], weight = both[: len(x)], 1 / spread(both[len(x) :])
             elif cue in ("attributes", "attributes-any"):
-                both = attribute_mismatch(model, np.concatenate([zt, z]), train.class_attributes,
-                                          top_class=cue == "attributes")
-                scores[cue], weight = both[:len(x)], 1 / spread(both[len(x):])
+                both = attribute_mismatch(
+                    model,
+                    np.concatenate([zt, z]),
+                    train.class_attributes,
+                    top_class=cue == "attributes",
+                )
+                scores[cue], weight = both[: len(x)], 1 / spread(both[len(x) :])
             else:
                 raise SystemExit(f"unknown cue {cue!r}")
             for w in weights:

@@ -16,7 +16,7 @@ novel class, ``samples`` latent codes z ~ q(z | a^z) (attribute encoder with noi
 softmax (linear) classifier is trained on those codes only; a test trial is encoded by
 the feature encoder's mean and classified. Reported per split: CADA-VAE alone, its
 product with DAP's posterior (``cada*dap``), and DAP alone (``dap``), on exactly the
-novel test trials that ``bench/explore_zsl.py`` and the evaluation protocol use.
+novel test trials that ``bench/research/explore_zsl.py`` and the evaluation protocol use.
 
 DAP here is ``best``'s zero-shot computed directly (same ``RobustInputScaler`` fitted on
 the flattened training trials, ``LinearAttributeModel`` with C = 0.1, prior = mean known
@@ -40,24 +40,24 @@ Commands run (2-core machine shared with other work, one thread each; the defaul
 flags are the paper's CUB settings scaled down, ``--epochs 300``):
 
     # 0. DAP here == best's zero-shot (prints max |difference| = 0.00e+00)
-    .venv/bin/python bench/explore_cadavae.py --seeds 1 --splits 1 --check-best --epochs 100
+    .venv/bin/python bench/research/explore_cadavae.py --seeds 1 --splits 1 --check-best --epochs 100
     # 1. paper-like defaults on the development splits (seeds 1-2, 14 splits, 6 novel)
-    .venv/bin/python bench/explore_cadavae.py --protocol test --seeds 1,2 --novel 6 --variants base
+    .venv/bin/python bench/research/explore_cadavae.py --protocol test --seeds 1,2 --novel 6 --variants base
     # 2. hyper-parameters chosen on validation objects carved from the known objects
-    .venv/bin/python bench/explore_cadavae.py --protocol val --seeds 1,2 --novel 6 \
+    .venv/bin/python bench/research/explore_cadavae.py --protocol val --seeds 1,2 --novel 6 \
         --variants 'base;latent=16;latent=64;epochs=100;delta=2;beta=1'
-    .venv/bin/python bench/explore_cadavae.py --protocol val --seeds 1,2 --novel 6 --epochs 100 \
+    .venv/bin/python bench/research/explore_cadavae.py --protocol val --seeds 1,2 --novel 6 --epochs 100 \
         --variants 'base;delta=20;gamma=8;delta=20,gamma=8;att_noise=0.5;hidden=64,hidden_att=64;repeats=3;epochs=50;latent=8;lr=3e-4'
-    .venv/bin/python bench/explore_cadavae.py --protocol val --seeds 1,2 --novel 6 --epochs 100 \
+    .venv/bin/python bench/research/explore_cadavae.py --protocol val --seeds 1,2 --novel 6 --epochs 100 \
         --variants 'delta=50,gamma=8;delta=20,gamma=20;delta=50,gamma=20;delta=100,gamma=50;delta=50,gamma=20,beta=0.1;delta=50,gamma=20,epochs=200;delta=50,gamma=20,latent=16;delta=50,gamma=20,latent=64'
-    .venv/bin/python bench/explore_cadavae.py --protocol val --seeds 1,2 --novel 6 --epochs 100 \
+    .venv/bin/python bench/research/explore_cadavae.py --protocol val --seeds 1,2 --novel 6 --epochs 100 \
         --delta 50 --gamma 20 --variants 'repeats=5;beta=0.1,repeats=5;latent=64,repeats=5'
     # 3. the chosen settings (epochs 100, delta 50, gamma 20) on the development splits
-    .venv/bin/python bench/explore_cadavae.py --protocol test --seeds 1,2 --novel 6 --epochs 100 \
+    .venv/bin/python bench/research/explore_cadavae.py --protocol test --seeds 1,2 --novel 6 --epochs 100 \
         --variants 'delta=20,gamma=8;delta=50,gamma=20;delta=50,gamma=20,beta=0.1;delta=50,gamma=20,latent=64'
-    .venv/bin/python bench/explore_cadavae.py --protocol test --seeds 1,2 --novel 6 --epochs 100 \
+    .venv/bin/python bench/research/explore_cadavae.py --protocol test --seeds 1,2 --novel 6 --epochs 100 \
         --delta 50 --gamma 20 --variants 'repeats=5;seed_offset=1;seed_offset=2'
-    .venv/bin/python bench/explore_cadavae.py --protocol test --seeds 1,2 --novel 12 --epochs 100 \
+    .venv/bin/python bench/research/explore_cadavae.py --protocol test --seeds 1,2 --novel 12 --epochs 100 \
         --delta 50 --gamma 20 --variants 'base;repeats=5'
 
 Validation objects (6 of each split's 54 known objects, 14 splits): DAP 0.418; CADA-VAE
@@ -99,12 +99,8 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 import torch.nn.functional as F  # noqa: E402
+from dev_splits import add_split_arguments, splits, tiny  # noqa: E402
 from torch import nn  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from dev_splits import add_split_arguments, splits  # noqa: E402
 
 from app.baselines.common import validation_folds  # noqa: E402
 from app.data.phac2 import load_phac2  # noqa: E402
@@ -168,8 +164,14 @@ def _kl(mu: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:
     return -0.5 * torch.sum(1 + logvar - mu.pow(2) - logvar.exp())
 
 
-def cada_vae(x: np.ndarray, y: np.ndarray, class_attributes: np.ndarray, novel_attributes: np.ndarray,
-             seed: int, h: dict) -> tuple[Encoder, nn.Linear]:
+def cada_vae(
+    x: np.ndarray,
+    y: np.ndarray,
+    class_attributes: np.ndarray,
+    novel_attributes: np.ndarray,
+    seed: int,
+    h: dict,
+) -> tuple[Encoder, nn.Linear]:
     """Train the aligned VAEs on (x, a_y) and a softmax classifier on novel latent codes."""
     torch.manual_seed(seed)
     xt = torch.tensor(x, dtype=torch.float32)
@@ -188,16 +190,22 @@ def cada_vae(x: np.ndarray, y: np.ndarray, class_attributes: np.ndarray, novel_a
         delta = _ramp(epoch, epochs, 0.06, 0.22, h["delta"])
         perm = torch.randperm(len(xt))
         for s in range(0, len(xt), bs):
-            i = perm[s:s + bs]
+            i = perm[s : s + bs]
             xb, ab = xt[i], attrs[yt[i]]
             mu_x, lv_x = enc_x(xb)
             mu_a, lv_a = enc_a(ab)
             z_x, z_a = _sample(mu_x, lv_x), _sample(mu_a, lv_a)
-            recon = F.l1_loss(dec_x(z_x), xb, reduction="sum") + F.l1_loss(dec_a(z_a), ab, reduction="sum")
-            cross = F.l1_loss(dec_x(z_a), xb, reduction="sum") + F.l1_loss(dec_a(z_x), ab, reduction="sum")
+            recon = F.l1_loss(dec_x(z_x), xb, reduction="sum") + F.l1_loss(
+                dec_a(z_a), ab, reduction="sum"
+            )
+            cross = F.l1_loss(dec_x(z_a), xb, reduction="sum") + F.l1_loss(
+                dec_a(z_x), ab, reduction="sum"
+            )
             kl = _kl(mu_x, lv_x) + _kl(mu_a, lv_a)
-            dist = torch.sqrt(((mu_x - mu_a) ** 2).sum(1)
-                              + ((torch.exp(0.5 * lv_x) - torch.exp(0.5 * lv_a)) ** 2).sum(1)).sum()
+            dist = torch.sqrt(
+                ((mu_x - mu_a) ** 2).sum(1)
+                + ((torch.exp(0.5 * lv_x) - torch.exp(0.5 * lv_a)) ** 2).sum(1)
+            ).sum()
             loss = (recon + beta * kl + gamma * cross + delta * dist) / len(i)
             opt.zero_grad()
             loss.backward()
@@ -215,7 +223,7 @@ def cada_vae(x: np.ndarray, y: np.ndarray, class_attributes: np.ndarray, novel_a
     for _ in range(int(h["cls_epochs"])):
         perm = torch.randperm(len(zs))
         for s in range(0, len(zs), 32):
-            i = perm[s:s + 32]
+            i = perm[s : s + 32]
             copt.zero_grad()
             F.cross_entropy(clf(zs[i]), ys[i]).backward()
             copt.step()
@@ -228,8 +236,15 @@ def cada_proba(enc_x: Encoder, clf: nn.Linear, z: np.ndarray) -> np.ndarray:
         return F.softmax(clf(mu), 1).double().numpy()
 
 
-def dap_proba(z_train: np.ndarray, y: np.ndarray, class_attributes: np.ndarray, z_eval: np.ndarray,
-              vectors: np.ndarray, C: float = 0.1, clip: float = 0.02) -> np.ndarray:
+def dap_proba(
+    z_train: np.ndarray,
+    y: np.ndarray,
+    class_attributes: np.ndarray,
+    z_eval: np.ndarray,
+    vectors: np.ndarray,
+    C: float = 0.1,
+    clip: float = 0.02,
+) -> np.ndarray:
     """best's zero-shot posterior (see BestRecognizer._fit and _novel_from)."""
     model = LinearAttributeModel.fit(z_train, class_attributes[y], C)
     prior = class_attributes.mean(axis=0).astype(np.float64)
@@ -241,16 +256,30 @@ def tasks(data, args):
     for seed, split in splits(data, args, development_only=True):
         train = split.train_dataset(data)
         if args.protocol == "test":
-            yield (seed, split, train, data.samples[split.novel_test_idx],
-                   split.novel_labels(data, split.novel_test_idx), split.novel_attributes(data))
+            yield (
+                seed,
+                split,
+                train,
+                data.samples[split.novel_test_idx],
+                split.novel_labels(data, split.novel_test_idx),
+                split.novel_attributes(data),
+            )
             continue
-        folds = validation_folds(train, 1, args.val_objects / train.n_classes, seed * 1000 + split.index)
+        folds = validation_folds(
+            train, 1, args.val_objects / train.n_classes, seed * 1000 + split.index
+        )
         fit_classes, val_classes = folds[0]
         remap = np.full(train.n_classes, -1)
         remap[val_classes] = np.arange(len(val_classes))
         is_val = np.isin(train.labels, val_classes)
-        yield (seed, split, train.select_classes(fit_classes), train.samples[is_val],
-               remap[train.labels[is_val]], train.class_attributes[val_classes])
+        yield (
+            seed,
+            split,
+            train.select_classes(fit_classes),
+            train.samples[is_val],
+            remap[train.labels[is_val]],
+            train.class_attributes[val_classes],
+        )
 
 
 def parse_variants(spec: str, base: dict) -> list[tuple[str, dict]]:
@@ -271,23 +300,31 @@ def parse_variants(spec: str, base: dict) -> list[tuple[str, dict]]:
 def summary(rows: list[dict], key: str, ref: str = "dap") -> dict:
     a = np.array([r[key] for r in rows])
     d = a - np.array([r[ref] for r in rows])
-    return {"mean": round(float(a.mean()), 3), "std": round(float(a.std(ddof=1)), 3) if len(a) > 1 else 0.0,
-            "minus_dap_mean": round(float(d.mean()), 3),
-            "minus_dap_std": round(float(d.std(ddof=1)), 3) if len(a) > 1 else 0.0,
-            "minus_dap_wins": int((d > 0).sum()), "minus_dap_losses": int((d < 0).sum())}
+    return {
+        "mean": round(float(a.mean()), 3),
+        "std": round(float(a.std(ddof=1)), 3) if len(a) > 1 else 0.0,
+        "minus_dap_mean": round(float(d.mean()), 3),
+        "minus_dap_std": round(float(d.std(ddof=1)), 3) if len(a) > 1 else 0.0,
+        "minus_dap_wins": int((d > 0).sum()),
+        "minus_dap_losses": int((d < 0).sum()),
+    }
 
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     add_split_arguments(p)
     p.add_argument("--protocol", choices=("test", "val"), default="test")
-    p.add_argument("--val-objects", type=int, default=6, help="validation objects for --protocol val")
+    p.add_argument(
+        "--val-objects", type=int, default=6, help="validation objects for --protocol val"
+    )
     p.add_argument("--variants", default="base", help="';'-separated hyper-parameter overrides")
-    p.add_argument("--check-best", action="store_true", help="check DAP against the best recognizer")
+    p.add_argument(
+        "--check-best", action="store_true", help="check DAP against the best recognizer"
+    )
     p.add_argument("--out", default=None, help="write all rows as JSON here")
     for name, (typ, default, text) in HYPER.items():
         p.add_argument("--" + name.replace("_", "-"), type=typ, default=default, help=text)
-    args = p.parse_args()
+    args = tiny(p.parse_args(), epochs=2, samples=10, cls_epochs=2)
     base = {name: getattr(args, name) for name in HYPER}
     variants = parse_variants(args.variants, base)
     data = load_phac2(args.data)
@@ -300,8 +337,11 @@ def main() -> int:
         p_dap = dap_proba(z_tr, train.labels, train.class_attributes, z_ev, vectors)
         if args.check_best and n == 0 and args.protocol == "test":
             from app.evaluation.protocol import make_recognizer
+
             best = make_recognizer("best", {"sae_lambda": 0}, 0).fit(train)  # its DAP part alone
-            ref = best.add_novel_classes(list(split.novel_names), vectors, allow_known_vectors=True).novel_proba(xe)
+            ref = best.add_novel_classes(
+                list(split.novel_names), vectors, allow_known_vectors=True
+            ).novel_proba(xe)
             gap = float(np.abs(ref - p_dap).max())
             print(f"check-best: max |p_dap - best.novel_proba| = {gap:.2e}", file=sys.stderr)
             assert gap < 1e-6, gap
@@ -310,27 +350,53 @@ def main() -> int:
             t = time.perf_counter()
             p_cada = np.zeros((len(z_ev), len(vectors)))
             for r in range(int(h["repeats"])):
-                enc, clf = cada_vae(z_tr, train.labels, train.class_attributes, vectors,
-                                    seed * 100 + split.index + 100_000 * r + 1_000_000 * int(h["seed_offset"]), h)
+                enc, clf = cada_vae(
+                    z_tr,
+                    train.labels,
+                    train.class_attributes,
+                    vectors,
+                    seed * 100 + split.index + 100_000 * r + 1_000_000 * int(h["seed_offset"]),
+                    h,
+                )
                 p_cada += cada_proba(enc, clf, z_ev) / int(h["repeats"])
             product = np.log(p_dap + 1e-12) + np.log(p_cada + 1e-12)
             dt = time.perf_counter() - t
             seconds[name] += dt
-            row = {"seed": seed, "split": split.index + 1, "dap": acc_dap,
-                   "cada": float((p_cada.argmax(1) == ye).mean()),
-                   "cada*dap": float((product.argmax(1) == ye).mean()), "seconds": round(dt, 1)}
+            row = {
+                "seed": seed,
+                "split": split.index + 1,
+                "dap": acc_dap,
+                "cada": float((p_cada.argmax(1) == ye).mean()),
+                "cada*dap": float((product.argmax(1) == ye).mean()),
+                "seconds": round(dt, 1),
+            }
             rows[name].append(row)
-            print(f"[{time.perf_counter() - t_all:6.0f}s] {name}: {json.dumps(row)}", file=sys.stderr, flush=True)
-    report = {"protocol": args.protocol, "novel": args.novel, "seeds": args.seeds,
-              "splits": len(next(iter(rows.values()))), "variants": {}}
+            print(
+                f"[{time.perf_counter() - t_all:6.0f}s] {name}: {json.dumps(row)}",
+                file=sys.stderr,
+                flush=True,
+            )
+    report = {
+        "protocol": args.protocol,
+        "novel": args.novel,
+        "seeds": args.seeds,
+        "splits": len(next(iter(rows.values()))),
+        "variants": {},
+    }
     for name, h in variants:
         r = rows[name]
         report["variants"][name] = {
-            "hyper": h, "seconds_per_split": round(seconds[name] / max(len(r), 1), 1),
+            "hyper": h,
+            "seconds_per_split": round(seconds[name] / max(len(r), 1), 1),
             "seconds_total": round(seconds[name], 1),
-            "cada": summary(r, "cada"), "cada*dap": summary(r, "cada*dap"),
-            "dap": {"mean": round(float(np.mean([x["dap"] for x in r])), 3),
-                    "std": round(float(np.std([x["dap"] for x in r], ddof=1)), 3) if len(r) > 1 else 0.0},
+            "cada": summary(r, "cada"),
+            "cada*dap": summary(r, "cada*dap"),
+            "dap": {
+                "mean": round(float(np.mean([x["dap"] for x in r])), 3),
+                "std": round(float(np.std([x["dap"] for x in r], ddof=1)), 3)
+                if len(r) > 1
+                else 0.0,
+            },
         }
     print(json.dumps(report, indent=1))
     if args.out:

@@ -62,27 +62,27 @@ Approaches joined by ``+`` are summed (their posteriors multiplied) before scori
 Each is reported alone and as a product with DAP (``best``'s zero-shot), on the
 novel objects' held-out trials of development split seeds (never seed 0):
 
-    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6
-    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches twins0.5,twins1,twins2,twins4
-    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches svm0.3,svm1,svm3,svm10,svm30
-    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches znorm,zmean
-    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches lda0.01,lda0.1,lda1
-    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 \
+    .venv/bin/python bench/research/explore_scorespace.py --seeds 1,2 --novel 6
+    .venv/bin/python bench/research/explore_scorespace.py --seeds 1,2 --novel 6 --approaches twins0.5,twins1,twins2,twins4
+    .venv/bin/python bench/research/explore_scorespace.py --seeds 1,2 --novel 6 --approaches svm0.3,svm1,svm3,svm10,svm30
+    .venv/bin/python bench/research/explore_scorespace.py --seeds 1,2 --novel 6 --approaches znorm,zmean
+    .venv/bin/python bench/research/explore_scorespace.py --seeds 1,2 --novel 6 --approaches lda0.01,lda0.1,lda1
+    .venv/bin/python bench/research/explore_scorespace.py --seeds 1,2 --novel 6 \
         --approaches saes0.2,saes1,saes5,saes25,saes100,saes400,saes1000,saes4000,saef0.2,saef1,saef5
-    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 12 \
+    .venv/bin/python bench/research/explore_scorespace.py --seeds 1,2 --novel 12 \
         --approaches saes1,saes5,saes25,saes100,saes400,saes1000,saes4000,saef1,saef5
-    .venv/bin/python bench/explore_scorespace.py --seeds 3,4 --novel 6 --approaches saes400   # then --novel 12
-    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches saes400,bag20,saes400+bag20
-    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 \
+    .venv/bin/python bench/research/explore_scorespace.py --seeds 3,4 --novel 6 --approaches saes400   # then --novel 12
+    .venv/bin/python bench/research/explore_scorespace.py --seeds 1,2 --novel 6 --approaches saes400,bag20,saes400+bag20
+    .venv/bin/python bench/research/explore_scorespace.py --seeds 1,2 --novel 6 \
         --approaches saes400@5,saes400,saes400@15,saes400@20,saes400@30
-    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 \
+    .venv/bin/python bench/research/explore_scorespace.py --seeds 1,2 --novel 6 \
         --approaches saes400,ksae400@1,ksae400@0.3,ksae100@1,ksae1000@1,saes400+ksae400@1
-    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 --approaches saes400,dap-C0.03,\
+    .venv/bin/python bench/research/explore_scorespace.py --seeds 1,2 --novel 6 --approaches saes400,dap-C0.03,\
 dap-C0.03+saes400,dap-C0.3,dap-C0.3+saes400,dap-C1,dap-C1+saes400,dap-k0.05,dap-k0.05+saes400,\
 dap-k0.1,dap-k0.1+saes400,dap-p0,dap-p0+saes400,dap-p0.5,dap-p0.5+saes400,dap-fisher,dap-fisher+saes400
-    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 12 \
+    .venv/bin/python bench/research/explore_scorespace.py --seeds 1,2 --novel 12 \
         --approaches saes400,dap-p0,dap-p0+saes400,dap-p0.5,dap-p0.5+saes400
-    .venv/bin/python bench/explore_scorespace.py --seeds 1,2 --novel 6 \
+    .venv/bin/python bench/research/explore_scorespace.py --seeds 1,2 --novel 6 \
         --approaches saes400,ep-dap,ep-sae,ep-dap+saes400,ep-sae+saes400,ep-dap+ep-sae
 
 ``dap`` is plain DAP throughout: ``dev_splits`` fits ``best`` with ``sae_lambda`` 0.
@@ -92,19 +92,14 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 import numpy as np
+from dev_splits import add_split_arguments, print_zsl_means, tiny, zsl_cases
 from sklearn.covariance import LedoitWolf
 from sklearn.model_selection import GroupKFold
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from dev_splits import add_split_arguments, print_zsl_means, zsl_cases  # noqa: E402
-
-from app.data.phac2 import load_phac2  # noqa: E402
-from app.methods.attributes import LinearAttributeModel  # noqa: E402
+from app.data.phac2 import load_phac2
+from app.methods.attributes import LinearAttributeModel
 
 
 def logits(p: np.ndarray, clip: float) -> np.ndarray:
@@ -170,6 +165,7 @@ def svm_dap(z, y, attrs, z_test, vectors, C, args):
     from sklearn.svm import SVC
 
     from app.methods.attributes import dap_log_scores
+
     targets = attrs[y] > 0.5
     p = np.tile(attrs.mean(0), (len(z_test), 1))
     for m in range(attrs.shape[1]):
@@ -184,6 +180,7 @@ def class_norm(z, y, attrs, z_test, vectors, args, scale: bool):
     """DAP scores standardised per novel class by their spread on known objects the
     attribute classifiers never saw: some attribute vectors match many objects (hubs)."""
     from app.methods.attributes import dap_log_scores
+
     targets = attrs[y]
     prior = attrs.mean(0)
     held_scores = np.zeros((len(z), len(vectors)))
@@ -202,6 +199,7 @@ def lda_dap(z, y, attrs, z_test, vectors, C, args):
     from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
 
     from app.methods.attributes import dap_log_scores
+
     lda = LinearDiscriminantAnalysis(solver="eigen", shrinkage="auto").fit(z, y)
     p, pt = lda.transform(z), lda.transform(z_test)
     scale = p.std(0)
@@ -244,7 +242,9 @@ def kernel_sae(z, y, attrs, z_test, vectors, lam: float, gamma: float, component
     a non-linear map from touch to attributes, regularised by the same reconstruction."""
     from sklearn.kernel_approximation import Nystroem
 
-    phi = Nystroem(gamma=gamma / z.shape[1], n_components=min(components, len(z)), random_state=0).fit(z)
+    phi = Nystroem(
+        gamma=gamma / z.shape[1], n_components=min(components, len(z)), random_state=0
+    ).fit(z)
     f, ft = phi.transform(z), phi.transform(z_test)
     mean, std = f.mean(0), f.std(0) + 1e-9
     return sae((f - mean) / std, y, attrs, (ft - mean) / std, vectors, lam, "s")
@@ -262,7 +262,9 @@ def dap_variant(z, y, attrs, z_test, vectors, C: float, clip: float, prior: floa
         z, z_test = z * w, z_test * w
     p = LinearAttributeModel.fit(z, attrs[y], C).predict_proba(z_test)
     full = dap_log_scores(p, vectors, attrs.mean(0), clip)
-    flat = dap_log_scores(p, vectors, np.full(attrs.shape[1], 0.5), clip)  # a flat prior adds nothing
+    flat = dap_log_scores(
+        p, vectors, np.full(attrs.shape[1], 0.5), clip
+    )  # a flat prior adds nothing
     return prior * full + (1 - prior) * flat
 
 
@@ -276,12 +278,16 @@ def per_procedure(z, y, attrs, z_test, vectors, kind: str, args, procedures: int
         if kind == "sae":
             total = total + sae(z[:, part], y, attrs, z_test[:, part], vectors, 400, "s")
         else:
-            p = LinearAttributeModel.fit(z[:, part], attrs[y], args.C).predict_proba(z_test[:, part])
+            p = LinearAttributeModel.fit(z[:, part], attrs[y], args.C).predict_proba(
+                z_test[:, part]
+            )
             total = total + dap_log_scores(p, vectors, attrs.mean(0), args.clip)
     return total
 
 
-def twins(known_p: np.ndarray, attrs: np.ndarray, vectors: np.ndarray, sharpness: float) -> np.ndarray:
+def twins(
+    known_p: np.ndarray, attrs: np.ndarray, vectors: np.ndarray, sharpness: float
+) -> np.ndarray:
     """log Σ_k p(k | x) exp(-sharpness · hamming(a^z, a^k)): a novel class feels like the
     known objects that people describe alike."""
     hamming = np.abs(vectors[:, None, :] - attrs[None, :, :]).sum(2)  # (L, K)
@@ -306,7 +312,11 @@ def one_approach(approach: str, case, args) -> np.ndarray:
         return svm_dap(z, y, attrs, zt, vectors, float(approach[3:] or 1), args)
     elif approach.startswith("sae"):  # sae<s|f><λ>[@temperature], e.g. saes1, saef0.2, saes400@20
         lam, _, temperature = approach[4:].partition("@")
-        return sae(z, y, attrs, zt, vectors, float(lam or 1), approach[3]) * float(temperature or 10) / 10
+        return (
+            sae(z, y, attrs, zt, vectors, float(lam or 1), approach[3])
+            * float(temperature or 10)
+            / 10
+        )
     elif approach.startswith("ksae"):  # ksae<λ>[@γ], e.g. ksae400@1
         lam, _, gamma = approach[4:].partition("@")
         return kernel_sae(z, y, attrs, zt, vectors, float(lam or 400), float(gamma or 1))
@@ -315,8 +325,17 @@ def one_approach(approach: str, case, args) -> np.ndarray:
         key = approach[4]
         if approach != "dap-fisher":
             options[key] = float(approach[5:])
-        return dap_variant(z, y, attrs, zt, vectors, options["C"], options["k"], options["p"],
-                           approach == "dap-fisher")
+        return dap_variant(
+            z,
+            y,
+            attrs,
+            zt,
+            vectors,
+            options["C"],
+            options["k"],
+            options["p"],
+            approach == "dap-fisher",
+        )
     elif approach in ("ep-dap", "ep-sae"):
         return per_procedure(z, y, attrs, zt, vectors, approach[3:], args)
     elif approach.startswith("twins"):
@@ -335,7 +354,7 @@ def main() -> int:
     p.add_argument("--folds", type=int, default=9, help="object folds for out-of-object logits")
     p.add_argument("--alpha", type=float, default=1.0, help="ridge penalty")
     p.add_argument("--components", type=int, default=32, help="flg: principal components")
-    args = p.parse_args()
+    args = tiny(p.parse_args(), folds=2)
     data = load_phac2(args.data)
     cases = []
     for case in zsl_cases(data, args):

@@ -1,5 +1,10 @@
-"""The PHAC-2 splits the issue-5 exploration scripts run on: their shared command-line
-arguments (``--data --seeds --novel --splits``) and the loop over seeds and splits."""
+"""The PHAC-2 splits the exploration scripts of ``bench/research`` run on: their shared
+command-line arguments (``--data --seeds --novel --splits --tiny``) and the loop over seeds
+and splits.
+
+``--tiny`` is the smoke-test size (``tests/bench/test_research_smoke.py``): one split of
+the first seed, and each script's costly loops (epochs, trees, folds) cut short through
+``tiny``. Its figures mean nothing; it shows that a script still runs against ``app``."""
 
 from __future__ import annotations
 
@@ -16,15 +21,35 @@ import numpy as np
 from app.data.dataset import TactileDataset
 from app.evaluation.splits import ZslSplit, make_zsl_splits
 
-DEFAULT_DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "phac2"
+DEFAULT_DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "phac2"
 
 
 def add_split_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the PHAC-2 folder")
-    parser.add_argument("--seeds", default="1,2",
-                        help="comma-separated split seeds (development: 1,2; 0 is the reported one)")
+    parser.add_argument(
+        "--seeds",
+        default="1,2",
+        help="comma-separated split seeds (development: 1,2; 0 is the reported one)",
+    )
     parser.add_argument("--novel", type=int, default=6, help="novel objects per split")
     parser.add_argument("--splits", type=int, default=7, help="splits per seed")
+    parser.add_argument(
+        "--tiny",
+        action="store_true",
+        help="smoke-test size: one split of the first seed, costly loops cut short "
+        "(checks that the script runs; its figures mean nothing)",
+    )
+
+
+def tiny(args: argparse.Namespace, **smaller: object) -> argparse.Namespace:
+    """With ``--tiny``: one split of the first of ``--seeds``, and ``smaller``'s values in
+    place of those options (e.g. ``epochs=2``). Without it, ``args`` unchanged."""
+    if args.tiny:
+        args.seeds = args.seeds.split(",")[0]
+        args.splits = 1
+        for name, value in smaller.items():
+            setattr(args, name, value)
+    return args
 
 
 def split_seeds(args: argparse.Namespace, development_only: bool = False) -> list[int]:
@@ -35,8 +60,9 @@ def split_seeds(args: argparse.Namespace, development_only: bool = False) -> lis
     return seeds
 
 
-def splits(dataset: TactileDataset, args: argparse.Namespace,
-           development_only: bool = False) -> Iterator[tuple[int, ZslSplit]]:
+def splits(
+    dataset: TactileDataset, args: argparse.Namespace, development_only: bool = False
+) -> Iterator[tuple[int, ZslSplit]]:
     """(seed, split) for every split of every seed in ``--seeds``."""
     for seed in split_seeds(args, development_only):
         for split in make_zsl_splits(dataset, args.novel, args.splits, seed):
@@ -87,19 +113,32 @@ def zsl_cases(dataset: TactileDataset, args: argparse.Namespace) -> Iterator[Zsl
         xn = dataset.samples[split.novel_test_idx]
         yn = split.novel_labels(dataset, split.novel_test_idx)
         vectors = split.novel_attributes(dataset).astype(np.float64)
-        p_dap = best.add_novel_classes(list(split.novel_names), vectors,
-                                       allow_known_vectors=True).novel_proba(xn)
+        p_dap = best.add_novel_classes(
+            list(split.novel_names), vectors, allow_known_vectors=True
+        ).novel_proba(xn)
         cues = best.known_.cues_model
-        yield ZslCase(seed, split, train, cues, cues.scaled(flatten(train.samples)), cues.scaled(flatten(xn)),
-                      yn, vectors, np.log(p_dap + 1e-12),
-                      {"seed": seed, "split": split.index + 1, "dap": float((p_dap.argmax(1) == yn).mean())},
-                      started)
+        yield ZslCase(
+            seed,
+            split,
+            train,
+            cues,
+            cues.scaled(flatten(train.samples)),
+            cues.scaled(flatten(xn)),
+            yn,
+            vectors,
+            np.log(p_dap + 1e-12),
+            {"seed": seed, "split": split.index + 1, "dap": float((p_dap.argmax(1) == yn).mean())},
+            started,
+        )
 
 
 def print_zsl_means(cases: list[ZslCase], args: argparse.Namespace) -> None:
-    """The means over every case's row (stdout)."""
+    """The means over every case's row, the number of splits run and the options (stdout)."""
     rows = [c.row for c in cases]
-    mean = {k: round(float(np.mean([r[k] for r in rows])), 3) for k in rows[0]
-            if k not in ("seed", "split", "seconds")}
-    print(json.dumps({"zsl_mean": mean, "splits": len(rows), **{k: str(v) for k, v in vars(args).items()}},
-                     indent=2))
+    mean = {
+        k: round(float(np.mean([r[k] for r in rows])), 3)
+        for k in rows[0]
+        if k not in ("seed", "split", "seconds")
+    }
+    options = {k: str(v) for k, v in vars(args).items()}  # --splits is the splits per seed
+    print(json.dumps({"zsl_mean": mean, "splits_run": len(rows), **options}, indent=2))

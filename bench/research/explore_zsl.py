@@ -11,8 +11,8 @@ development split seeds (never seed 0, the reported one):
   is trained on them.
 - ``eszsl``: the ESZSL baseline (``app/baselines/eszsl.py``, validation-tuned).
 
-    .venv/bin/python bench/explore_zsl.py --approaches fclswgan --seeds 1,2 --novel 6 --beta 0.01
-    .venv/bin/python bench/explore_zsl.py --approaches eszsl --seeds 1,2 --novel 6
+    .venv/bin/python bench/research/explore_zsl.py --approaches fclswgan --seeds 1,2 --novel 6 --beta 0.01
+    .venv/bin/python bench/research/explore_zsl.py --approaches eszsl --seeds 1,2 --novel 6
 """
 
 from __future__ import annotations
@@ -21,21 +21,16 @@ import argparse
 import json
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import torch
 import torch.nn.functional as F
+from dev_splits import add_split_arguments, splits, tiny
 from torch import nn
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from dev_splits import add_split_arguments, splits  # noqa: E402
-
-from app.data.phac2 import load_phac2  # noqa: E402
-from app.evaluation.protocol import make_recognizer  # noqa: E402
-from app.methods.known import flatten  # noqa: E402
+from app.data.phac2 import load_phac2
+from app.evaluation.protocol import make_recognizer
+from app.methods.known import flatten
 
 
 class Generator(nn.Module):
@@ -43,8 +38,11 @@ class Generator(nn.Module):
 
     def __init__(self, n_attributes: int, n_noise: int, n_features: int, hidden: int) -> None:
         super().__init__()
-        self.net = nn.Sequential(nn.Linear(n_attributes + n_noise, hidden), nn.LeakyReLU(0.2),
-                                 nn.Linear(hidden, n_features))
+        self.net = nn.Sequential(
+            nn.Linear(n_attributes + n_noise, hidden),
+            nn.LeakyReLU(0.2),
+            nn.Linear(hidden, n_features),
+        )
 
     def forward(self, a: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
         return self.net(torch.cat([a, z], 1))
@@ -55,8 +53,9 @@ class Critic(nn.Module):
 
     def __init__(self, n_features: int, n_attributes: int, hidden: int) -> None:
         super().__init__()
-        self.net = nn.Sequential(nn.Linear(n_features + n_attributes, hidden), nn.LeakyReLU(0.2),
-                                 nn.Linear(hidden, 1))
+        self.net = nn.Sequential(
+            nn.Linear(n_features + n_attributes, hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, 1)
+        )
 
     def forward(self, x: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
         return self.net(torch.cat([x, a], 1))
@@ -91,7 +90,9 @@ def fclswgan(z, y, class_attributes, novel_attributes, seed: int, args) -> nn.Li
             eps = torch.rand(bs, 1)
             mix = (eps * real + (1 - eps) * fake).requires_grad_(True)
             grad = torch.autograd.grad(d(mix, a).sum(), mix, create_graph=True)[0]
-            loss_d = d(fake, a).mean() - d(real, a).mean() + 10 * ((grad.norm(dim=1) - 1) ** 2).mean()
+            loss_d = (
+                d(fake, a).mean() - d(real, a).mean() + 10 * ((grad.norm(dim=1) - 1) ** 2).mean()
+            )
             opt_d.zero_grad()
             loss_d.backward()
             opt_d.step()
@@ -117,9 +118,11 @@ def main() -> int:
     p.add_argument("--beta", type=float, default=0.01, help="weight of the classification loss")
     p.add_argument("--hidden", type=int, default=256)
     p.add_argument("--noise", type=int, default=24)
-    p.add_argument("--synthetic", type=int, default=200, help="features synthesised per novel class")
+    p.add_argument(
+        "--synthetic", type=int, default=200, help="features synthesised per novel class"
+    )
     p.add_argument("--lr", type=float, default=1e-4)
-    args = p.parse_args()
+    args = tiny(p.parse_args(), iters=5, hidden=32, synthetic=10)
     torch.set_num_threads(1)
     data = load_phac2(args.data)
     rows = []
@@ -130,19 +133,30 @@ def main() -> int:
         xn = data.samples[split.novel_test_idx]
         yn = split.novel_labels(data, split.novel_test_idx)
         vectors = split.novel_attributes(data)
-        p_dap = best.add_novel_classes(list(split.novel_names), vectors,
-                                       allow_known_vectors=True).novel_proba(xn)
+        p_dap = best.add_novel_classes(
+            list(split.novel_names), vectors, allow_known_vectors=True
+        ).novel_proba(xn)
         row = {"seed": seed, "split": split.index + 1, "dap": float((p_dap.argmax(1) == yn).mean())}
         for approach in args.approaches.split(","):
             if approach == "fclswgan":
                 cues = best.known_.cues_model
-                clf = fclswgan(cues.scaled(flatten(train.samples)), train.labels,
-                               train.class_attributes, vectors, seed * 100 + split.index, args)
+                clf = fclswgan(
+                    cues.scaled(flatten(train.samples)),
+                    train.labels,
+                    train.class_attributes,
+                    vectors,
+                    seed * 100 + split.index,
+                    args,
+                )
                 with torch.no_grad():
                     p = F.softmax(clf(torch.tensor(cues.scaled(flatten(xn)))), 1).numpy()
             elif approach == "eszsl":
-                p = make_recognizer("eszsl", None, 0).fit(train).add_novel_classes(
-                    list(split.novel_names), vectors, allow_known_vectors=True).novel_proba(xn)
+                p = (
+                    make_recognizer("eszsl", None, 0)
+                    .fit(train)
+                    .add_novel_classes(list(split.novel_names), vectors, allow_known_vectors=True)
+                    .novel_proba(xn)
+                )
             else:
                 raise SystemExit(f"unknown approach {approach!r}")
             product = np.log(p_dap + 1e-12) + np.log(p + 1e-12)
@@ -151,9 +165,13 @@ def main() -> int:
         row["seconds"] = round(time.perf_counter() - t, 1)
         rows.append(row)
         print(json.dumps(row), file=sys.stderr, flush=True)
-    mean = {k: round(float(np.mean([r[k] for r in rows])), 3) for k in rows[0]
-            if k not in ("seed", "split", "seconds")}
-    print(json.dumps({"zsl_mean": mean, "splits": len(rows), **vars(args)}, indent=2))
+    mean = {
+        k: round(float(np.mean([r[k] for r in rows])), 3)
+        for k in rows[0]
+        if k not in ("seed", "split", "seconds")
+    }
+    options = {k: str(v) for k, v in vars(args).items()}
+    print(json.dumps({"zsl_mean": mean, "splits_run": len(rows), **options}, indent=2))
     return 0
 
 
