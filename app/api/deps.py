@@ -123,6 +123,30 @@ def _access(scope: str):
     return check
 
 
+JSON = "application/json"
+NPY = "application/x-npy"
+
+
+def media_type(request: Request, accepted: tuple[str, ...]) -> str:
+    """The body's media type (``Content-Type`` without parameters) when it is one of
+    ``accepted``; a 415 naming them otherwise. A request without a body needs none."""
+    given = request.headers.get("content-type")
+    if given is None:
+        if request.headers.get("content-length", "0") == "0" and "transfer-encoding" not in request.headers:
+            return accepted[0]
+        raise Problem(415, f"the body has no Content-Type; send one of: {', '.join(accepted)}",
+                      "Content-Type")
+    kind = given.split(";", 1)[0].strip().lower()
+    if kind not in accepted:
+        raise Problem(415, f"Content-Type {kind or '(empty)'!r} is not accepted here; send one "
+                      f"of: {', '.join(accepted)}", "Content-Type")
+    return kind
+
+
+async def require_json(request: Request) -> None:
+    media_type(request, (JSON,))
+
+
 class Recognizing(NamedTuple):
     model: LoadedModel
     service: RecognitionService
@@ -266,5 +290,6 @@ Enroller = Annotated[Principal, Depends(require_enroll)]
 ReadAccess = Depends(require_read)
 EnrollAccess = Depends(require_enroll)
 AdminAccess = Depends(require_admin)
+JsonBody = Depends(require_json)  # 415 for a body that is not JSON
 IdempotencyDep = Annotated[Idempotency, Depends(get_idempotency)]
 PageDep = Annotated[Page, Depends(get_page)]

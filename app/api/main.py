@@ -19,7 +19,7 @@ from fastapi.staticfiles import StaticFiles
 from starlette.datastructures import Headers
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from app.api import problems
+from app.api import openapi, problems
 from app.api.deps import Replay, replay_handler
 from app.api.routes import attributes, classes, describe, health, jobs, models, recognize, samples
 from app.config import Settings
@@ -126,6 +126,7 @@ def create_app(
     for module in (recognize, health, describe, attributes, classes, samples, jobs, models):
         app.include_router(module.router)
     _mount_docs(app)
+    openapi.install(app)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     if settings.cors_origins:  # closed by default: no CORS headers at all
         app.add_middleware(

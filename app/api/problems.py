@@ -16,6 +16,7 @@ from typing import Any
 from fastapi import FastAPI, HTTPException, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from pydantic import BaseModel, Field
 from sqlalchemy.exc import OperationalError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
@@ -99,8 +100,12 @@ def problem_response(
 
 
 def field_name(loc: Sequence[Any]) -> str:
-    """('body', 'samples', 0, 3) -> 'samples[0][3]'; ('path', 'class_id') -> 'class_id'."""
+    """('body', 'samples', 0, 3) -> 'samples[0][3]'; ('path', 'class_id') -> 'class_id'.
+
+    Pydantic's names for the members of a union (``list[list[float]]``, ``function-after[…]``)
+    are left out: they name the validator's internals, not the request."""
     parts = list(loc[1:]) if loc and loc[0] in ("body", "path", "query", "header") else list(loc)
+    parts = [p for p in parts if not _union_member(p)]
     if not parts:
         return "body"
     out = str(parts[0])
@@ -109,10 +114,94 @@ def field_name(loc: Sequence[Any]) -> str:
     return out
 
 
+def _union_member(part: Any) -> bool:
+    return isinstance(part, str) and ("[" in part or part in _SCALAR_TYPES)
+
+
+_SCALAR_TYPES = frozenset({"int", "float", "str", "bool", "none", "bytes"})
+
+# pydantic error type -> what a person reads
+_REASONS = {
+    "float_parsing": "not a number",
+    "float_type": "not a number",
+    "finite_number": "not a finite number",
+    "int_parsing": "not a whole number",
+    "int_type": "not a whole number",
+    "int_from_float": "not a whole number",
+    "list_type": "not a list",
+    "string_type": "not a string",
+    "bool_type": "not true or false",
+    "bool_parsing": "not true or false",
+    "model_type": "not an object",
+    "dict_type": "not an object",
+    "model_attributes_type": "not an object",
+    "missing": "required",
+    "extra_forbidden": "not a field of this request",
+}
+# at most this many distinct problems per answer: a batch with 992 bad values is one problem
+MAX_ERRORS = 5
+
+
 def _validation_reason(err: dict[str, Any]) -> str:
     if err.get("type") == "json_invalid":
         return f"malformed JSON: {err.get('ctx', {}).get('error', 'cannot be parsed')}"
-    return str(err.get("msg", "invalid"))
+    return _REASONS.get(err.get("type", ""), str(err.get("msg", "invalid")))
+
+
+def _value_shown(err: dict[str, Any]) -> str:
+    if err.get("type") not in _REASONS or err["type"] in ("missing", "extra_forbidden"):
+        return ""
+    shown = repr(err.get("input"))
+    return f" (got {shown if len(shown) <= 40 else shown[:37] + '...'})"
+
+
+def _closest_union_member(errors: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Of a union's failed members, keep the one the value came closest to matching.
+
+    A sample is ``list[list[float]] | list[float]``; a bad value fails both, and pydantic
+    reports both. The member whose errors lie deepest in the value is the shape the client
+    meant (ties: the one with fewer errors)."""
+    groups: dict[tuple, dict[str, list[dict[str, Any]]]] = {}
+    kept = []
+    for err in errors:
+        loc = tuple(err.get("loc", ()))
+        at = next((i for i, p in enumerate(loc) if _union_member(p)), None)
+        if at is None:
+            kept.append(err)
+        else:
+            groups.setdefault(loc[:at], {}).setdefault(loc[at], []).append(err)
+    for members in groups.values():
+        best = max(members.values(), key=lambda errs: (max(len(e["loc"]) for e in errs), -len(errs)))
+        kept.extend(_closest_union_member([
+            {**e, "loc": tuple(p for i, p in enumerate(e["loc"]) if i != _first_union(e["loc"]))}
+            for e in best
+        ]))
+    return kept
+
+
+def _first_union(loc: Sequence[Any]) -> int:
+    return next(i for i, p in enumerate(loc) if _union_member(p))
+
+
+def readable_errors(errors: Sequence[dict[str, Any]]) -> list[dict[str, str]]:
+    """Pydantic's errors as at most ``MAX_ERRORS`` ``{"field", "reason"}`` entries, one per
+    distinct problem: the same reason at the same place of each sample (``samples[*][*]``)
+    is one problem, named at its first occurrence with a count of the others."""
+    problems: dict[tuple[str, str], list[tuple[str, str]]] = {}
+    for err in _closest_union_member(errors):
+        # a JSON syntax error's location is a character offset, not a field
+        name = "body" if err.get("type") == "json_invalid" else field_name(err.get("loc", ()))
+        reason = _validation_reason(err)
+        place = "".join("[*]" if isinstance(p, int) else f".{p}" for p in err.get("loc", ())
+                        if not _union_member(p))
+        problems.setdefault((place, reason), []).append((name, reason + _value_shown(err)))
+    out = []
+    for same in list(problems.values())[:MAX_ERRORS]:
+        name, reason = same[0]
+        if len(same) > 1:
+            reason += f"; {len(same) - 1} more like it"
+        out.append({"field": name, "reason": reason})
+    return out
 
 
 async def http_exception_handler(request: Request, exc: StarletteHTTPException) -> ProblemResponse:
@@ -123,14 +212,13 @@ async def http_exception_handler(request: Request, exc: StarletteHTTPException) 
 async def validation_exception_handler(
     request: Request, exc: RequestValidationError
 ) -> ProblemResponse:
-    errors = []
-    for err in exc.errors():
-        loc = err.get("loc", ())
-        # a JSON syntax error's location is a character offset, not a field
-        name = "body" if err.get("type") == "json_invalid" else field_name(loc)
-        errors.append({"field": name, "reason": _validation_reason(err)})
+    errors = readable_errors(exc.errors())
     first = errors[0] if errors else {"field": "body", "reason": "invalid request"}
-    return problem_response(request, 422, f"{first['field']}: {first['reason']}", errors)
+    detail = f"{first['field']}: {first['reason']}"
+    model = request.app.state.holder.current
+    if model is not None and any(e["field"].startswith("sample") for e in errors):
+        detail += f"; one sample has shape {list(model.recognizer.input_shape)}"
+    return problem_response(request, 422, detail, errors)
 
 
 async def framework_exception_handler(request: Request, exc: FrameworkError) -> ProblemResponse:
@@ -164,30 +252,45 @@ def install(app: FastAPI) -> None:
     app.add_exception_handler(Exception, unhandled_exception_handler)
 
 
+class ProblemError(BaseModel):
+    field: str = Field(description="What was wrong: a body path such as `samples[0][3]`, a "
+                       "parameter, or a header such as `X-API-Key`.")
+    reason: str
+
+
+class ProblemDetails(BaseModel):
+    """An RFC 9457 problem: every error of the service has this body."""
+
+    type: str = Field("about:blank", description="Always `about:blank`: `status` says it all.")
+    title: str = Field(description="The status code's phrase.")
+    status: int
+    detail: str = Field(description="What went wrong, for a person.")
+    instance: str | None = Field(None, description="The request's path.")
+    errors: list[ProblemError] = Field(
+        default_factory=list, description="Each thing the request got wrong, by field.")
+
+
+class ValidationProblem(ProblemDetails):
+    """A 422: the request's content is not what the route takes. At most a handful of
+    `errors`, one per distinct problem."""
+
+    errors: list[ProblemError] = Field(min_length=1)
+
+
+# component name -> model; app/api/openapi.py adds them to the schema
+COMPONENTS: dict[str, type[BaseModel]] = {
+    "Problem": ProblemDetails, "ValidationProblem": ValidationProblem,
+}
+
+
 def responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
-    """OpenAPI entries for the problem responses a route can give."""
+    """OpenAPI entries for the problem responses a route can give, each a reference to
+    one shared component (so client generators make one model, not one per response)."""
     return {
-        s: {"description": HTTPStatus(s).phrase, "content": {MEDIA_TYPE: {"schema": PROBLEM_SCHEMA}}}
+        s: {
+            "description": HTTPStatus(s).phrase,
+            "content": {MEDIA_TYPE: {"schema": {
+                "$ref": f"#/components/schemas/{'ValidationProblem' if s == 422 else 'Problem'}"}}},
+        }
         for s in statuses
     }
-
-
-PROBLEM_SCHEMA = {
-    "type": "object",
-    "title": "Problem",
-    "required": ["type", "title", "status", "detail"],
-    "properties": {
-        "type": {"type": "string"},
-        "title": {"type": "string"},
-        "status": {"type": "integer"},
-        "detail": {"type": "string"},
-        "instance": {"type": "string"},
-        "errors": {
-            "type": "array",
-            "items": {
-                "type": "object",
-                "properties": {"field": {"type": "string"}, "reason": {"type": "string"}},
-            },
-        },
-    },
-}

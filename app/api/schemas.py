@@ -113,7 +113,8 @@ class ClassCreated(BaseModel):
 
 # --------------------------------------------------------------------- samples
 class SampleCreate(Strict):
-    sample: SampleData = Field(description="One sample in the active model's input shape.")
+    sample: SampleData = Field(
+        description="One sample, of the shape `input_shape` of `GET /v1/models/active` says.")
 
 
 class SampleCreated(BaseModel):
@@ -162,7 +163,9 @@ class Withdrawal(BaseModel):
 
 # ------------------------------------------------------------------- recognize
 class RecognizeRequest(Strict):
-    samples: list[SampleData] = Field(min_length=1, description="1 … batch_limit samples.")
+    samples: list[SampleData] = Field(
+        min_length=1, description="1 … batch_limit samples (`TACTILE_BATCH_LIMIT`), each of the "
+        "shape `input_shape` of `GET /v1/models/active` says.")
 
 
 class ScoreOut(BaseModel):
@@ -235,7 +238,9 @@ class ModelSummary(BaseModel):
     reason: Literal["bootstrap", "update", "promotion", "withdrawal"]
     base_version: int | None
     sha256: str = Field(validation_alias="bundle_sha256")
-    input_shape: list[int]
+    input_shape: list[int] = Field(
+        description="The shape of one sample to send: `POST /v1/recognize` and `POST /v1/describe` "
+        "take a batch of samples of this shape (nested lists), `POST /v1/classes/{id}/samples` one.")
     metrics: dict[str, Any]
     class_count: int = Field(description="Classes the version recognises, known and novel.")
 
@@ -252,4 +257,5 @@ class ModelList(BaseModel):
 # ---------------------------------------------------------------------- health
 class Health(BaseModel):
     status: Literal["ok", "ready"]
-    model_version: int | None = None
+    model_version: int | None = Field(
+        None, description="The model version this process serves; null until one is loaded.")

@@ -69,8 +69,10 @@ def test_wrong_sample_shape(client, dataset):
 
 
 def test_ragged_sample(client, sample):
+    shape = list(np.shape(sample))
     sample[1] = sample[1][:-1]
-    problem(client.post("/v1/recognize", json={"samples": [sample]}), 422, "samples")
+    body = problem(client.post("/v1/recognize", json={"samples": [sample, sample]}), 422, "samples[0]")
+    assert "rows have different lengths" in body["detail"] and str(shape) in body["detail"]
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])

@@ -9,6 +9,7 @@ from app.api.deps import (
     EnrollAccess,
     Enroller,
     IdempotencyDep,
+    JsonBody,
     MetricsDep,
     ModelDep,
     PageDep,
@@ -71,8 +72,8 @@ def get_class(class_id: RowId, session: SessionDep, model: ModelDep) -> ClassOut
 
 
 @router.post(
-    "", status_code=202, response_model=ClassCreated, dependencies=[EnrollAccess],
-    responses=problems.responses(409),
+    "", status_code=202, response_model=ClassCreated, dependencies=[EnrollAccess, JsonBody],
+    responses=problems.responses(409, 415),
 )
 def register_class(
     body: ClassCreate, session: SessionDep, model: ModelDep, metrics: MetricsDep,
@@ -105,8 +106,8 @@ def register_class(
 
 
 @router.patch(
-    "/{class_id}", status_code=202, response_model=ClassCreated, dependencies=[EnrollAccess],
-    responses=problems.responses(404, 409),
+    "/{class_id}", status_code=202, response_model=ClassCreated,
+    dependencies=[EnrollAccess, JsonBody], responses=problems.responses(404, 409, 415),
 )
 def redescribe_class(
     class_id: RowId, body: ClassDescription, session: SessionDep, model: ModelDep, metrics: MetricsDep,

@@ -15,7 +15,7 @@ router = APIRouter(prefix="/v1", tags=["describe"], responses=problems.responses
 
 @router.post(
     "/describe", response_model=DescribeResponse, openapi_extra=OPENAPI_EXTRA,
-    responses=problems.responses(409, 413, 422, 503),
+    responses=problems.responses(409, 413, 415, 422, 503),
 )
 async def describe(
     request: Request, recognizing: RecognizingDep,

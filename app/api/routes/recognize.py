@@ -8,14 +8,13 @@ from fastapi.exceptions import RequestValidationError
 from pydantic import ValidationError
 
 from app.api import problems
-from app.api.deps import RecognizingDep, api_key_header
+from app.api.deps import JSON, NPY, RecognizingDep, api_key_header, media_type
 from app.api.problems import Problem, blame
 from app.api.schemas import RecognizeRequest, RecognizeResponse
 from app.framework.recognizer import RecognitionBatch
 
 router = APIRouter(prefix="/v1", tags=["recognize"], responses=problems.responses(401, 403, 429))
 
-NPY = "application/x-npy"
 # Bodies above this are parsed in the thread pool, so one big JSON batch cannot stall
 # the event loop.
 PARSE_INLINE_BYTES = 64 * 1024
@@ -27,7 +26,7 @@ OPENAPI_EXTRA = {
     "requestBody": {
         "required": True,
         "content": {
-            "application/json": {"schema": RecognizeRequest.model_json_schema()},
+            JSON: {"schema": {"$ref": "#/components/schemas/RecognizeRequest"}},
             NPY: {
                 "schema": {
                     "type": "string", "format": "binary",
@@ -41,7 +40,7 @@ OPENAPI_EXTRA = {
 
 @router.post(
     "/recognize", response_model=RecognizeResponse, openapi_extra=OPENAPI_EXTRA,
-    responses=problems.responses(413, 422, 503),
+    responses=problems.responses(413, 415, 422, 503),
 )
 async def recognize(request: Request, recognizing: RecognizingDep) -> Response:
     """Recognise a batch of samples as known or novel objects.
@@ -60,14 +59,14 @@ async def read_samples(request: Request, input_shape: tuple[int, ...], batch_lim
                        ) -> tuple[np.ndarray | list, int]:
     """The body's samples (JSON, or .npy by its Content-Type) and how many there are, at
     most ``batch_limit``; the model validates them."""
+    content_type = media_type(request, (JSON, NPY))
     body = await request.body()
-    content_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if content_type == NPY:
         samples = _from_npy(body)
         n = 1 if samples.ndim <= len(input_shape) else len(samples)  # one bare sample
     else:
-        samples = await run_in_threadpool(_from_json, body) if len(body) > PARSE_INLINE_BYTES \
-            else _from_json(body)
+        samples = await run_in_threadpool(_from_json, body, input_shape) \
+            if len(body) > PARSE_INLINE_BYTES else _from_json(body, input_shape)
         n = len(samples)
     if n > batch_limit:
         raise Problem(422, f"{n} samples is more than the batch limit of {batch_limit}", "samples")
@@ -79,8 +78,9 @@ def _to_json(version: int, batch: RecognitionBatch, class_ids: dict[str, int]) -
     return orjson.dumps({"model_version": version, "results": batch.records(class_ids)})
 
 
-def _from_json(body: bytes) -> np.ndarray | list:
-    """The samples of a JSON body: an array when well-formed, else pydantic's errors.
+def _from_json(body: bytes, input_shape: tuple[int, ...]) -> np.ndarray:
+    """The samples of a JSON body: an array when well-formed, else pydantic's errors or a
+    422 naming the first sample not of ``input_shape``.
 
     The fast path (orjson, then one numpy conversion) takes only what the schema accepts:
     an object holding just a non-empty ``samples`` list of numeric samples, each a list
@@ -100,11 +100,25 @@ def _from_json(body: bytes) -> np.ndarray | list:
     # pydantic's own JSON parser; like json.loads it reads NaN/Infinity literals, which
     # the framework then rejects by name
     try:
-        return RecognizeRequest.model_validate_json(body).samples
+        samples = RecognizeRequest.model_validate_json(body).samples
     except ValidationError as exc:
         raise RequestValidationError(
             [{**e, "loc": ("body", *e["loc"])} for e in exc.errors(include_url=False)]
         ) from None
+    return np.stack([_one(s, i, input_shape) for i, s in enumerate(samples)])
+
+
+def _one(sample: list, i: int, input_shape: tuple[int, ...]) -> np.ndarray:
+    try:
+        with np.errstate(over="ignore"):  # beyond float32 is inf: rejected by name later
+            x = np.asarray(sample, dtype=np.float32)
+    except ValueError:  # ragged nesting
+        raise Problem(422, f"samples[{i}]: its rows have different lengths; one sample has shape "
+                           f"{list(input_shape)}", f"samples[{i}]") from None
+    if x.shape != input_shape:
+        raise Problem(422, f"samples[{i}]: shape {list(x.shape)}, where one sample has shape "
+                           f"{list(input_shape)}", f"samples[{i}]")
+    return x
 
 
 def _from_npy(body: bytes) -> np.ndarray:

@@ -6,9 +6,11 @@ from fastapi import APIRouter, Header, Response
 
 from app.api import problems
 from app.api.deps import (
+    NPY,
     EnrollAccess,
     Enroller,
     IdempotencyDep,
+    JsonBody,
     MetricsDep,
     ModelDep,
     PageDep,
@@ -17,7 +19,6 @@ from app.api.deps import (
     SessionDep,
 )
 from app.api.problems import Problem, blame, not_found
-from app.api.routes.recognize import NPY
 from app.api.schemas import (
     JobOut,
     SampleCreate,
@@ -78,7 +79,7 @@ def get_sample(class_id: RowId, sample_id: RowId, session: SessionDep,
 
 @router.post(
     "/{class_id}/samples", status_code=202, response_model=SampleCreated,
-    dependencies=[EnrollAccess], responses=problems.responses(404, 409),
+    dependencies=[EnrollAccess, JsonBody], responses=problems.responses(404, 409, 415),
 )
 def add_sample(
     class_id: RowId, body: SampleCreate, session: SessionDep, model: ModelDep,
@@ -98,10 +99,9 @@ def add_sample(
             "class_id",
         )
     rec = model.recognizer
+    x = one_sample(body.sample, rec.input_shape)
     with blame("sample"):
-        x = rec.validate_samples(body.sample)  # ragged lists become a named 422 too
-    if x.shape[1:] != rec.input_shape or len(x) != 1:
-        raise Problem(422, f"expected one sample of shape {list(rec.input_shape)}", "sample")
+        x = rec.validate_samples(x)  # NaN and infinity become a named 422
     recognized_as = rec.recognize_batch(x).records(model.class_ids)[0]
     with idempotency.writing(session):  # a concurrent retry with this key may win
         row = repo.add_sample(session, class_id, x[0])
@@ -111,6 +111,18 @@ def add_sample(
         idempotency.accept(session, out, job.id, response)
     metrics.enrollments.labels("sample").inc()
     return out
+
+
+def one_sample(data: list, input_shape: tuple[int, ...]) -> np.ndarray:
+    """``data`` as one sample of ``input_shape``, or a 422 that names the shape expected."""
+    expected = f"expected one sample of shape {list(input_shape)}"
+    try:
+        x = np.asarray(data, dtype=np.float32)
+    except ValueError:  # ragged nesting
+        raise Problem(422, f"{expected}; its rows have different lengths", "sample") from None
+    if x.shape != input_shape:
+        raise Problem(422, f"{expected}, got one of shape {list(x.shape)}", "sample")
+    return x[None]
 
 
 @router.delete(
