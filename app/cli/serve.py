@@ -53,11 +53,12 @@ def run(args: argparse.Namespace) -> int:
     finally:
         engine.dispose()
     server = {"log_level": "info", "access_log": settings.access_log, "http": CoalescingHttpToolsProtocol}
-    n = settings.api_processes
-    if n == 1 or not processes.supported():
-        uvicorn.run(create_app(settings), host=settings.host, port=settings.port, **server)
-        return 0
+    n = settings.api_processes if processes.supported() else 1
     port = settings.port or processes.free_port(settings.host)  # one port for all of them
-    logging.getLogger("tactile").info("serving on http://%s:%d with %d API processes",
-                                      settings.host, port, n)
+    log = logging.getLogger("tactile")
+    log.info("serving on http://%s:%d with %d API process%s; API docs at http://%s:%d/docs",
+             settings.host, port, n, "" if n == 1 else "es", settings.host, port)
+    if n == 1:
+        uvicorn.run(create_app(settings), host=settings.host, port=port, **server)
+        return 0
     return processes.serve({**overrides, "port": port}, n, server)

@@ -82,7 +82,7 @@ def test_unknown_model_version_is_a_named_404(client):
 
 
 def test_health_and_readiness(client):
-    assert client.get("/healthz").json() == {"status": "ok", "model_version": None}
+    assert client.get("/healthz").json() == {"status": "ok", "model_version": 1}
     assert client.get("/readyz").json() == {"status": "ready", "model_version": 1}
 
 

@@ -16,9 +16,10 @@ router = APIRouter(tags=["health"])
 
 
 @router.get("/healthz", response_model=Health)
-async def healthz() -> Health:
-    """The process is alive."""
-    return Health(status="ok")
+async def healthz(holder: HolderDep) -> Health:
+    """The process is alive; the model version it serves, once one is loaded."""
+    model = holder.current
+    return Health(status="ok", model_version=None if model is None else model.version)
 
 
 @router.get("/readyz", response_model=Health, responses=problems.responses(503))
