@@ -1,0 +1,138 @@
+"""Jobs: the enrolments, withdrawals and new descriptions queued for the worker, and
+how they are claimed, finished and reported."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from sqlalchemy import func, select, update
+from sqlalchemy.orm import Session
+
+from app.store.models import Job, utcnow
+
+
+def add_job(
+    session: Session,
+    kind: str,
+    class_id: int,
+    sample_id: int | None = None,
+    requested_by: str | None = None,
+) -> Job:
+    job = Job(
+        kind=kind,
+        status="queued",
+        class_id=class_id,
+        sample_id=sample_id,
+        requested_by=requested_by,
+    )
+    session.add(job)
+    session.flush()
+    return job
+
+
+def get_job(session: Session, job_id: int) -> Job | None:
+    return session.get(Job, job_id)
+
+
+def list_jobs(
+    session: Session,
+    after: int | None = None,
+    limit: int | None = None,
+    *,
+    status: str | None = None,
+    kind: str | None = None,
+    class_id: int | None = None,
+) -> list[Job]:
+    """Jobs by id, newest last; with ``after``, those after it; filtered by whatever is given."""
+    stmt = select(Job).order_by(Job.id).limit(limit)
+    if after is not None:
+        stmt = stmt.where(Job.id > after)
+    for column, value in ((Job.status, status), (Job.kind, kind), (Job.class_id, class_id)):
+        if value is not None:
+            stmt = stmt.where(column == value)
+    return list(session.scalars(stmt))
+
+
+def claim_queued_jobs(session: Session, worker_id: str) -> list[Job]:
+    """Mark every queued job running for this worker and commit; returns them.
+
+    FOR UPDATE SKIP LOCKED lets PostgreSQL workers claim side by side (SQLite
+    ignores it and serialises writers); the status guard in the UPDATE makes a
+    lost race harmless on either.
+    """
+    stmt = (
+        select(Job.id)
+        .where(Job.status == "queued")
+        .order_by(Job.id)
+        .with_for_update(skip_locked=True)
+    )
+    ids = list(session.scalars(stmt))
+    if not ids:
+        session.rollback()
+        return []
+    now = utcnow()
+    session.execute(
+        update(Job)
+        .where(Job.id.in_(ids), Job.status == "queued")
+        .values(status="running", claimed_by=worker_id, started_at=now, heartbeat_at=now)
+    )
+    session.commit()
+    mine = select(Job).where(Job.id.in_(ids), Job.claimed_by == worker_id, Job.status == "running")
+    return list(session.scalars(mine.order_by(Job.id)))
+
+
+def requeue_running(session: Session) -> int:
+    """Jobs left ``running`` by a worker that died go back to the queue."""
+    res = session.execute(
+        update(Job)
+        .where(Job.status == "running")
+        .values(status="queued", claimed_by=None, started_at=None, heartbeat_at=None)
+    )
+    return res.rowcount or 0
+
+
+def finish_jobs(
+    session: Session,
+    job_ids: Sequence[int],
+    status: str,
+    version: int | None = None,
+    error: str | None = None,
+) -> None:
+    session.execute(
+        update(Job)
+        .where(Job.id.in_(job_ids))
+        .values(status=status, model_version=version, error=error, finished_at=utcnow())
+    )
+
+
+def registration_failed(session: Session, class_id: int) -> bool:
+    """Whether the class's latest registration job failed (so it may be registered again)."""
+    status = session.scalar(
+        select(Job.status)
+        .where(Job.class_id == class_id, Job.kind == "register_class")
+        .order_by(Job.id.desc())
+        .limit(1)
+    )
+    return status == "failed"
+
+
+def jobs_finished_since(session: Session, since) -> list[tuple]:
+    stmt = (
+        select(Job.id, Job.status, Job.created_at, Job.started_at, Job.finished_at)
+        .where(Job.finished_at >= since)
+        .order_by(Job.finished_at)
+    )
+    return [tuple(row) for row in session.execute(stmt)]
+
+
+FINISHED_JOB_STATUSES = ("succeeded", "failed")
+
+
+def finished_job_ids(session: Session, ids: Sequence[int]) -> list[int]:
+    """Those of ``ids`` whose jobs have succeeded or failed."""
+    stmt = select(Job.id).where(Job.id.in_(ids), Job.status.in_(FINISHED_JOB_STATUSES))
+    return list(session.scalars(stmt))
+
+
+def jobs_by_status(session: Session) -> dict[str, int]:
+    return dict(session.execute(select(Job.status, func.count()).group_by(Job.status)).all())
