@@ -1,6 +1,6 @@
 """Schemathesis against the service's own OpenAPI schema, at benchmark size.
 
-    .venv/bin/python bench/fuzz.py --examples 1000     # 12 operations x 1000 >= 10,000 requests
+    .venv/bin/python -m bench.fuzz --examples 1000     # 12 operations x 1000 >= 10,000 requests
 
 In-process (ASGI) on a fresh SQLite store with the quick test model, or on PostgreSQL
 with --postgres URL. Counts every request; fails (exit 1) on any 5xx or any 4xx that is
@@ -17,8 +17,6 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
 def main() -> int:
@@ -50,8 +48,12 @@ def main() -> int:
         for result in schema.get_all_operations():
             operation = result.ok()
 
-            @settings(max_examples=args.examples, deadline=None, database=None,
-                      suppress_health_check=list(HealthCheck))
+            @settings(
+                max_examples=args.examples,
+                deadline=None,
+                database=None,
+                suppress_health_check=list(HealthCheck),
+            )
             @given(case=operation.as_strategy())
             def exercise(case):
                 response = case.call()
@@ -63,10 +65,12 @@ def main() -> int:
             exercise()
     report = {
         "store": "postgresql" if args.postgres else "sqlite",
-        "requests": sum(statuses.values()), "operations": len(per_op),
+        "requests": sum(statuses.values()),
+        "operations": len(per_op),
         "seconds": round(time.monotonic() - started, 1),
         "statuses": {str(k): v for k, v in sorted(statuses.items())},
-        "failures": len(failures), "first_failures": failures[:10],
+        "failures": len(failures),
+        "first_failures": failures[:10],
     }
     print(json.dumps(report, indent=2))
     return 1 if failures else 0

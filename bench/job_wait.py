@@ -1,6 +1,6 @@
 """What robots waiting for their enrolments cost the API: polling against long polling.
 
-    .venv/bin/python bench/job_wait.py --robots 100 --seconds 20 [--postgres URL]
+    .venv/bin/python -m bench.job_wait --robots 100 --seconds 20 [--postgres URL]
 
 One API process and no worker, so every robot's job stays queued and each robot waits the
 whole phase: the worst case, a retrain that takes long. Phase ``poll``: each robot asks
@@ -23,15 +23,14 @@ from pathlib import Path
 
 import httpx
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from load import process_cpu_s  # noqa: E402
-
-from tests.reliability.harness import Cluster  # noqa: E402
-from tests.service_fixtures import fresh_postgres_database, quick_dataset, unused_vectors  # noqa: E402
+from bench.load import process_cpu_s
+from tests.reliability.harness import Cluster
+from tests.service_fixtures import fresh_postgres_database, quick_dataset, unused_vectors
 
 
-async def robot(client: httpx.AsyncClient, job_id: int, until: float, wait: float, interval: float) -> int:
+async def robot(
+    client: httpx.AsyncClient, job_id: int, until: float, wait: float, interval: float
+) -> int:
     answered = 0
     while time.monotonic() < until:
         params = {"wait": wait} if wait else {}
@@ -43,17 +42,26 @@ async def robot(client: httpx.AsyncClient, job_id: int, until: float, wait: floa
     return answered
 
 
-async def phase(url: str, pid: int, job_ids: list[int], seconds: float, wait: float, interval: float) -> dict:
-    limits = httpx.Limits(max_connections=len(job_ids) + 8, max_keepalive_connections=len(job_ids) + 8)
+async def phase(
+    url: str, pid: int, job_ids: list[int], seconds: float, wait: float, interval: float
+) -> dict:
+    limits = httpx.Limits(
+        max_connections=len(job_ids) + 8, max_keepalive_connections=len(job_ids) + 8
+    )
     async with httpx.AsyncClient(base_url=url, timeout=wait + 30, limits=limits) as client:
         cpu = process_cpu_s(pid)
         start = time.monotonic()
-        counts = await asyncio.gather(*(robot(client, j, start + seconds, wait, interval) for j in job_ids))
+        counts = await asyncio.gather(
+            *(robot(client, j, start + seconds, wait, interval) for j in job_ids)
+        )
         elapsed = time.monotonic() - start
         used = process_cpu_s(pid) - cpu
-    return {"requests": sum(counts), "seconds": round(elapsed, 1),
-            "api_cpu_pct_of_one_core": round(100 * used / elapsed, 1),
-            "api_cpu_ms_per_robot_minute": round(1000 * used / len(job_ids) / (elapsed / 60), 1)}
+    return {
+        "requests": sum(counts),
+        "seconds": round(elapsed, 1),
+        "api_cpu_pct_of_one_core": round(100 * used / elapsed, 1),
+        "api_cpu_ms_per_robot_minute": round(1000 * used / len(job_ids) / (elapsed / 60), 1),
+    }
 
 
 def main() -> int:
@@ -74,7 +82,9 @@ def main() -> int:
             job_ids = []
             with httpx.Client(base_url=api, timeout=30) as c:
                 for i, vector in enumerate(unused_vectors(quick_dataset(), args.robots)):
-                    r = c.post("/v1/classes", json={"name": f"robot-{i}", "attribute_vector": vector})
+                    r = c.post(
+                        "/v1/classes", json={"name": f"robot-{i}", "attribute_vector": vector}
+                    )
                     assert r.status_code == 202, r.text
                     job_ids.append(r.json()["job"]["id"])
             report = {"robots": args.robots, "store": "postgresql" if url else "sqlite"}

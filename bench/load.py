@@ -1,7 +1,7 @@
 """Load on 2 API processes (plus 1 worker) on loopback, SQLite and PostgreSQL side by side.
 
-    .venv/bin/python bench/load.py --seconds 15 --clients 32 [--postgres URL]
-    .venv/bin/python bench/load.py --seconds 15 --clients 32 --embedded   # plain `serve`
+    .venv/bin/python -m bench.load --seconds 15 --clients 32 [--postgres URL]
+    .venv/bin/python -m bench.load --seconds 15 --clients 32 --embedded   # plain `serve`
 
 The service runs as deployed by default (the embedded simulated dataset, the default
 method, no rate limit). A lean asyncio HTTP/1.1 client measures requests/s and p50/p99
@@ -40,13 +40,11 @@ import httpx
 import numpy as np
 import uvloop
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from app.config import Settings  # noqa: E402
-from app.data.sources import load_dataset  # noqa: E402
-from app.framework.registry import DEFAULT_METHOD  # noqa: E402
-from tests.reliability.harness import Cluster  # noqa: E402
-from tests.service_fixtures import fresh_postgres_database, unused_vectors  # noqa: E402
+from app.config import Settings
+from app.data.sources import load_dataset
+from app.framework.registry import DEFAULT_METHOD
+from tests.reliability.harness import Cluster
+from tests.service_fixtures import fresh_postgres_database, unused_vectors
 
 
 def cpu_jiffies() -> list[int] | None:
@@ -127,8 +125,10 @@ class Connection:
 
     @staticmethod
     def prepare(method: str, path: str, body: bytes, content_type: str) -> bytes:
-        head = (f"{method} {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: {content_type}\r\n"
-                f"Content-Length: {len(body)}\r\n\r\n")
+        head = (
+            f"{method} {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: {content_type}\r\n"
+            f"Content-Length: {len(body)}\r\n\r\n"
+        )
         return head.encode() + body
 
     async def send(self, request: bytes) -> int:
@@ -164,8 +164,14 @@ class Connection:
             self.writer = None
 
 
-async def hammer(urls, seconds, clients, request: bytes, stop: asyncio.Event | None = None,
-                 pids: dict[str, int] | None = None) -> dict:
+async def hammer(
+    urls,
+    seconds,
+    clients,
+    request: bytes,
+    stop: asyncio.Event | None = None,
+    pids: dict[str, int] | None = None,
+) -> dict:
     """``clients`` connections, each sending ``request`` back to back for ``seconds`` (or
     until ``stop`` is set). With ``pids`` (name → process id), also the CPU time each of
     those processes and this load generator spent per answered request."""
@@ -194,31 +200,45 @@ async def hammer(urls, seconds, clients, request: bytes, stop: asyncio.Event | N
     pids = {**(pids or {}), "load_generator": os.getpid()}
 
     def cpu() -> dict:  # the load generator's children are the service's processes
-        return {name: process_cpu_s(pid, children=name != "load_generator") for name, pid in pids.items()}
+        return {
+            name: process_cpu_s(pid, children=name != "load_generator")
+            for name, pid in pids.items()
+        }
 
     start, jiffies = time.monotonic(), cpu_jiffies()
     cpu_before = cpu()
     await asyncio.gather(*(one(i) for i in range(clients)))
     elapsed = time.monotonic() - start
     cpu_after = cpu()
-    return {"requests": len(latencies), "errors": errors, "rps": round(len(latencies) / elapsed, 1),
-            "p50_ms": round(pct(latencies, 50), 2), "p99_ms": round(pct(latencies, 99), 2),
-            "cpu_steal_pct": steal_pct(jiffies, cpu_jiffies()),
-            "cpu_us_per_request": cpu_per_request(pids, cpu_before, cpu_after, len(latencies))}
+    return {
+        "requests": len(latencies),
+        "errors": errors,
+        "rps": round(len(latencies) / elapsed, 1),
+        "p50_ms": round(pct(latencies, 50), 2),
+        "p99_ms": round(pct(latencies, 99), 2),
+        "cpu_steal_pct": steal_pct(jiffies, cpu_jiffies()),
+        "cpu_us_per_request": cpu_per_request(pids, cpu_before, cpu_after, len(latencies)),
+    }
 
 
-async def enrollment_to_live(urls, dataset, n: int, offset: int, poll: float) -> dict[str, list[float]]:
+async def enrollment_to_live(
+    urls, dataset, n: int, offset: int, poll: float
+) -> dict[str, list[float]]:
     """Seconds from ``POST /v1/classes``, then from ``POST …/samples`` (one real sample of
     the new class), until its job succeeded with it in the active model ("active"), and
     until every API process answers recognitions with that model version ("served")."""
     vectors = unused_vectors(dataset, offset + n)[offset:]
-    times: dict[str, list[float]] = {f"{kind}_{to}": [] for kind in ("class", "sample")
-                                     for to in ("active", "served")}
+    times: dict[str, list[float]] = {
+        f"{kind}_{to}": [] for kind in ("class", "sample") for to in ("active", "served")
+    }
     # polls on lean keep-alive connections: it shares the 2 cores with the service
     polls = {url: Connection(url) for url in urls}
-    which = Connection.prepare("POST", "/v1/recognize",
-                               json.dumps({"samples": dataset.samples[:1].tolist()}).encode(),
-                               "application/json")
+    which = Connection.prepare(
+        "POST",
+        "/v1/recognize",
+        json.dumps({"samples": dataset.samples[:1].tolist()}).encode(),
+        "application/json",
+    )
     async with httpx.AsyncClient(timeout=30) as c:
 
         async def live(kind: str, job: dict, start: float) -> None:
@@ -231,7 +251,9 @@ async def enrollment_to_live(urls, dataset, n: int, offset: int, poll: float) ->
             pending = list(urls)
             while pending:
                 for url in list(pending):
-                    if (await polls[url].fetch_json(which))["model_version"] >= job["model_version"]:
+                    if (await polls[url].fetch_json(which))["model_version"] >= job[
+                        "model_version"
+                    ]:
                         pending.remove(url)
                 if pending:
                     await asyncio.sleep(poll)
@@ -239,12 +261,15 @@ async def enrollment_to_live(urls, dataset, n: int, offset: int, poll: float) ->
 
         for i, v in enumerate(vectors):
             t = time.perf_counter()
-            r = await c.post(f"{urls[0]}/v1/classes",
-                             json={"name": f"load-{offset + i}", "attribute_vector": v})
+            r = await c.post(
+                f"{urls[0]}/v1/classes", json={"name": f"load-{offset + i}", "attribute_vector": v}
+            )
             await live("class", r.json()["job"], t)
             t = time.perf_counter()
-            r = await c.post(f"{urls[0]}/v1/classes/{r.json()['class']['id']}/samples",
-                             json={"sample": dataset.samples[i].tolist()})
+            r = await c.post(
+                f"{urls[0]}/v1/classes/{r.json()['class']['id']}/samples",
+                json={"sample": dataset.samples[i].tolist()},
+            )
             await live("sample", r.json()["job"], t)
     for conn in polls.values():
         conn.close()
@@ -280,14 +305,25 @@ async def reads(urls, seconds: float, pids: dict[str, int], clients: int = 8) ->
     return out
 
 
-async def run(cluster: Cluster, seconds: float, clients: int, batch: int, dataset,
-              dataset_name: str, phases: set[str], poll: float) -> dict:
+async def run(
+    cluster: Cluster,
+    seconds: float,
+    clients: int,
+    batch: int,
+    dataset,
+    dataset_name: str,
+    phases: set[str],
+    poll: float,
+) -> dict:
     urls = cluster.urls
     pids = {p.name: p.popen.pid for p in cluster.procs if p.popen is not None}
     samples = dataset.samples
-    single = Connection.prepare("POST", "/v1/recognize",
-                                json.dumps({"samples": samples[:1].tolist()}).encode(),
-                                "application/json")
+    single = Connection.prepare(
+        "POST",
+        "/v1/recognize",
+        json.dumps({"samples": samples[:1].tolist()}).encode(),
+        "application/json",
+    )
     buf = io.BytesIO()
     np.save(buf, np.resize(samples, (batch, *samples.shape[1:])).astype(np.float32))
     npy = Connection.prepare("POST", "/v1/recognize", buf.getvalue(), "application/x-npy")
@@ -307,8 +343,9 @@ async def run(cluster: Cluster, seconds: float, clients: int, batch: int, datase
     return out
 
 
-async def enrollment_phases(urls, clients: int, single: bytes, dataset_name: str, poll: float,
-                            pids: dict[str, int]) -> dict:
+async def enrollment_phases(
+    urls, clients: int, single: bytes, dataset_name: str, poll: float, pids: dict[str, int]
+) -> dict:
     """Enrollment to live, idle and under the single-sample load, and that load's figures."""
     out = {}
     loop = asyncio.get_running_loop()
@@ -326,7 +363,8 @@ async def enrollment_phases(urls, clients: int, single: bytes, dataset_name: str
         out[key.replace("_", "_to_", 1) + "_s"] = {
             "idle_median": round(statistics.median(idle[key]), 2),
             "under_load_median": round(statistics.median(busy[key]), 2),
-            "under_load_max": round(max(busy[key]), 2)}
+            "under_load_max": round(max(busy[key]), 2),
+        }
     return out
 
 
@@ -336,20 +374,41 @@ def main() -> int:
     p.add_argument("--seconds", type=float, default=15)
     p.add_argument("--clients", type=int, default=32)
     p.add_argument("--batch", type=int, default=1024)
-    p.add_argument("--embedded", action="store_true",
-                   help="one plain `tactile-zsl serve` (its default number of processes, each with "
-                   "a worker thread) instead of 2 single-process APIs + 1 worker")
-    p.add_argument("--env", action="append", default=[], metavar="TACTILE_X=V",
-                   help="extra service setting for every process (repeatable)")
-    p.add_argument("--dataset", default="simulated",
-                   help="bootstrap data, as TACTILE_DATASET (default: the embedded default)")
-    p.add_argument("--method", default=DEFAULT_METHOD,
-                   help=f"recognition method, as TACTILE_METHOD (default: {DEFAULT_METHOD})")
-    p.add_argument("--poll-seconds", type=float, default=0.02,
-                   help="how often the enrolling client polls its job and the APIs' active model")
-    p.add_argument("--phases", default="single,batch,enroll",
-                   help="which phases to run, comma-separated (default: the three of the goals; "
-                   "'reads' adds the polled read endpoints, 8 clients each)")
+    p.add_argument(
+        "--embedded",
+        action="store_true",
+        help="one plain `tactile-zsl serve` (its default number of processes, each with "
+        "a worker thread) instead of 2 single-process APIs + 1 worker",
+    )
+    p.add_argument(
+        "--env",
+        action="append",
+        default=[],
+        metavar="TACTILE_X=V",
+        help="extra service setting for every process (repeatable)",
+    )
+    p.add_argument(
+        "--dataset",
+        default="simulated",
+        help="bootstrap data, as TACTILE_DATASET (default: the embedded default)",
+    )
+    p.add_argument(
+        "--method",
+        default=DEFAULT_METHOD,
+        help=f"recognition method, as TACTILE_METHOD (default: {DEFAULT_METHOD})",
+    )
+    p.add_argument(
+        "--poll-seconds",
+        type=float,
+        default=0.02,
+        help="how often the enrolling client polls its job and the APIs' active model",
+    )
+    p.add_argument(
+        "--phases",
+        default="single,batch,enroll",
+        help="which phases to run, comma-separated (default: the three of the goals; "
+        "'reads' adds the polled read endpoints, 8 clients each)",
+    )
     args = p.parse_args()
     phases = set(args.phases.split(","))
     known = {"single", "batch", "enroll", "reads"}
@@ -357,25 +416,54 @@ def main() -> int:
         p.error(f"--phases: unknown phase(s) {sorted(phases - known)}")
     dataset = load_dataset(args.dataset)
     # the deployed model, not the tests' quick one; no rate limit: this measures capacity
-    env = {"TACTILE_DATASET": args.dataset, "TACTILE_METHOD": args.method,
-           "TACTILE_METHOD_PARAMS": "{}", "TACTILE_RATE_LIMIT": "0", **dict(a.split("=", 1) for a in args.env)}
+    env = {
+        "TACTILE_DATASET": args.dataset,
+        "TACTILE_METHOD": args.method,
+        "TACTILE_METHOD_PARAMS": "{}",
+        "TACTILE_RATE_LIMIT": "0",
+        **dict(a.split("=", 1) for a in args.env),
+    }
     with tempfile.TemporaryDirectory() as tmp, contextlib.ExitStack() as stack:
         url = stack.enter_context(fresh_postgres_database(args.postgres)) if args.postgres else ""
         # --embedded: plain `serve`, with as many processes as it starts on this machine
-        shape = {"n_api": 1, "n_workers": 0, "embedded_worker": True,
-                 "processes": Settings().api_processes} if args.embedded else {"n_api": 2, "n_workers": 1}
+        shape = (
+            {
+                "n_api": 1,
+                "n_workers": 0,
+                "embedded_worker": True,
+                "processes": Settings().api_processes,
+            }
+            if args.embedded
+            else {"n_api": 2, "n_workers": 1}
+        )
         cluster = Cluster(Path(tmp) / "data", url, extra_env=env, **shape)
         try:
             cluster.start()
             cluster.wait_ready()
-            report = uvloop.run(run(cluster, args.seconds, args.clients, args.batch, dataset, args.dataset, phases,
-                                     args.poll_seconds))
+            report = uvloop.run(
+                run(
+                    cluster,
+                    args.seconds,
+                    args.clients,
+                    args.batch,
+                    dataset,
+                    args.dataset,
+                    phases,
+                    args.poll_seconds,
+                )
+            )
         finally:
             cluster.stop()
-    report.update(store="postgresql" if args.postgres else "sqlite", clients=args.clients,
-                  processes=f"plain serve: {shape['processes']} API process(es) on one port, worker "
-                  "thread in each" if args.embedded else "2 APIs + 1 worker",
-                  dataset=args.dataset, method=args.method)
+    report.update(
+        store="postgresql" if args.postgres else "sqlite",
+        clients=args.clients,
+        processes=f"plain serve: {shape['processes']} API process(es) on one port, worker "
+        "thread in each"
+        if args.embedded
+        else "2 APIs + 1 worker",
+        dataset=args.dataset,
+        method=args.method,
+    )
     print(json.dumps(report, indent=2))
     return 0
 

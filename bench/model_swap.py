@@ -1,7 +1,7 @@
 """What one enrolment costs in model bundles: writing the new version, and an API process
 loading it (CPU time, median of repeats, in-process).
 
-    .venv/bin/python bench/model_swap.py [--method best] [--dataset simulated] [--repeats 20]
+    .venv/bin/python -m bench.model_swap [--method best] [--dataset simulated] [--repeats 20]
 
 The deployed default model (the embedded simulated dataset, `best`) is stored in a fresh
 SQLite store, then the same model with one more novel class, the change an enrolment
@@ -24,20 +24,17 @@ import json
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from app.data.sources import load_dataset  # noqa: E402
-from app.framework import bundle  # noqa: E402
-from app.framework.registry import DEFAULT_METHOD, make_method  # noqa: E402
-from app.service.bootstrap import model_classes  # noqa: E402
-from app.store import bundles, repo, retention  # noqa: E402
-from app.store.db import make_engine, make_sessionmaker  # noqa: E402
-from app.store.models import Base  # noqa: E402
-from tests.service_fixtures import unused_vectors  # noqa: E402
+from app.data.sources import load_dataset
+from app.framework import bundle
+from app.framework.registry import DEFAULT_METHOD, make_method
+from app.service.bootstrap import model_classes
+from app.store import bundles, repo, retention
+from app.store.db import make_engine, make_sessionmaker
+from app.store.models import Base
+from tests.service_fixtures import unused_vectors
 
 
 def cpu_ms(fn, repeats: int) -> float:
@@ -63,27 +60,39 @@ def prune_ms(sessions, base, dataset, repeats: int, remember: bool, keep: int = 
                 n += 1
                 model = base.add_novel_classes([f"enrolled-{n}"], vector)
                 row = repo.add_version(
-                    s, method=model.method, reason="update", base_version=None,
+                    s,
+                    method=model.method,
+                    reason="update",
+                    base_version=None,
                     bundle_sha256=bundles.store_model(s, encoder.split(model)),
-                    input_shape=list(model.input_shape), metrics={}, classes=model_classes(model))
+                    input_shape=list(model.input_shape),
+                    metrics={},
+                    classes=model_classes(model),
+                )
                 repo.activate(s, row.version)
         start = time.process_time()
         with sessions.begin() as s:
-            pruned = retention.prune(s, keep, slack=keep // 10, part_refs=refs if remember else None)
+            pruned = retention.prune(
+                s, keep, slack=keep // 10, part_refs=refs if remember else None
+            )
             assert len(pruned.versions) == keep // 10 + 1
         times.append(time.process_time() - start)
     return round(1000 * float(np.median(times[1:])), 1)
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument("--method", default=DEFAULT_METHOD)
     p.add_argument("--dataset", default="simulated")
     p.add_argument("--repeats", type=int, default=20)
     args = p.parse_args()
     dataset = load_dataset(args.dataset)
     base = make_method(args.method).fit(dataset)
-    enrolled = base.add_novel_classes(["enrolled"], np.asarray(unused_vectors(dataset, 1), np.float32))
+    enrolled = base.add_novel_classes(
+        ["enrolled"], np.asarray(unused_vectors(dataset, 1), np.float32)
+    )
 
     with tempfile.TemporaryDirectory() as tmp:
         engine = make_engine(f"sqlite:///{tmp}/store.db")
@@ -110,18 +119,25 @@ def main() -> int:
         split_head, parts = bundle.split(enrolled)
         encoder.split(base)  # the worker's encoder holds the previous version's parts
         report = {
-            "method": args.method, "dataset": args.dataset,
+            "method": args.method,
+            "dataset": args.dataset,
             "whole_bundle_bytes": len(bundle.to_bytes(enrolled)),
-            "split_head_bytes": len(split_head), "split_parts": len(parts),
+            "split_head_bytes": len(split_head),
+            "split_parts": len(parts),
             "write_whole_ms": cpu_ms(lambda: bundle.to_bytes(enrolled), args.repeats),
             "write_split_from_scratch_ms": cpu_ms(lambda: bundle.split(enrolled), args.repeats),
             # each split follows the other version's, as the worker's do
-            "write_split_after_previous_version_ms": round(cpu_ms(
-                lambda: (encoder.split(enrolled), encoder.split(base)), args.repeats) / 2, 1),
+            "write_split_after_previous_version_ms": round(
+                cpu_ms(lambda: (encoder.split(enrolled), encoder.split(base)), args.repeats) / 2, 1
+            ),
             "load_whole_ms": cpu_ms(lambda: load(whole, None), args.repeats),
             "load_split_parts_cached_ms": round(1000 * float(np.median(cached)), 1),
-            "prune_11_of_111_versions_ms": prune_ms(sessions, base, dataset, min(args.repeats, 5), True),
-            "prune_reading_every_head_ms": prune_ms(sessions, base, dataset, min(args.repeats, 5), False),
+            "prune_11_of_111_versions_ms": prune_ms(
+                sessions, base, dataset, min(args.repeats, 5), True
+            ),
+            "prune_reading_every_head_ms": prune_ms(
+                sessions, base, dataset, min(args.repeats, 5), False
+            ),
         }
         engine.dispose()
     print(json.dumps(report, indent=2))

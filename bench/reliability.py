@@ -1,8 +1,8 @@
 """Reliability runs at full size against real processes (the tests run them small).
 
-    .venv/bin/python bench/reliability.py crash --kills 50 [--postgres URL]
-    .venv/bin/python bench/reliability.py concurrency --clients 100 --postgres URL
-    .venv/bin/python bench/reliability.py hotswap --versions 20 [--postgres URL]
+    .venv/bin/python -m bench.reliability crash --kills 50 [--postgres URL]
+    .venv/bin/python -m bench.reliability concurrency --clients 100 --postgres URL
+    .venv/bin/python -m bench.reliability hotswap --versions 20 [--postgres URL]
 
 --postgres takes a server URL (e.g. postgresql://postgres@127.0.0.1:5432/test); the run
 gets a fresh database on it, dropped afterwards. Prints one JSON report.
@@ -17,11 +17,9 @@ import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from tests.reliability import scenarios  # noqa: E402
-from tests.reliability.harness import Cluster  # noqa: E402
-from tests.service_fixtures import fresh_postgres_database  # noqa: E402
+from tests.reliability import scenarios
+from tests.reliability.harness import Cluster
+from tests.service_fixtures import fresh_postgres_database
 
 
 def main() -> int:
@@ -39,8 +37,9 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp, contextlib.ExitStack() as stack:
         url = stack.enter_context(fresh_postgres_database(args.postgres)) if args.postgres else ""
         env = {"TACTILE_PROMOTION_THRESHOLD": "1000"} if args.scenario == "crash" else {}
-        cluster = Cluster(Path(tmp) / "data", url, n_api=args.apis, n_workers=workers,
-                          extra_env=env)
+        cluster = Cluster(
+            Path(tmp) / "data", url, n_api=args.apis, n_workers=workers, extra_env=env
+        )
         try:
             if args.scenario == "crash":
                 report = scenarios.crash(cluster, args.kills, args.seed)

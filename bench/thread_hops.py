@@ -3,7 +3,7 @@ async route, sync route, and sync route with a sync generator dependency (FastAP
 that dependency's enter and exit in worker threads too), served as `tactile-zsl serve`
 serves (uvicorn, httptools, the one-write transport) and driven by bench/load.py's client.
 
-    .venv/bin/python bench/thread_hops.py [--clients 1] [--seconds 4]
+    .venv/bin/python -m bench.thread_hops [--clients 1] [--seconds 4]
 """
 
 from __future__ import annotations
@@ -13,16 +13,11 @@ import json
 import multiprocessing
 import sys
 import time
-from pathlib import Path
 
 import uvloop
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from load import Connection, hammer  # noqa: E402
-
-from tests.reliability.harness import free_port  # noqa: E402
+from bench.load import Connection, hammer
+from tests.reliability.harness import free_port
 
 
 def serve(port: int) -> None:
@@ -48,11 +43,15 @@ def serve(port: int) -> None:
     def in_threads(_x: int = Depends(one)) -> dict:
         return {"ok": 1}
 
-    uvicorn.run(app, host="127.0.0.1", port=port, log_level="warning", http=CoalescingHttpToolsProtocol)
+    uvicorn.run(
+        app, host="127.0.0.1", port=port, log_level="warning", http=CoalescingHttpToolsProtocol
+    )
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument("--clients", type=int, default=1)
     p.add_argument("--seconds", type=float, default=4)
     args = p.parse_args()
@@ -64,10 +63,20 @@ def main() -> int:
     try:
         for path in ("/async", "/sync", "/sync-with-generator-dependency"):
             request = Connection.prepare("GET", path, b"", "application/json")
-            out = uvloop.run(hammer([f"http://127.0.0.1:{port}"], args.seconds, args.clients, request,
-                                    pids={"app": server.pid}))
-            report[path] = {"rps": out["rps"], "p50_ms": out["p50_ms"],
-                            "cpu_us_per_request": out["cpu_us_per_request"]["app"]}
+            out = uvloop.run(
+                hammer(
+                    [f"http://127.0.0.1:{port}"],
+                    args.seconds,
+                    args.clients,
+                    request,
+                    pids={"app": server.pid},
+                )
+            )
+            report[path] = {
+                "rps": out["rps"],
+                "p50_ms": out["p50_ms"],
+                "cpu_us_per_request": out["cpu_us_per_request"]["app"],
+            }
     finally:
         server.terminate()
         server.join()

@@ -28,21 +28,20 @@ import time
 from pathlib import Path
 
 import numpy as np
+from fastapi.testclient import TestClient
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from fastapi.testclient import TestClient  # noqa: E402
-
-from app.api.main import create_app  # noqa: E402
-from app.config import Settings  # noqa: E402
-from app.framework.registry import DEFAULT_METHOD  # noqa: E402
-from worker import Worker  # noqa: E402
+from app.api.main import create_app
+from app.config import Settings
+from app.framework.registry import DEFAULT_METHOD
+from worker import Worker
 
 PROMOTION = 3  # real samples that make a novel class known
 
 
 def cpu_model() -> str:
-    for line in Path("/proc/cpuinfo").read_text().splitlines() if Path("/proc/cpuinfo").exists() else []:
+    for line in (
+        Path("/proc/cpuinfo").read_text().splitlines() if Path("/proc/cpuinfo").exists() else []
+    ):
         if line.startswith("model name"):
             return line.split(":", 1)[1].strip()
     return platform.machine()
@@ -60,27 +59,45 @@ def timed_round(worker: Worker, client: TestClient, job_id: int) -> float:
 def unused_attributes(client: TestClient, i: int) -> list[str]:
     """The first two attributes (after ``i`` shifts) no class has as its whole vector."""
     names = client.get("/v1/attributes").json()["attributes"]
-    taken = {tuple(c["attributes"]) for c in
-             client.get("/v1/classes", params={"limit": 1000}).json()["classes"]}
-    pairs = [(a, b) for k, a in enumerate(names) for b in names[k + 1:] if (a, b) not in taken]
+    taken = {
+        tuple(c["attributes"])
+        for c in client.get("/v1/classes", params={"limit": 1000}).json()["classes"]
+    }
+    pairs = [(a, b) for k, a in enumerate(names) for b in names[k + 1 :] if (a, b) not in taken]
     return list(pairs[i])
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--dataset", default="simulated")
     ap.add_argument("--method", default=DEFAULT_METHOD)
     ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args()
 
     with tempfile.TemporaryDirectory() as tmp:
-        settings = Settings(data_dir=Path(tmp), embedded_worker=False, dataset=args.dataset,
-                            method=args.method, promotion_threshold=PROMOTION)
+        settings = Settings(
+            data_dir=Path(tmp),
+            embedded_worker=False,
+            dataset=args.dataset,
+            method=args.method,
+            promotion_threshold=PROMOTION,
+        )
         started = time.perf_counter()
         app = create_app(settings)
-        times: dict[str, list[float]] = {k: [] for k in (
-            "register", "add sample", "withdraw sample", "describe anew", "withdraw class",
-            "promotion (full retrain)", "withdraw a promoted class's sample (full retrain)")}
+        times: dict[str, list[float]] = {
+            k: []
+            for k in (
+                "register",
+                "add sample",
+                "withdraw sample",
+                "describe anew",
+                "withdraw class",
+                "promotion (full retrain)",
+                "withdraw a promoted class's sample (full retrain)",
+            )
+        }
         with TestClient(app) as client:
             print(f"bootstrapped in {time.perf_counter() - started:.1f} s", file=sys.stderr)
             worker = Worker(settings, app.state.sessions, on_activate=app.state.holder.serve)
@@ -88,8 +105,10 @@ def main() -> int:
             shape = app.state.holder.current.recognizer.input_shape
             rng = np.random.default_rng(0)
             for i in range(args.repeats):
-                r = client.post("/v1/classes", json={"name": f"object-{i}",
-                                                     "attributes": unused_attributes(client, i)})
+                r = client.post(
+                    "/v1/classes",
+                    json={"name": f"object-{i}", "attributes": unused_attributes(client, i)},
+                )
                 cid = r.json()["class"]["id"]
                 times["register"].append(timed_round(worker, client, r.json()["job"]["id"]))
                 sample_ids = []
@@ -100,13 +119,17 @@ def main() -> int:
                     times["add sample"].append(timed_round(worker, client, r.json()["job"]["id"]))
                 r = client.delete(f"/v1/classes/{cid}/samples/{sample_ids[0]}")
                 times["withdraw sample"].append(timed_round(worker, client, r.json()["job"]["id"]))
-                r = client.patch(f"/v1/classes/{cid}", json={"attributes": unused_attributes(client, i + 1)})
+                r = client.patch(
+                    f"/v1/classes/{cid}", json={"attributes": unused_attributes(client, i + 1)}
+                )
                 times["describe anew"].append(timed_round(worker, client, r.json()["job"]["id"]))
                 r = client.delete(f"/v1/classes/{cid}")
                 times["withdraw class"].append(timed_round(worker, client, r.json()["job"]["id"]))
 
-                r = client.post("/v1/classes", json={"name": f"promoted-{i}",
-                                                     "attributes": unused_attributes(client, i)})
+                r = client.post(
+                    "/v1/classes",
+                    json={"name": f"promoted-{i}", "attributes": unused_attributes(client, i)},
+                )
                 cid = r.json()["class"]["id"]
                 timed_round(worker, client, r.json()["job"]["id"])
                 for k in range(PROMOTION):
@@ -114,18 +137,30 @@ def main() -> int:
                     r = client.post(f"/v1/classes/{cid}/samples", json={"sample": sample})
                     if k < PROMOTION - 1:
                         timed_round(worker, client, r.json()["job"]["id"])
-                times["promotion (full retrain)"].append(timed_round(worker, client, r.json()["job"]["id"]))
+                times["promotion (full retrain)"].append(
+                    timed_round(worker, client, r.json()["job"]["id"])
+                )
                 assert client.get(f"/v1/classes/{cid}").json()["kind"] == "known"
                 r = client.delete(f"/v1/classes/{cid}/samples/{r.json()['sample_id']}")
                 times["withdraw a promoted class's sample (full retrain)"].append(
-                    timed_round(worker, client, r.json()["job"]["id"]))
+                    timed_round(worker, client, r.json()["job"]["id"])
+                )
                 assert client.get(f"/v1/classes/{cid}").json()["kind"] == "novel"
                 print(json.dumps({k: round(v[-1], 2) for k, v in times.items()}), file=sys.stderr)
-    print(json.dumps({
-        "dataset": args.dataset, "method": args.method, "repeats": args.repeats,
-        "median_seconds_to_active": {k: round(float(np.median(v)), 2) for k, v in times.items()},
-        "machine": f"{cpu_model()}, {os.cpu_count()} CPUs, Python {platform.python_version()}",
-    }, indent=2))
+    print(
+        json.dumps(
+            {
+                "dataset": args.dataset,
+                "method": args.method,
+                "repeats": args.repeats,
+                "median_seconds_to_active": {
+                    k: round(float(np.median(v)), 2) for k, v in times.items()
+                },
+                "machine": f"{cpu_model()}, {os.cpu_count()} CPUs, Python {platform.python_version()}",
+            },
+            indent=2,
+        )
+    )
     return 0
 
 
