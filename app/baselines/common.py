@@ -36,12 +36,8 @@ from app.evaluation.splits import SplitError, draw_novel_sets, novel_candidates
 from app.framework.errors import FrameworkError
 from app.framework.novelty import novelty_validation_split, tune_threshold
 from app.framework.recognizer import TactileRecognizer
-from app.framework.scaling import RobustInputScaler
+from app.framework.scaling import RobustInputScaler, flatten
 from app.methods.attributes import softmax
-
-
-def flatten(samples: np.ndarray) -> np.ndarray:
-    return np.asarray(samples, dtype=np.float32).reshape(len(samples), -1)
 
 
 def _check(cond: bool, message: str) -> None:

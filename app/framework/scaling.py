@@ -5,6 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 
+def flatten(samples: np.ndarray) -> np.ndarray:
+    """Samples as flat float32 vectors (N, D): a C x T tactile image becomes one row."""
+    return np.asarray(samples, dtype=np.float32).reshape(len(samples), -1)
+
+
 class RobustInputScaler:
     """sign(x)·log1p(|x|), then centre by the median and divide by a robust spread, then clip.
 

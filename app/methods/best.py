@@ -43,6 +43,7 @@ from app.data.dataset import DatasetError, TactileDataset
 from app.framework.errors import FrameworkError
 from app.framework.recognizer import TactileRecognizer
 from app.framework.runtime import ensure_threads_configured
+from app.framework.scaling import flatten
 from app.methods.attributes import (
     LinearAttributeModel,
     cosine_scores,
@@ -50,7 +51,7 @@ from app.methods.attributes import (
     semantic_autoencoder,
     softmax,
 )
-from app.methods.known import CUES, KnownModel, flatten, relabelled
+from app.methods.known import CUES, KnownModel, relabelled
 
 ensure_threads_configured()  # one BLAS thread unless TACTILE_TORCH_THREADS or serve's settings say otherwise
 

@@ -30,16 +30,12 @@ import numpy as np
 from numba import njit
 
 from app.data.dataset import TactileDataset
-from app.framework.scaling import RobustInputScaler
+from app.framework.scaling import RobustInputScaler, flatten
 from app.methods.forest import FlatForest
 
 CUES = ("one_minus_maxp", "entropy", "neg_gap", "log_knn3", "log_knn1", "log_top")
 _KNN = 3
 _EPS = 1e-6
-
-
-def flatten(samples: np.ndarray) -> np.ndarray:
-    return np.asarray(samples, dtype=np.float32).reshape(len(samples), -1)
 
 
 def fisher_weights(z: np.ndarray, y: np.ndarray, n_classes: int) -> np.ndarray:
