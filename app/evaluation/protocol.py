@@ -41,6 +41,7 @@ from tqdm.auto import tqdm
 from app.data.dataset import TactileDataset
 from app.evaluation import metrics
 from app.evaluation.splits import ZslSplit, make_zsl_splits
+from app.framework.jsonable import jsonable
 from app.framework.recognizer import TactileRecognizer
 from app.framework.registry import method_class
 
@@ -169,7 +170,7 @@ def evaluate_split(
 
     timings["total_s"] = time.perf_counter() - t0
     details["timings"] = timings
-    details["model_metrics"] = _jsonable(getattr(model, "metrics", {}) or {})
+    details["model_metrics"] = jsonable(getattr(model, "metrics", {}) or {})
     return figures, details
 
 
@@ -261,19 +262,4 @@ def evaluate(
             mean, std = metrics.summarize([s[f] for s in entry["splits"]])
             entry["mean"][f], entry["std"][f] = mean, std
     results["elapsed_s"] = time.perf_counter() - started
-    return _jsonable(results)
-
-
-def _jsonable(obj: Any) -> Any:
-    """Plain JSON types; NaN and infinity become None."""
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
+    return jsonable(results)
