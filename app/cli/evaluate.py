@@ -117,7 +117,9 @@ def run(args: argparse.Namespace) -> int:
     from app.evaluation.protocol import evaluate
     from app.evaluation.report import write_report
     from app.framework.registry import DEFAULT_METHOD
+    from app.framework.runtime import configure_threads
 
+    configure_threads()  # TACTILE_TORCH_THREADS, else one thread (see app.framework.runtime)
     methods = args.methods or [DEFAULT_METHOD]
     dataset = load_dataset(args.dataset, seed=args.data_seed)
     results = evaluate(

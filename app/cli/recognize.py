@@ -69,7 +69,9 @@ def _from_json(text: str, where: str):
 
 def run(args: argparse.Namespace) -> int:
     from app.framework import bundle
+    from app.framework.runtime import configure_threads
 
+    configure_threads()  # TACTILE_TORCH_THREADS, else one thread (see app.framework.runtime)
     if args.top_k < 1:
         raise ValueError(f"--top-k must be at least 1, got {args.top_k}")
     if args.lines:

@@ -62,7 +62,9 @@ def run(args: argparse.Namespace) -> int:
     from app.data.sources import load_dataset
     from app.framework import bundle
     from app.framework.registry import DEFAULT_METHOD, make_method
+    from app.framework.runtime import configure_threads
 
+    configure_threads()  # TACTILE_TORCH_THREADS, else one thread (see app.framework.runtime)
     dataset = load_dataset(args.dataset, seed=args.seed)
     params = {"seed": args.seed, **parse_params(args.param)}
     try:

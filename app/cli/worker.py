@@ -23,9 +23,11 @@ def run(args: argparse.Namespace) -> int:
     import threading
 
     from app.config import Settings
+    from app.framework.runtime import configure_threads
     from worker import run_worker
 
     settings = Settings(**({"data_dir": args.data_dir} if args.data_dir else {}))
+    configure_threads(settings.torch_threads)  # as every serve and worker process does
     logging.basicConfig(
         level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )

@@ -26,8 +26,6 @@ from app.framework.runtime import configure_torch
 from app.framework.scaling import RobustInputScaler
 from app.framework.synthesis import generate_features, nearest_real_features
 
-configure_torch()  # one thread unless TACTILE_TORCH_THREADS or serve's settings say otherwise
-
 SYNTHESIS = ("neighbf", "genf")
 GENERATORS = ("adversarial", "alg1")
 NOVELTY_SPACES = ("input", "features")
@@ -167,6 +165,7 @@ class PaperRecognizer(TactileRecognizer):
 
     # ----------------------------------------------------------------- fitting
     def _fit(self, dataset: TactileDataset, progress: bool) -> None:
+        configure_torch()  # torch gets the process's threads (it may have loaded after they were chosen)
         self._check_params()
         t0 = time.perf_counter()
         timings: dict[str, float] = {}
@@ -426,6 +425,7 @@ class PaperRecognizer(TactileRecognizer):
         return meta, arrays
 
     def set_state(self, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        configure_torch()
         for key, value in meta["params"].items():
             setattr(self, key, value)
         self._check_params()

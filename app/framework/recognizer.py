@@ -32,6 +32,7 @@ from app.framework.errors import (
     UnknownClassError,
     UnsupportedOperationError,
 )
+from app.framework.runtime import ensure_threads_configured
 
 
 class ClassScore(NamedTuple):
@@ -220,6 +221,7 @@ class TactileRecognizer(ABC):
         """Train on ``dataset``; every class in it becomes a known class."""
         if len(dataset) == 0:
             raise NotFittedError("cannot fit on an empty dataset")
+        ensure_threads_configured()  # the default thread limits, where no entry point chose them
         self.input_shape = dataset.input_shape
         self.registry = ClassRegistry(
             attribute_names=dataset.attribute_names,

@@ -7,6 +7,14 @@ intra-op threads mostly add contention with the API and other processes on a
 with 1 BLAS thread, 4 ms with 2). The default is therefore one thread for both;
 TACTILE_TORCH_THREADS overrides it.
 
+The process's entry point chooses, by calling ``configure_threads`` once at its start:
+the ``train``, ``evaluate``, ``recognize`` and ``worker`` commands do, and every
+``serve``, API and worker process through ``app.service.bootstrap.ensure_ready``
+(with the ``torch_threads`` setting). Importing a method changes nothing. A process
+that never chose still gets the default: fitting a recognizer or loading one from a
+bundle calls ``ensure_threads_configured`` (and the paper's pipeline
+``configure_torch``), so its first fit or answer already runs on one thread.
+
 Torch is imported only by the methods that use it (the paper's pipeline): a process
 that serves ``best`` never loads it, which saves a second and a few hundred MB.
 """
@@ -22,8 +30,9 @@ _threads: int | None = None  # what the process was configured with; None: not y
 
 
 def configure_threads(threads: int | None = None) -> int:
-    """Limit numpy's BLAS, and torch once it is loaded, to ``threads`` (default:
-    TACTILE_TORCH_THREADS, else 1; 0 leaves the libraries' own defaults)."""
+    """The entry points' call: limit numpy's BLAS, and torch once it is loaded, to
+    ``threads`` (default: TACTILE_TORCH_THREADS, else 1; 0 leaves the libraries' own
+    defaults). Returns the number chosen; calling it again replaces the choice."""
     global _threads
     _threads = threads if threads is not None else int(os.environ.get("TACTILE_TORCH_THREADS", "1"))
     if _threads > 0:
@@ -37,13 +46,15 @@ def configure_threads(threads: int | None = None) -> int:
 
 
 def ensure_threads_configured() -> None:
-    """The default configuration, unless the process chose one already (``serve`` does)."""
+    """The default configuration, unless the process chose one already: what fitting
+    and loading a recognizer call, for processes whose entry point did not."""
     if _threads is None:
         configure_threads()
 
 
 def configure_torch() -> None:
-    """For the modules that use torch, at their import: torch gets the process's threads."""
+    """For the methods that use torch, before they compute (fit, bundle loading): torch
+    gets the process's threads, also when it was loaded after ``configure_threads``."""
     ensure_threads_configured()
     if _threads:
         _set_torch_threads(_threads)

@@ -53,8 +53,6 @@ from app.methods.attributes import (
 )
 from app.methods.known import CUES, KnownModel, relabelled
 
-ensure_threads_configured()  # one BLAS thread unless TACTILE_TORCH_THREADS or serve's settings say otherwise
-
 
 def _check(cond: bool, message: str) -> None:
     if not cond:
@@ -359,6 +357,7 @@ class BestRecognizer(TactileRecognizer):
         return meta, arrays
 
     def set_state(self, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        ensure_threads_configured()  # the default thread limits, where no entry point chose them
         self.distance_components = 0  # bundles made before the parameter measure exact distances
         self.sae_lambda = 0.0  # and those made before the autoencoder have none
         for key, value in meta["params"].items():

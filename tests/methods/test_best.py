@@ -404,16 +404,3 @@ print(json.dumps({{"names": [a["class_name"] for a in answers],
 """)
     assert seen["loaded"] == [] and seen["blas_threads"] == [1], seen
     assert seen["names"] == [a["class_name"] for a in model.recognize_batch(x).records()]
-
-
-def test_torch_gets_the_threads_the_process_chose_when_it_loads_later():
-    seen = _run_python("""
-import json
-from app.framework.runtime import configure_threads
-configure_threads(2)  # as serve does from its settings, before any method is loaded
-import app.methods.best  # its default must not undo that choice
-import app.framework.paper  # loads torch
-import torch
-print(json.dumps({"torch_threads": torch.get_num_threads()}))
-""")
-    assert seen["torch_threads"] == 2
