@@ -108,7 +108,8 @@ def zsl_cases(dataset: TactileDataset, args: argparse.Namespace) -> Iterator[Zsl
     for seed, split in splits(dataset, args, development_only=True):
         started = time.perf_counter()
         train = split.train_dataset(dataset)
-        # sae_lambda 0: the reference stays plain DAP, as in every session before 8
+        # sae_lambda 0: the reference stays plain DAP, as before 8e8eab5 put the
+        # semantic autoencoder into best
         best = make_recognizer("best", {"sae_lambda": 0}, 0).fit(train)
         xn = dataset.samples[split.novel_test_idx]
         yn = split.novel_labels(dataset, split.novel_test_idx)

@@ -1,4 +1,4 @@
-"""Exploration bench (issue 5): per-attribute feature subsets for ``best``'s DAP, dev seeds only.
+"""Exploration bench: per-attribute feature subsets for ``best``'s DAP, dev seeds only.
 
 ``best`` predicts each of the 19 haptic attributes with one L2 logistic regression
 (C = 0.1) on all 188 robust-scaled features (4 exploratory procedures (EPs) x 47
@@ -65,7 +65,7 @@ space sharing the all-features combos, a new selection rule) refits nothing it h
     .venv/bin/python bench/research/explore_attributes.py --space ep --Cs 0.03,0.1,0.3 --seeds 1,2 --novel 6 --cache /tmp/ea/cache
     .venv/bin/python bench/research/explore_attributes.py --space group --Cs 0.1 --seeds 1,2 --novel 6 --cache /tmp/ea/cache
 
-Results (session 3, 2-core machine; 14 splits of seeds 1-2, 6 novel; zsl mean,
+Results (f92636e, 2-core machine; 14 splits of seeds 1-2, 6 novel; zsl mean,
 difference to plain DAP's 0.446 +- its standard error over the 14 paired splits;
 uncached run times 4.2, 1.5, 9.5 and 8.9 min):
 

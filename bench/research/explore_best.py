@@ -1,4 +1,4 @@
-"""Exploration bench for the ``best`` method (issue 5) on the real PHAC-2 features.
+"""Exploration bench for the ``best`` method on the real PHAC-2 features.
 
 Runs the evaluation harness (``app.evaluation.protocol.evaluate``: the same
 splits, whole-trial hold-out and figures as ``tactile-zsl evaluate``) for some

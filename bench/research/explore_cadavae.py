@@ -1,4 +1,4 @@
-"""Exploration bench (issue 5): CADA-VAE zero-shot against best's DAP, development seeds only.
+"""Exploration bench: CADA-VAE zero-shot against best's DAP, development seeds only.
 
 CADA-VAE (Schönfeld et al., CVPR 2019, "Generalized Zero- and Few-Shot Learning via
 Aligned Variational Autoencoders"): two VAEs, one for the robust-scaled PHAC-2 features

@@ -1,4 +1,4 @@
-"""Exploration bench (issue 5, session 7): the two BioTac fingers as augmentation, dev seeds only.
+"""Exploration bench (be3c8fd): the two BioTac fingers as augmentation, dev seeds only.
 
 The paper doubled its data by treating the gripper's two BioTac sensors as two
 samples. Our static features keep the fingers apart (``*_f0`` / ``*_f1``: 10 pairs per

@@ -1,4 +1,4 @@
-"""Novelty cues beyond ``best``'s, on development split seeds (issue 5).
+"""Novelty cues beyond ``best``'s, on development split seeds.
 
 ``best`` scores novelty by the forest's 1 − max-probability plus two distance cues
 (AUROC ~0.98). The targets need both ``nd_known_kept`` and ``nd_novel_detected`` ≥ 0.95,
@@ -18,32 +18,32 @@ scores, each a diagnostic on development seeds only:
   by the forest rather than a distance in the scaled feature space;
 - ``best+proximity·w``: the sum, the proximity cue weighted by 10·w (it spans 0–1, the
   phase cue about 0–7);
-- ``mahalanobis`` (session 8): the smallest Mahalanobis distance to a known class mean,
+- ``mahalanobis`` (ce9010a): the smallest Mahalanobis distance to a known class mean,
   with one shared Ledoit-Wolf-shrunk covariance of ``best``'s scaled inputs (the
   class-conditional Gaussian detector of Lee et al., 2018, on a linear embedding);
-- ``prototype`` (session 8): 1 − the largest cosine similarity to a learned class
+- ``prototype`` (ce9010a): 1 − the largest cosine similarity to a learned class
   prototype, in a small MLP embedding trained with a prototype (normalised-softmax)
-  loss on the same scaled inputs, as issue 5 suggests;
-- ``attributes`` (session 9): how badly ``best``'s attribute classifiers' probabilities fit
+  loss on the same scaled inputs;
+- ``attributes`` (bb24ffa): how badly ``best``'s attribute classifiers' probabilities fit
   the attribute vector of the forest's top known class (mean −log p(a_m = a^k_m | x)): a
   known trial should have its own object's attributes, a novel object's may not match the
   object it is mistaken for; ``attributes-any``: the best fit over all known classes;
 - ``best+<cue>·w``: each added to ``best``'s score after dividing it by its spread
   (interquartile range) on the training trials.
 
-Measured (session 5, seeds 1–2, 14 splits, 6 novel; AUROC / oracle balance): best
+Measured (9472b9c, seeds 1–2, 14 splits, 6 novel; AUROC / oracle balance): best
 0.9731 / 0.9233; phases alone 0.9573 / 0.8922, added at w = 0.2 0.9743 / 0.9272;
 proximity alone 0.9477 / 0.8750, added at best 0.9735 / 0.9246. Neither is adopted: the
 gains are a tenth of the split-to-split spread, and the bound stays far below 0.95.
 
-Measured (session 8, same splits): mahalanobis alone 0.7950 / 0.7176, added 0.9729 /
+Measured (ce9010a, same splits): mahalanobis alone 0.7950 / 0.7176, added 0.9729 /
 0.9226 at w = 0.02 and worse above; prototype alone 0.7496 / 0.6832, added 0.9721 /
 0.9246 at w = 0.02 and worse above. Both embeddings separate known from novel objects far
 less well than the forest: with 8 trials per object, a linear or MLP embedding learned
 from 432 samples does not generalise to unseen trials as the trees do (the MLP twin of
 the paper's network reaches 0.85 known accuracy, the forest 0.99). Not adopted.
 
-Measured (session 9; AUROC / oracle balance): seeds 1–2, 6 novel: attributes alone 0.7885 /
+Measured (bb24ffa; AUROC / oracle balance): seeds 1–2, 6 novel: attributes alone 0.7885 /
 0.7183, added at w = 0.005–0.03 0.9747–0.9762 / 0.9272–0.9352 (best at 0.02, against best's
 0.9731 / 0.9233); attributes-any alone 0.5828 / 0.5503, added at most 0.9744 / 0.9246.
 Seeds 1–2, 12 novel, at 0.02: 0.9818 / 0.9373 against 0.9807 / 0.9339. Fixed at w = 0.02 and
@@ -209,7 +209,7 @@ def main() -> int:
                 scores[cue] = phase_disagreement(
                     by_phase(train.samples), train.labels, by_phase(x), args.trees, seed
                 )
-                weight = 1.0  # as measured in session 5: the raw cue, weights 0.02–0.2
+                weight = 1.0  # as measured in 9472b9c: the raw cue, weights 0.02–0.2
             elif cue == "proximity":
                 scores[cue] = proximity_novelty(
                     flat(train.samples), train.labels, flat(x), args.trees, seed

@@ -1,4 +1,4 @@
-"""Exploration bench (issue 5): soft routing of the mixed known + novel decision, dev seeds only.
+"""Exploration bench: soft routing of the mixed known + novel decision, dev seeds only.
 
 ``best`` routes hard: a sample whose novelty score s exceeds the tuned threshold t goes
 to the zero-shot classifier, any other to the known-class forest. Soft routing (in the

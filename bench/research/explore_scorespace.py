@@ -1,4 +1,4 @@
-"""Exploration bench (issue 5, session 6): zero-shot alternatives to DAP, dev seeds only.
+"""Exploration bench (from 803466d): zero-shot alternatives to DAP, dev seeds only.
 
 DAP multiplies per-attribute probabilities as if the attribute classifiers erred
 independently and were calibrated on unseen objects. Neither holds: "soft",
@@ -18,10 +18,10 @@ model both, learning from the known objects only; the last two change DAP's inpu
 - ``twins<s>``: a novel class is scored by the forest's posterior on the known objects
   whose attribute vectors are close to its own (Hamming kernel of sharpness s).
 - ``svm<C>``: DAP with one RBF-kernel SVM per attribute (Platt-scaled), as Lampert et al.
-- ``znorm`` / ``zmean`` (session 7): DAP scores minus each novel class's mean score (and
+- ``znorm`` / ``zmean`` (be3c8fd): DAP scores minus each novel class's mean score (and
   divided by its spread) over known training samples scored out of object (hubness).
-- ``lda<C>`` (session 7): DAP on the shrinkage-LDA subspace of the known objects.
-- ``sae<s|f><λ>`` (session 8): the semantic autoencoder of Kodirov et al. (2017), matched
+- ``lda<C>`` (be0c591): DAP on the shrinkage-LDA subspace of the known objects.
+- ``sae<s|f><λ>`` (8e8eab5): the semantic autoencoder of Kodirov et al. (2017), matched
   in attribute space (``s``) or feature space (``f``). Seeds 1–2, 6 novel (DAP 0.446):
   alone 0.41–0.45 for every λ from 0.2 to 4000, × DAP 0.442–0.471 (s-space, rising with
   λ to 0.459–0.471 for λ 5–1000); 12 novel (DAP 0.267), 9 of those variants: × DAP
@@ -29,20 +29,20 @@ model both, learning from the known objects only; the last two change DAP's inpu
   (× DAP 0.466 / 0.273) was then fixed and run on untouched seeds 3–4: DAP 0.403 → 0.447
   at 6 novel (paired +0.044 ± 0.041, 10 splits won, 0 lost) and 0.234 → 0.251 at 12
   (+0.017 ± 0.021, 10 won, 2 lost). Adopted into ``best`` (``sae_lambda``).
-- ``bag<B>`` (session 9): DAP with each attribute's probability averaged over B logistic
+- ``bag<B>`` (bb24ffa): DAP with each attribute's probability averaged over B logistic
   regressions, each fitted on a random 80 % of the known objects (an ensemble over object
   subsets). Seeds 1–2, 6 novel: bag20 alone 0.433, × DAP 0.446 (DAP 0.446); with the SAE
   (``saes400+bag20``, scores summed) 0.466 alone and 0.459 × DAP, against DAP × SAE's
   0.466. No gain; not adopted.
 
-- ``saes<λ>@<T>`` (session 9): the SAE's temperature T (10 in ``best``). Seeds 1–2, 6 novel,
+- ``saes<λ>@<T>`` (bb24ffa): the SAE's temperature T (10 in ``best``). Seeds 1–2, 6 novel,
   × DAP: T = 5 0.458, 10 0.466, 15 0.466, 20 0.464, 30 0.462. 10 stays.
-- ``ksae<λ>@<γ>`` (session 9): the SAE on 400 Nyström features of an RBF kernel (γ / D).
+- ``ksae<λ>@<γ>`` (bb24ffa): the SAE on 400 Nyström features of an RBF kernel (γ / D).
   Seeds 1–2, 6 novel: λ 100 / 400 / 1000 at γ 1 alone 0.403–0.405, × DAP 0.426; γ 0.3
   0.443 / 0.438; beside the linear SAE (``saes400+ksae400@1``) 0.439 / 0.440, against the
   linear SAE's 0.444 / 0.466. A non-linear map overfits the 54 objects; not adopted.
 
-- ``dap-C<C>``, ``dap-k<clip>``, ``dap-p<exponent>``, ``dap-fisher`` (session 9): DAP's own
+- ``dap-C<C>``, ``dap-k<clip>``, ``dap-p<exponent>``, ``dap-fisher`` (bb24ffa): DAP's own
   settings again, now beside the SAE (``+saes400``; alone / with the SAE). Seeds 1–2, 6 novel
   (DAP 0.446, DAP + SAE 0.466): C 0.03 / 0.3 / 1: 0.427 / 0.433 / 0.423, with the SAE 0.462 /
   0.451 / 0.430; clip 0.05 / 0.1: 0.431 / 0.407, with the SAE 0.456 / 0.447; inputs weighted by
@@ -51,7 +51,7 @@ model both, learning from the known objects only; the last two change DAP's inpu
   0.273) the prior exponents 0 / 0.5 give 0.237 / 0.266 alone and 0.260 / 0.273 with the SAE:
   what dropping the prior wins with 6 novel objects it loses with 12. Nothing adopted.
 
-- ``ep-dap``, ``ep-sae`` (session 9): one DAP or SAE per exploratory procedure (squeeze,
+- ``ep-dap``, ``ep-sae`` (bb24ffa): one DAP or SAE per exploratory procedure (squeeze,
   hold, slide, move down), their scores summed: experts whose errors come from different
   touches. Seeds 1–2, 6 novel: alone 0.403 / 0.429, × DAP 0.423 / 0.452; ``ep-sae+saes400``
   × DAP 0.462 and ``ep-dap+ep-sae`` × DAP 0.454, against DAP × SAE's 0.466. Not adopted.

@@ -1,4 +1,4 @@
-"""Exploration bench (issue 5): zero-shot alternatives against best's DAP, dev seeds only.
+"""Exploration bench: zero-shot alternatives against best's DAP, dev seeds only.
 
 Approaches (``--approaches``, comma-separated), each reported alone and as a product
 ensemble with DAP (``best``'s zero-shot), on the novel objects' held-out trials of

@@ -1,6 +1,6 @@
-"""How far threshold tuning can take novelty detection: an upper bound (issue 5).
+"""How far threshold tuning can take novelty detection: an upper bound.
 
-The targets ask for ``nd_known_kept`` and ``nd_novel_detected`` both ≥ 0.95. For a
+The detection targets (docs/RESULTS.md) ask for ``nd_known_kept`` and ``nd_novel_detected`` both ≥ 0.95. For a
 given novelty score, no threshold can do better than the *oracle* one, chosen on the
 test samples themselves to maximise min(known test trials kept, novel test samples
 detected). This prints, per split and on average, that oracle figure next to what the
