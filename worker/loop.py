@@ -23,9 +23,9 @@ from sqlalchemy.orm import Session, sessionmaker
 from app.config import Settings
 from app.framework import bundle
 from app.framework.recognizer import TactileRecognizer
-from app.service.bootstrap import extract_features, model_classes
+from app.service.bootstrap import model_classes
 from app.store import bundles, leases, repo, retention
-from app.store.models import Job, ObjectClass, Sample, utcnow
+from app.store.models import Job, ObjectClass, utcnow
 from worker.retrain import Plan, build, known_dataset, make_plan
 
 log = logging.getLogger(__name__)
@@ -38,7 +38,9 @@ class Worker:
     model itself; no build modifies a model afterwards (each one copies its base)."""
 
     def __init__(
-        self, settings: Settings, sessions: sessionmaker[Session],
+        self,
+        settings: Settings,
+        sessions: sessionmaker[Session],
         on_activate: Callable[[int, TactileRecognizer], None] | None = None,
     ) -> None:
         self.settings = settings
@@ -46,15 +48,19 @@ class Worker:
         self.id = leases.new_holder_id()
         self.on_activate = on_activate
         self._cache: tuple[int, TactileRecognizer] | None = None  # last model built or loaded
-        self._encoder = bundle.PartEncoder()  # parts unchanged since the last version are not encoded again
-        self._part_refs: dict[str, set[str]] = {}  # kept heads' parts, so pruning reads new heads only
+        # parts unchanged since the last version are not encoded again
+        self._encoder = bundle.PartEncoder()
+        # kept heads' parts, so pruning reads new heads only
+        self._part_refs: dict[str, set[str]] = {}
 
     # ------------------------------------------------------------------ rounds
     def run_once(self) -> int:
         """One round; returns how many jobs it finished."""
         with self.sessions() as s:
             pending = s.scalar(select(exists().where(Job.status.in_(("queued", "running")))))
-            if not pending or not leases.try_acquire(s, LEASE, self.id, self.settings.lease_seconds):
+            if not pending or not leases.try_acquire(
+                s, LEASE, self.id, self.settings.lease_seconds
+            ):
                 return 0
         try:
             with leases.Renewer(self.sessions, LEASE, self.id, self.settings.lease_seconds):
@@ -116,9 +122,14 @@ class Worker:
             log.exception("could not prune old model versions")
             return
         if pruned:
-            log.info("pruned %d model versions (%d to %d), %d bundle rows (%d bytes)",
-                     len(pruned.versions), pruned.versions[0], pruned.versions[-1],
-                     pruned.bundles, pruned.bytes)
+            log.info(
+                "pruned %d model versions (%d to %d), %d bundle rows (%d bytes)",
+                len(pruned.versions),
+                pruned.versions[0],
+                pruned.versions[-1],
+                pruned.bundles,
+                pruned.bytes,
+            )
 
     # -------------------------------------------------------------------- jobs
     def _process(self, job_ids: list[int]) -> None:
@@ -126,7 +137,9 @@ class Worker:
             self._retrain(job_ids)
         except Exception as exc:
             if len(job_ids) > 1:
-                log.warning("retrain of %d jobs failed (%s); retrying one by one", len(job_ids), exc)
+                log.warning(
+                    "retrain of %d jobs failed (%s); retrying one by one", len(job_ids), exc
+                )
                 for job_id in job_ids:
                     self._process([job_id])
                 return
@@ -145,9 +158,14 @@ class Worker:
         if plan.changes_model:
             log.info(
                 "retraining v%d: %d new class(es), samples for %d, %s",
-                base.version, len(plan.new_classes), len(plan.new_samples),
-                f"full retrain ({plan.reason})" if plan.full_retrain
-                else "novel classes rebuilt (withdrawal)" if plan.rebuild_novel else "incremental",
+                base.version,
+                len(plan.new_classes),
+                len(plan.new_samples),
+                f"full retrain ({plan.reason})"
+                if plan.full_retrain
+                else "novel classes rebuilt (withdrawal)"
+                if plan.rebuild_novel
+                else "incremental",
             )
             new = build(plan, model, self.settings, known)
             split = self._encoder.split(new)  # serialised before the transaction opens
@@ -165,49 +183,40 @@ class Worker:
             self.on_activate(version, new)
 
     def _commit(
-        self, s: Session, base_version: int, new: TactileRecognizer, split: bundles.Split,
-        plan: Plan, job_ids: list[int],
+        self,
+        s: Session,
+        base_version: int,
+        new: TactileRecognizer,
+        split: bundles.Split,
+        plan: Plan,
+        job_ids: list[int],
     ) -> int:
         row = repo.add_version(
-            s, method=new.method, reason=plan.reason,
-            base_version=base_version, bundle_sha256=bundles.store_model(s, split),
-            input_shape=list(new.input_shape), metrics=repo.jsonable(new.metrics),
-            classes=model_classes(new), sample_ids=plan.sample_ids,
+            s,
+            method=new.method,
+            reason=plan.reason,
+            base_version=base_version,
+            bundle_sha256=bundles.store_model(s, split),
+            input_shape=list(new.input_shape),
+            metrics=repo.jsonable(new.metrics),
+            classes=model_classes(new),
+            sample_ids=plan.sample_ids,
         )
         repo.activate(s, row.version)
         repo.finish_jobs(s, job_ids, "succeeded", version=row.version)
         if plan.promote:
             s.execute(
-                update(ObjectClass).where(ObjectClass.id.in_([c.id for c in plan.promote]))
+                update(ObjectClass)
+                .where(ObjectClass.id.in_([c.id for c in plan.promote]))
                 .values(kind="known", promoted_at=utcnow())
             )
         if plan.demote:
             s.execute(
-                update(ObjectClass).where(ObjectClass.id.in_([c.id for c in plan.demote]))
+                update(ObjectClass)
+                .where(ObjectClass.id.in_([c.id for c in plan.demote]))
                 .values(kind="novel", promoted_at=None)
             )
-        # a full retrain has a new encoder: every stored sample's features change
-        new_rows = [r for rows in plan.new_samples.values() for r in rows]
-        ids = None if plan.full_retrain else [r.id for r in new_rows]
-        self._store_features(s, new, ids, row.version)
         return row.version
-
-    @staticmethod
-    def _store_features(
-        s: Session, model: TactileRecognizer, ids: list[int] | None, version: int
-    ) -> None:
-        """CONV_XF features of the samples ``ids`` (all samples when None) under ``version``."""
-        if ids == [] or not hasattr(model, "extract_features"):
-            return
-        stmt = select(Sample.id, Sample.data, Sample.shape)
-        rows = s.execute(stmt if ids is None else stmt.where(Sample.id.in_(ids))).all()
-        if not rows:
-            return
-        feats = extract_features(model, np.stack([repo.decode_sample(d, sh) for _, d, sh in rows]))
-        s.execute(update(Sample), [  # ORM bulk UPDATE by primary key: one executemany
-            {"id": i, "features": repo.encode_sample(f)[0], "features_version": version}
-            for (i, _, _), f in zip(rows, feats, strict=True)
-        ])
 
     def _load(self, s: Session, version: int, sha256: str) -> TactileRecognizer:
         if self._cache is None or self._cache[0] != version:

@@ -30,7 +30,9 @@ def say(msg: str) -> None:
     print(f"tactile-zsl: {msg}", file=sys.stderr, flush=True)
 
 
-def train_base(settings: Settings, progress: bool = True) -> tuple[TactileRecognizer, TactileDataset]:
+def train_base(
+    settings: Settings, progress: bool = True
+) -> tuple[TactileRecognizer, TactileDataset]:
     from app.data.sources import load_dataset  # heavy; only a bootstrap needs it
 
     dataset = load_dataset(settings.dataset)
@@ -43,8 +45,11 @@ def train_base(settings: Settings, progress: bool = True) -> tuple[TactileRecogn
 
 
 def ensure_ready(
-    settings: Settings, engine: Engine, sessions: sessionmaker[Session],
-    trainer: Trainer | None = None, progress: bool = True,
+    settings: Settings,
+    engine: Engine,
+    sessions: sessionmaker[Session],
+    trainer: Trainer | None = None,
+    progress: bool = True,
 ) -> int:
     """Migrate, bootstrap if needed; returns the active model version."""
     from app.framework.runtime import configure_threads
@@ -85,24 +90,19 @@ def store_base_model(s: Session, model: TactileRecognizer, dataset: TactileDatas
     for name, vector in zip(dataset.class_names, dataset.class_attributes, strict=True):
         ids.append(repo.add_class(s, name, repo.vector_key(vector), "known", "dataset").id)
     row = repo.add_version(
-        s, method=model.method, reason="bootstrap", base_version=None,
-        bundle_sha256=bundles.store_model(s, bundle.split(model)), input_shape=list(model.input_shape),
-        metrics=repo.jsonable(model.metrics), classes=model_classes(model), sample_ids=[],
+        s,
+        method=model.method,
+        reason="bootstrap",
+        base_version=None,
+        bundle_sha256=bundles.store_model(s, bundle.split(model)),
+        input_shape=list(model.input_shape),
+        metrics=repo.jsonable(model.metrics),
+        classes=model_classes(model),
+        sample_ids=[],
     )
     repo.activate(s, row.version)
-    repo.add_dataset_samples(
-        s, np.asarray(ids)[dataset.labels], dataset.samples, dataset.trials,
-        features=extract_features(model, dataset.samples), version=row.version,
-    )
+    repo.add_dataset_samples(s, np.asarray(ids)[dataset.labels], dataset.samples, dataset.trials)
     return row.version
-
-
-def extract_features(model: TactileRecognizer, samples: np.ndarray) -> np.ndarray | None:
-    """CONV_XF features when the method has an encoder (the paper's does)."""
-    extract = getattr(model, "extract_features", None)
-    if extract is None or len(samples) == 0:
-        return None
-    return np.concatenate([extract(samples[i : i + 512]) for i in range(0, len(samples), 512)])
 
 
 def model_classes(model: TactileRecognizer) -> list[dict[str, str]]:

@@ -113,9 +113,6 @@ class Sample(Base):
     trial: Mapped[int | None] = mapped_column(Integer)  # dataset trial id, for grouped splits
     shape: Mapped[list[int]] = mapped_column(JSON)
     data: Mapped[bytes] = mapped_column(LargeBinary)
-    # CONV_XF features of the sample under ``features_version`` (filled by the worker)
-    features: Mapped[bytes | None] = mapped_column(LargeBinary)
-    features_version: Mapped[int | None] = mapped_column(Integer)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     withdrawn_at: Mapped[datetime | None] = mapped_column(UTCDateTime)  # see ObjectClass
 
@@ -167,8 +164,10 @@ class ModelVersion(Base):
 class Job(Base):
     """One enrollment waiting for (or folded into) a model version.
 
-    Workers claim queued rows (``SELECT … FOR UPDATE SKIP LOCKED`` on PostgreSQL);
-    ``claimed_by`` and ``heartbeat_at`` let a later lease scheme find dead workers.
+    Workers claim queued rows (``SELECT … FOR UPDATE SKIP LOCKED`` on PostgreSQL) and
+    record themselves in ``claimed_by``. Jobs left ``running`` by a worker that died go back
+    to the queue when the next worker takes the retrain lease (``app.store.leases``), which
+    only one worker holds at a time (``repo.requeue_running``).
     """
 
     __tablename__ = "jobs"
@@ -183,7 +182,6 @@ class Job(Base):
     # the principal that queued it: key:<id>, env:<hash prefix> or addr:<ip> (keys.Principal)
     requested_by: Mapped[str | None] = mapped_column(String(200))
     claimed_by: Mapped[str | None] = mapped_column(String(200))
-    heartbeat_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     started_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
     finished_at: Mapped[datetime | None] = mapped_column(UTCDateTime)

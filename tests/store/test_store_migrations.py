@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import threading
+from collections.abc import Iterator
 
 import pytest
 from alembic import command
@@ -10,13 +12,20 @@ from sqlalchemy import inspect, text
 
 from app.store import migrate
 from app.store.db import make_engine
-from tests.service_fixtures import fresh_postgres_database, postgres_url
+from tests.service_fixtures import fresh_postgres_database, postgres_url, require_postgres
 
-HEAD = "0004"
+HEAD = "0005"
 PG_URL = postgres_url()
 
 TABLES = {
-    "attributes", "classes", "samples", "bundles", "model_versions", "jobs", "leases", "api_keys",
+    "attributes",
+    "classes",
+    "samples",
+    "bundles",
+    "model_versions",
+    "jobs",
+    "leases",
+    "api_keys",
     "idempotency_keys",
 }
 
@@ -46,9 +55,12 @@ def test_going_below_0004_is_refused_while_the_store_holds_withdrawals(tmp_path)
     engine = make_engine(f"sqlite:///{tmp_path / 'w.db'}")
     migrate.upgrade(engine)
     with engine.begin() as conn:
-        conn.execute(text(
-            "INSERT INTO classes (name, kind, origin, attribute_key, created_at, withdrawn_at) "
-            "VALUES ('mug', 'novel', 'enrolled', '01', '2026-11-23', '2026-11-23')"))
+        conn.execute(
+            text(
+                "INSERT INTO classes (name, kind, origin, attribute_key, created_at, withdrawn_at) "
+                "VALUES ('mug', 'novel', 'enrolled', '01', '2026-11-23', '2026-11-23')"
+            )
+        )
     with pytest.raises(RuntimeError, match="1 withdrawn classes and samples"):
         migrate.downgrade(engine, "0003")
     assert migrate.current_revision(engine) == HEAD
@@ -58,6 +70,70 @@ def test_going_below_0004_is_refused_while_the_store_holds_withdrawals(tmp_path)
     migrate.downgrade(engine, "0003")
     assert "withdrawn_at" not in {c["name"] for c in inspect(engine).get_columns("classes")}
     engine.dispose()
+
+
+@contextlib.contextmanager
+def _database(backend: str, tmp_path) -> Iterator[str]:
+    """The URL of an empty SQLite file or of a fresh PostgreSQL database."""
+    if backend == "sqlite":
+        yield f"sqlite:///{tmp_path / 'd.db'}"
+        return
+    with fresh_postgres_database(require_postgres()) as url:
+        yield url
+
+
+def _columns(engine, table: str) -> dict[str, dict]:
+    return {c["name"]: c for c in inspect(engine).get_columns(table)}
+
+
+@pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
+def test_0005_drops_the_write_only_columns_and_keeps_every_row(backend, tmp_path):
+    """Samples' stored features and jobs' heartbeat go; the rows stay. Going back down adds
+    the columns again, nullable and empty."""
+    with _database(backend, tmp_path) as url:
+        engine = make_engine(url)
+        migrate.upgrade(engine, "0004")
+        with engine.begin() as conn:
+            conn.execute(
+                text(
+                    "INSERT INTO classes (id, name, kind, origin, attribute_key, created_at) "
+                    "VALUES (1, 'mug', 'novel', 'enrolled', '01', '2026-11-23')"
+                )
+            )
+            conn.execute(
+                text(
+                    "INSERT INTO samples (id, class_id, origin, shape, data, features, "
+                    "features_version, created_at) VALUES (1, 1, 'enrolled', '[2]', :data, "
+                    ":features, 3, '2026-11-23')"
+                ),
+                {"data": b"12345678", "features": b"feat"},
+            )
+            conn.execute(
+                text(
+                    "INSERT INTO jobs (id, kind, status, class_id, sample_id, heartbeat_at, "
+                    "created_at) VALUES (1, 'add_sample', 'running', 1, 1, '2026-11-23', "
+                    "'2026-11-23')"
+                )
+            )
+        migrate.upgrade(engine)
+        assert migrate.current_revision(engine) == HEAD
+        assert not {"features", "features_version"} & set(_columns(engine, "samples"))
+        assert "heartbeat_at" not in _columns(engine, "jobs")
+        with engine.connect() as conn:
+            sample_id, data = conn.execute(text("SELECT id, data FROM samples")).one()
+            assert (sample_id, bytes(data)) == (1, b"12345678")  # psycopg2 gives a memoryview
+            assert conn.execute(text("SELECT id, status FROM jobs")).one() == (1, "running")
+        migrate.downgrade(engine, "0004")
+        samples, jobs = _columns(engine, "samples"), _columns(engine, "jobs")
+        assert samples["features"]["nullable"] and samples["features_version"]["nullable"]
+        assert jobs["heartbeat_at"]["nullable"]
+        with engine.connect() as conn:
+            data, *dropped = conn.execute(
+                text("SELECT data, features, features_version FROM samples")
+            ).one()
+            assert bytes(data) == b"12345678" and dropped == [None, None]
+            assert conn.execute(text("SELECT heartbeat_at FROM jobs")).scalar() is None
+        engine.dispose()
 
 
 def test_works_from_any_working_directory(tmp_path, monkeypatch):
@@ -109,17 +185,21 @@ def test_a_bare_postgresql_url_uses_the_installed_driver():
 
 
 @pytest.mark.postgres
-@pytest.mark.skipif(not PG_URL, reason="no PostgreSQL reachable (TACTILE_TEST_POSTGRES_URL or the local server)")
+@pytest.mark.skipif(
+    not PG_URL, reason="no PostgreSQL reachable (TACTILE_TEST_POSTGRES_URL or the local server)"
+)
 def test_postgresql_upgrade_downgrade_and_bundle_storage():
     """Bundles (already compressed) skip TOAST compression on PostgreSQL; the whole chain
     also goes down and up again there."""
 
     def bundle_storage(engine) -> str:
         with engine.connect() as conn:
-            return conn.execute(text(
-                "SELECT attstorage FROM pg_attribute "
-                "WHERE attrelid = 'bundles'::regclass AND attname = 'data'"
-            )).scalar()
+            return conn.execute(
+                text(
+                    "SELECT attstorage FROM pg_attribute "
+                    "WHERE attrelid = 'bundles'::regclass AND attname = 'data'"
+                )
+            ).scalar()
 
     with fresh_postgres_database(PG_URL) as url:
         engine = make_engine(url)

@@ -75,10 +75,16 @@ def test_two_workers_never_retrain_at_the_same_time(client, app, settings, datas
 def _orphan(app, holder: str, expires_in: float) -> None:
     """A worker elsewhere claimed the queued jobs, holds the lease, then died."""
     with app.state.sessions.begin() as s:
-        s.add(Lease(name=loop.LEASE, holder=holder,
-                    expires_at=utcnow() + timedelta(seconds=expires_in)))
-        s.execute(update(Job).where(Job.status == "queued").values(
-            status="running", claimed_by=holder, started_at=utcnow(), heartbeat_at=utcnow()))
+        s.add(
+            Lease(
+                name=loop.LEASE, holder=holder, expires_at=utcnow() + timedelta(seconds=expires_in)
+            )
+        )
+        s.execute(
+            update(Job)
+            .where(Job.status == "queued")
+            .values(status="running", claimed_by=holder, started_at=utcnow())
+        )
 
 
 def test_a_dead_workers_job_is_taken_over_after_its_lease_expires(client, app, worker, dataset):

@@ -102,15 +102,12 @@ def add_dataset_samples(
     class_ids: Sequence[int],
     samples: np.ndarray,
     trials: Sequence[int],
-    features: np.ndarray | None = None,
-    version: int | None = None,
 ) -> None:
     """Bulk insert (one executemany) of a whole training set."""
     now = utcnow()
     rows = []
-    for i, (cid, x, trial) in enumerate(zip(class_ids, samples, trials, strict=True)):
+    for cid, x, trial in zip(class_ids, samples, trials, strict=True):
         data, shape = encode_sample(x)
-        feats = None if features is None else encode_sample(features[i])[0]
         rows.append(
             {
                 "class_id": int(cid),
@@ -118,8 +115,6 @@ def add_dataset_samples(
                 "trial": int(trial),
                 "shape": shape,
                 "data": data,
-                "features": feats,
-                "features_version": version,
                 "created_at": now,
             }
         )
@@ -168,7 +163,7 @@ def _live_samples(class_id: int, *columns: Any) -> Select:
 
 def get_sample(session: Session, class_id: int, sample_id: int) -> Sample | None:
     """The live sample ``sample_id`` of class ``class_id`` (its data left unread)."""
-    row = session.get(Sample, sample_id, options=[defer(Sample.data), defer(Sample.features)])
+    row = session.get(Sample, sample_id, options=[defer(Sample.data)])
     live = row is not None and row.class_id == class_id and row.withdrawn_at is None
     return row if live else None
 

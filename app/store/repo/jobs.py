@@ -74,7 +74,7 @@ def claim_queued_jobs(session: Session, worker_id: str) -> list[Job]:
     session.execute(
         update(Job)
         .where(Job.id.in_(ids), Job.status == "queued")
-        .values(status="running", claimed_by=worker_id, started_at=now, heartbeat_at=now)
+        .values(status="running", claimed_by=worker_id, started_at=now)
     )
     session.commit()
     mine = select(Job).where(Job.id.in_(ids), Job.claimed_by == worker_id, Job.status == "running")
@@ -86,7 +86,7 @@ def requeue_running(session: Session) -> int:
     res = session.execute(
         update(Job)
         .where(Job.status == "running")
-        .values(status="queued", claimed_by=None, started_at=None, heartbeat_at=None)
+        .values(status="queued", claimed_by=None, started_at=None)
     )
     return res.rowcount or 0
 
