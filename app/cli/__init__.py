@@ -10,7 +10,7 @@ import argparse
 import importlib
 import sys
 
-SUBCOMMANDS = ["train", "evaluate", "recognize", "serve", "worker", "apikey", "store"]
+SUBCOMMANDS = ["train", "evaluate", "recognize", "serve", "worker", "apikey", "store", "dataset"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -20,13 +20,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in SUBCOMMANDS:
-        try:
-            module = importlib.import_module(f"app.cli.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name == f"app.cli.{name}":
-                continue  # sub-command not built into this version
-            raise
-        module.register(sub)
+        importlib.import_module(f"app.cli.{name}").register(sub)
     return parser
 
 
