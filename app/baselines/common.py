@@ -35,21 +35,48 @@ from app.data.dataset import DatasetError, TactileDataset
 from app.evaluation.splits import SplitError, draw_novel_sets, novel_candidates
 from app.framework.errors import FrameworkError
 from app.framework.novelty import novelty_validation_split, tune_threshold
+from app.framework.params import at_least, between
 from app.framework.recognizer import TactileRecognizer
 from app.framework.scaling import RobustInputScaler, flatten
 from app.methods.attributes import softmax
 
 
-def _check(cond: bool, message: str) -> None:
-    if not cond:
-        raise FrameworkError(message)
-
-
 class ForestBaseline(TactileRecognizer):
     """Base of the baselines; subclasses implement the zero-shot part (``_fit_zsl``,
-    ``_prepare_novel``, ``_zsl_proba``). Hyper-parameters are constructor arguments."""
+    ``_prepare_novel``, ``_zsl_proba``) and take these parameters after their own.
+
+    Parameters
+    ----------
+    n_estimators : int, default 300
+        Trees in the extra-trees forest that classifies the known objects (its
+        max-probability is the novelty score), and in the probe forest of the novelty
+        tuning. At least 1.
+    max_features : {"sqrt", "log2"} or float, default "sqrt"
+        Features each split of a tree draws from, as scikit-learn's
+        ``ExtraTreesClassifier`` takes it.
+    min_samples_leaf : int, default 1
+        Fewest training samples in a leaf of those trees. At least 1.
+    novelty_val_fraction : float, default 0.1
+        Share of the known objects that act as validation-novel objects (Y_val of
+        Sect. VI-B) when the novelty threshold is tuned. In (0, 1).
+    novelty_holdout_trials : int, default 1
+        Whole trials of every other known object held out as its known validation
+        samples (X_te of Sect. VI-B) in that tuning. At least 1.
+    seed : int, default 0
+        Seed of the forests, of the choice of validation objects for the novelty
+        threshold, and of the validation folds that choose zero-shot settings.
+    n_jobs : int or None, default -1
+        Parallel jobs of scikit-learn's forests (-1: every core, None: one).
+    """
 
     method = "forest-baseline"
+
+    _parameter_constraints = {
+        "n_estimators": at_least(1),
+        "min_samples_leaf": at_least(1),
+        "novelty_val_fraction": between(0, 1),
+        "novelty_holdout_trials": at_least(1),
+    }
 
     def __init__(
         self,
@@ -62,31 +89,21 @@ class ForestBaseline(TactileRecognizer):
         n_jobs: int | None = -1,
     ) -> None:
         super().__init__()
-        _check(int(n_estimators) >= 1, f"n_estimators must be at least 1, got {n_estimators}")
-        _check(
-            int(min_samples_leaf) >= 1,
-            f"min_samples_leaf must be at least 1, got {min_samples_leaf}",
-        )
-        _check(
-            0 < novelty_val_fraction < 1,
-            f"novelty_val_fraction must lie in (0, 1), got {novelty_val_fraction}",
-        )
-        _check(int(novelty_holdout_trials) >= 1, "novelty_holdout_trials must be at least 1")
-        self.n_estimators = int(n_estimators)
+        self.n_estimators = n_estimators
         self.max_features = max_features
-        self.min_samples_leaf = int(min_samples_leaf)
-        self.novelty_val_fraction = float(novelty_val_fraction)
-        self.novelty_holdout_trials = int(novelty_holdout_trials)
-        self.seed = int(seed)
+        self.min_samples_leaf = min_samples_leaf
+        self.novelty_val_fraction = novelty_val_fraction
+        self.novelty_holdout_trials = novelty_holdout_trials
+        self.seed = seed
         self.n_jobs = n_jobs
 
     # ------------------------------------------------------------------ parts
     def _forest(self) -> ExtraTreesClassifier:
         return ExtraTreesClassifier(
-            n_estimators=self.n_estimators,
+            n_estimators=int(self.n_estimators),
             max_features=self.max_features,
-            min_samples_leaf=self.min_samples_leaf,
-            random_state=self.seed,
+            min_samples_leaf=int(self.min_samples_leaf),
+            random_state=int(self.seed),
             n_jobs=self.n_jobs,
         )
 
@@ -116,7 +133,10 @@ class ForestBaseline(TactileRecognizer):
 
         # Sect. VI-B threshold tuning with a probe forest that never sees the validation data.
         fit_idx, known_idx, val_idx = novelty_validation_split(
-            dataset, self.novelty_val_fraction, self.novelty_holdout_trials, seed=self.seed
+            dataset,
+            float(self.novelty_val_fraction),
+            int(self.novelty_holdout_trials),
+            seed=int(self.seed),
         )
         if len(known_idx) == 0 or len(val_idx) == 0:
             raise DatasetError("novelty tuning needs held-out trials and validation-novel objects")

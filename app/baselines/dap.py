@@ -25,8 +25,9 @@ from scipy.optimize import minimize
 from scipy.special import expit
 from sklearn.ensemble import ExtraTreesClassifier
 
-from app.baselines.common import ForestBaseline, _check, validation_folds
+from app.baselines.common import ForestBaseline, validation_folds
 from app.data.dataset import TactileDataset
+from app.framework.params import at_least, between, either, number, one_of
 from app.methods.attributes import dap_log_scores, softmax
 
 ATTRIBUTE_MODELS = ("logistic", "extratrees")
@@ -125,9 +126,43 @@ def fit_logistic(
 
 
 class DAPRecognizer(ForestBaseline):
-    """DAP zero-shot on robust-scaled inputs; known classes and novelty by extra-trees."""
+    """DAP zero-shot on robust-scaled inputs; known classes and novelty by extra-trees.
+
+    Parameters
+    ----------
+    attribute_model : {"logistic", "extratrees"}, default "logistic"
+        The attribute classifiers p(a_m | x): one L2-regularised logistic regression
+        per attribute, or one multi-output extra-trees forest for all of them.
+    C : float or "auto", default "auto"
+        Inverse strength of the logistic regressions' L2 penalty; "auto" chooses it
+        from ``C_GRID`` by the mean zero-shot accuracy on validation objects carved
+        from the known set. Positive or "auto"; unused by "extratrees".
+    attribute_estimators : int, default 300
+        Trees of the multi-output attribute forest ("extratrees" only).
+    clip : float, default 0.02
+        Attribute probabilities, and the attribute prior, are clipped to
+        [clip, 1 - clip], so that no single attribute classifier can veto a novel
+        class alone. In (0, 0.5).
+    val_folds : int, default 3
+        Sets of validation objects over which "auto" measures each C. At least 1.
+    val_fraction : float, default 0.1
+        Share of the known objects in each set of validation objects (at least 2).
+        In (0, 1).
+    n_estimators, max_features, min_samples_leaf, novelty_val_fraction, novelty_holdout_trials, seed, n_jobs
+        The known-class forest and the novelty tuning, with ``ForestBaseline``'s
+        meanings and defaults.
+    """
 
     method = "dap"
+
+    _parameter_constraints = {
+        **ForestBaseline._parameter_constraints,
+        "attribute_model": one_of(ATTRIBUTE_MODELS),
+        "C": either(one_of(("auto",)), number(0), must="be positive or 'auto'"),
+        "clip": between(0, 0.5),
+        "val_folds": at_least(1),
+        "val_fraction": between(0, 1),
+    }
 
     def __init__(
         self,
@@ -137,35 +172,40 @@ class DAPRecognizer(ForestBaseline):
         clip: float = 0.02,
         val_folds: int = 3,
         val_fraction: float = 0.1,
-        **base,
+        n_estimators: int = 300,
+        max_features: str | float = "sqrt",
+        min_samples_leaf: int = 1,
+        novelty_val_fraction: float = 0.1,
+        novelty_holdout_trials: int = 1,
+        seed: int = 0,
+        n_jobs: int | None = -1,
     ) -> None:
-        super().__init__(**base)
-        _check(
-            attribute_model in ATTRIBUTE_MODELS,
-            f"attribute_model must be one of {ATTRIBUTE_MODELS}, got {attribute_model!r}",
+        super().__init__(
+            n_estimators=n_estimators,
+            max_features=max_features,
+            min_samples_leaf=min_samples_leaf,
+            novelty_val_fraction=novelty_val_fraction,
+            novelty_holdout_trials=novelty_holdout_trials,
+            seed=seed,
+            n_jobs=n_jobs,
         )
-        _check(
-            C == "auto" or (isinstance(C, int | float) and C > 0),
-            f"C must be positive or 'auto', got {C!r}",
-        )
-        _check(0 < clip < 0.5, f"clip must lie in (0, 0.5), got {clip}")
-        _check(int(val_folds) >= 1, f"val_folds must be at least 1, got {val_folds}")
-        _check(0 < val_fraction < 1, f"val_fraction must lie in (0, 1), got {val_fraction}")
         self.attribute_model = attribute_model
         self.C = C
-        self.attribute_estimators = int(attribute_estimators)
-        self.clip = float(clip)
-        self.val_folds = int(val_folds)
-        self.val_fraction = float(val_fraction)
+        self.attribute_estimators = attribute_estimators
+        self.clip = clip
+        self.val_folds = val_folds
+        self.val_fraction = val_fraction
 
     def _predictor(self, C: float) -> AttributePredictor:
         return AttributePredictor(
-            self.attribute_model, C, self.attribute_estimators, self.seed, self.n_jobs
+            self.attribute_model, C, int(self.attribute_estimators), int(self.seed), self.n_jobs
         )
 
     def _choose_C(self, z: np.ndarray, dataset: TactileDataset) -> tuple[float, dict]:
         """C with the best mean ZSL accuracy on validation objects carved from the known set."""
-        folds = validation_folds(dataset, self.val_folds, self.val_fraction, self.seed)
+        folds = validation_folds(
+            dataset, int(self.val_folds), float(self.val_fraction), int(self.seed)
+        )
         if not folds:
             return 0.1, {}
         attrs, y = dataset.class_attributes, dataset.labels
@@ -180,7 +220,7 @@ class DAPRecognizer(ForestBaseline):
                     previous.predict_proba(z[val]),
                     attrs[val_c],
                     attrs[fit_c].mean(axis=0),
-                    self.clip,
+                    float(self.clip),
                 )
                 accs[C].append(float(np.mean(s.argmax(axis=1) == truth)))
         scores = {C: float(np.mean(a)) for C, a in accs.items()}
@@ -202,4 +242,6 @@ class DAPRecognizer(ForestBaseline):
 
     def _zsl_proba(self, z: np.ndarray) -> np.ndarray:
         p = self.attributes_.predict_proba(z)
-        return softmax(dap_log_scores(p, self.novel_vectors_, self.attribute_prior_, self.clip))
+        return softmax(
+            dap_log_scores(p, self.novel_vectors_, self.attribute_prior_, float(self.clip))
+        )

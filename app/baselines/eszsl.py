@@ -22,8 +22,17 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from app.baselines.common import ForestBaseline, _check, validation_folds
+from app.baselines.common import ForestBaseline, validation_folds
 from app.data.dataset import TactileDataset
+from app.framework.params import (
+    Constraint,
+    at_least,
+    between,
+    check,
+    either,
+    one_of,
+    positive_values,
+)
 from app.methods.attributes import softmax
 
 GAMMA_GRID = (1e-1, 1.0, 1e1, 1e2, 1e3, 1e4)
@@ -83,9 +92,54 @@ def signatures(attributes: np.ndarray, mode: str, known_mean: np.ndarray) -> np.
 
 
 class ESZSLRecognizer(ForestBaseline):
-    """ESZSL zero-shot on robust-scaled inputs; known classes and novelty by extra-trees."""
+    """ESZSL zero-shot on robust-scaled inputs; known classes and novelty by extra-trees.
+
+    Parameters
+    ----------
+    gamma : float or None, default None
+        γ, the ridge on the samples' side, (X^T X + γ I)^{-1}. None: chosen from
+        ``gammas`` on validation objects. Positive or None.
+    lam : float or None, default None
+        λ, the ridge on the signatures' side, (S S^T + λ I)^{-1}. None: chosen from
+        ``lambdas`` on validation objects. Positive or None.
+    signature : {"raw", "centered", "l2", "centered_l2"} or None, default None
+        How a class's 0/1 attribute vector becomes its signature: as it is, minus the
+        known classes' mean vector, scaled to unit length, or both. None: chosen from
+        ``signature_modes`` on validation objects.
+    gammas : sequence of float, default ``GAMMA_GRID``
+        The candidates for γ when ``gamma`` is None. Positive values.
+    lambdas : sequence of float, default ``LAMBDA_GRID``
+        The candidates for λ when ``lam`` is None. Positive values.
+    signature_modes : sequence of str, default ``SIGNATURE_MODES``
+        The candidates for the signature when ``signature`` is None.
+    val_folds : int, default 5
+        Sets of validation objects, carved from the known set, over which every
+        candidate's mean zero-shot accuracy is measured. At least 1.
+    val_fraction : float, default 0.1
+        Share of the known objects in each set of validation objects (at least 2).
+        In (0, 1).
+    n_estimators, max_features, min_samples_leaf, novelty_val_fraction, novelty_holdout_trials, seed, n_jobs
+        The known-class forest and the novelty tuning, with ``ForestBaseline``'s
+        meanings and defaults.
+    """
 
     method = "eszsl"
+
+    _parameter_constraints = {
+        **ForestBaseline._parameter_constraints,
+        **{
+            name: either(
+                one_of((None,)),
+                Constraint(lambda v: v > 0, "be positive"),
+                must="be positive or None (chosen on validation)",
+            )
+            for name in ("gamma", "lam")
+        },
+        "gammas": positive_values(),
+        "lambdas": positive_values(),
+        "val_folds": at_least(1),
+        "val_fraction": between(0, 1),
+    }
 
     def __init__(
         self,
@@ -97,39 +151,53 @@ class ESZSLRecognizer(ForestBaseline):
         signature_modes: Sequence[str] = SIGNATURE_MODES,
         val_folds: int = 5,
         val_fraction: float = 0.1,
-        **base,
+        n_estimators: int = 300,
+        max_features: str | float = "sqrt",
+        min_samples_leaf: int = 1,
+        novelty_val_fraction: float = 0.1,
+        novelty_holdout_trials: int = 1,
+        seed: int = 0,
+        n_jobs: int | None = -1,
     ) -> None:
-        super().__init__(**base)
-        for name, value in (("gamma", gamma), ("lam", lam)):
-            _check(
-                value is None or value > 0,
-                f"{name} must be positive or None (chosen on validation), got {value}",
-            )
-        _check(len(gammas) > 0 and min(gammas) > 0, "gammas must be positive values")
-        _check(len(lambdas) > 0 and min(lambdas) > 0, "lambdas must be positive values")
-        modes = (signature,) if signature is not None else tuple(signature_modes)
-        _check(
-            len(modes) > 0 and all(m in SIGNATURE_MODES for m in modes),
-            f"signature modes must be among {SIGNATURE_MODES}, got {modes}",
+        super().__init__(
+            n_estimators=n_estimators,
+            max_features=max_features,
+            min_samples_leaf=min_samples_leaf,
+            novelty_val_fraction=novelty_val_fraction,
+            novelty_holdout_trials=novelty_holdout_trials,
+            seed=seed,
+            n_jobs=n_jobs,
         )
-        _check(int(val_folds) >= 1, f"val_folds must be at least 1, got {val_folds}")
-        _check(0 < val_fraction < 1, f"val_fraction must lie in (0, 1), got {val_fraction}")
         self.gamma = gamma
         self.lam = lam
         self.signature = signature
-        self.gammas = tuple(float(g) for g in gammas)
-        self.lambdas = tuple(float(v) for v in lambdas)
-        self.signature_modes = modes
-        self.val_folds = int(val_folds)
-        self.val_fraction = float(val_fraction)
+        self.gammas = gammas
+        self.lambdas = lambdas
+        self.signature_modes = signature_modes
+        self.val_folds = val_folds
+        self.val_fraction = val_fraction
+
+    def _modes(self) -> tuple[str, ...]:
+        """The signatures to choose from: ``signature`` alone when given."""
+        return (self.signature,) if self.signature is not None else tuple(self.signature_modes)
+
+    def _validate_params(self) -> None:
+        super()._validate_params()
+        modes = self._modes()
+        check(
+            len(modes) > 0 and all(m in SIGNATURE_MODES for m in modes),
+            f"signature modes must be among {SIGNATURE_MODES}, got {modes}",
+        )
 
     def _choose(self, z: np.ndarray, dataset: TactileDataset) -> tuple[str, float, float, dict]:
-        gammas = (self.gamma,) if self.gamma is not None else self.gammas
-        lambdas = (self.lam,) if self.lam is not None else self.lambdas
-        modes = self.signature_modes
+        gammas = (self.gamma,) if self.gamma is not None else tuple(float(g) for g in self.gammas)
+        lambdas = (self.lam,) if self.lam is not None else tuple(float(v) for v in self.lambdas)
+        modes = self._modes()
         if len(gammas) == 1 and len(lambdas) == 1 and len(modes) == 1:
             return modes[0], gammas[0], lambdas[0], {}
-        folds = validation_folds(dataset, self.val_folds, self.val_fraction, self.seed)
+        folds = validation_folds(
+            dataset, int(self.val_folds), float(self.val_fraction), int(self.seed)
+        )
         if not folds:  # too few known objects to carve validation objects: middle of the grid
             return modes[0], gammas[len(gammas) // 2], lambdas[len(lambdas) // 2], {}
         attrs, y = dataset.class_attributes, dataset.labels

@@ -15,12 +15,46 @@ from app.baselines.dap import DAPRecognizer
 
 
 class ExtraTreesRecognizer(DAPRecognizer):
+    """DAP with a multi-output extra-trees forest as its attribute classifiers.
+
+    Parameters
+    ----------
+    attribute_estimators : int, default 300
+        Trees of the multi-output forest that predicts every attribute from a sample.
+    clip : float, default 0.02
+        Attribute probabilities, and the attribute prior, are clipped to
+        [clip, 1 - clip], so that no single attribute classifier can veto a novel
+        class alone. In (0, 0.5).
+    n_estimators, max_features, min_samples_leaf, novelty_val_fraction, novelty_holdout_trials, seed, n_jobs
+        The known-class forest and the novelty tuning, with ``ForestBaseline``'s
+        meanings and defaults.
+    """
+
     method = "extratrees"
 
-    def __init__(self, attribute_estimators: int = 300, clip: float = 0.02, **base) -> None:
+    def __init__(
+        self,
+        attribute_estimators: int = 300,
+        clip: float = 0.02,
+        n_estimators: int = 300,
+        max_features: str | float = "sqrt",
+        min_samples_leaf: int = 1,
+        novelty_val_fraction: float = 0.1,
+        novelty_holdout_trials: int = 1,
+        seed: int = 0,
+        n_jobs: int | None = -1,
+    ) -> None:
+        # DAP's other parameters keep DAP's defaults; C and the validation folds serve
+        # only logistic attribute classifiers
         super().__init__(
             attribute_model="extratrees",
             attribute_estimators=attribute_estimators,
             clip=clip,
-            **base,
+            n_estimators=n_estimators,
+            max_features=max_features,
+            min_samples_leaf=min_samples_leaf,
+            novelty_val_fraction=novelty_val_fraction,
+            novelty_holdout_trials=novelty_holdout_trials,
+            seed=seed,
+            n_jobs=n_jobs,
         )

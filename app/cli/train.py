@@ -71,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
         model = make_method(args.method or DEFAULT_METHOD, **params)
     except TypeError as exc:
         raise ValueError(f"bad --param: {exc}") from None
+    model._validate_params()  # fit checks them too; a bad value is refused before any work
     print(
         f"training '{model.method}' on {dataset.name}: {len(dataset)} samples, "
         f"{dataset.n_classes} classes, input {dataset.input_shape}",

@@ -21,6 +21,7 @@ from app.framework.errors import FrameworkError
 from app.framework.generator import build_generator, noisy
 from app.framework.novelty import GMMNoveltyDetector, novelty_validation_split, tune_threshold
 from app.framework.one_shot import one_shot_training_set
+from app.framework.params import at_least, one_of
 from app.framework.recognizer import TactileRecognizer
 from app.framework.runtime import configure_torch
 from app.framework.scaling import RobustInputScaler
@@ -32,11 +33,121 @@ NOVELTY_SPACES = ("input", "features")
 
 
 class PaperRecognizer(TactileRecognizer):
-    """Hyper-parameters follow Sect. V-B where the paper gives them (batches of 50,
-    noise N(0, 0.1), 10 generated features per novel class); epochs are far fewer
-    than the paper's 600 because our datasets are 10x smaller and CPU time matters."""
+    """The paper's framework (Fig. 1), trained as Sect. IV describes.
+
+    ``fit`` trains CONV_XF + FC_Y on the known objects (step 1, Fig. 2), fits the GMM
+    of ND(x) and tunes σ_nov by Sect. VI-B, then trains G by Algorithm 1 and
+    Algorithm 2 (steps 2 and 3). Each enrolment trains FC_Z on features G makes from
+    the novel classes' attribute vectors (step 4: GEN-F or NEIGHB-F, Sect. IV-E),
+    and each real sample of a novel class adds its k nearest real features (Sect.
+    IV-F). Hyper-parameters follow Sect. V-B where the paper gives them (batches of
+    50, noise N(0, 0.1), 10 generated features per novel class); epochs are far fewer
+    than the paper's 600 because our datasets are 10x smaller and CPU time matters.
+
+    Parameters
+    ----------
+    seed : int, default 0
+        Seed of every random draw: the networks' initial weights, the order of the
+        batches, the noise ns added to attribute vectors, the PCA and GMM of ND(x),
+        and the Sect. VI-B choice of validation objects.
+    encoder_epochs : int or None, default None
+        Epochs of training CONV_XF + FC_Y on D_train (Sect. IV-B, Fig. 2). None: 60
+        for C x T tactile images, 200 for flat feature vectors (the paper trains every
+        network for 600 epochs, Sect. V-B).
+    lr : float, default 1e-3
+        Adam's learning rate for CONV_XF + FC_Y; FC_Z trains at ``10 * lr`` and the
+        one-shot fine-tuning of G (``finetune_steps``) at ``0.2 * lr``. Algorithms 1
+        and 2 keep their own rates (1e-3 and 2e-4).
+    weight_decay : float, default 1e-4
+        Adam's weight decay (L2 penalty) for CONV_XF + FC_Y and for FC_Z.
+    batch_size : int, default 50
+        Mini-batch size of every training loop: CONV_XF + FC_Y, Algorithms 1 and 2
+        ("batches of 50 samples", Sect. V-B) and FC_Z. At least 1.
+    mlp_hidden : int, default 256
+        Flat feature vectors only: width of the hidden layer of the MLP that stands
+        in for CONV_XF. C x T images get the convolutional CONV_XF of Table I, which
+        has no such setting.
+    mlp_features : int, default 128
+        Flat feature vectors only: dimension of the feature space F, the MLP's output
+        (for images F is 256 x T'' by Table I, 256 x 6 for 32 x 30 images).
+    mlp_dropout : float, default 0.5
+        Flat feature vectors only: dropout before the MLP's second layer (half as much
+        on its inputs), against over-fitting a small training set.
+    input_clip : float, default 4.0
+        Inputs are scaled before CONV_XF and ND(x) (beyond the paper: PHAC-2's
+        features span many orders of magnitude): sign(x) log(1 + abs(x)), centred on
+        the median, divided by a robust spread, then clipped to
+        [-input_clip, input_clip].
+    alg1_epochs : int, default 200
+        epoch_max of Algorithm 1: G learns, through the frozen FC_Y, to make from
+        a_y + ns features that FC_Y classifies as y. At least 1.
+    alg2_epochs : int, default 60
+        epoch_max of Algorithm 2: G and D trained in turns, G to make features that D
+        takes for real ones and FC_Y still classifies right. At least 1.
+    sigma_d : float, default 0.45
+        σ_D of Algorithm 2: D trains until its loss L_D / 2 falls below σ_D, then G
+        takes over.
+    sigma_g : float, default 0.8
+        σ_G of Algorithm 2: G trains until both L_FC (FC_Y's loss on G's features) and
+        L_D (D's verdict "synthetic") fall below σ_G, then D takes over.
+    max_phase_steps : int, default 25
+        Beyond the paper: a D or G phase of Algorithm 2 also ends after this many
+        updates, so a threshold that is never reached cannot starve the other network.
+    noise_std : float, default 0.1
+        Standard deviation of the noise ns ~ N(0, 0.1) added to an attribute vector
+        before G, in Algorithms 1 and 2, when generating features for novel classes
+        and in the one-shot fine-tuning of G.
+    samples_per_class : int, default 10
+        I_z of Sect. IV-E: how many features G(a_z + ns) are generated per novel
+        class z to train FC_Z. At least 1.
+    fc_z_epochs : int, default 100
+        Epochs of training FC_Z on D^Z_train (Fig. 5) at every enrolment. At least 1.
+    synthesis : {"neighbf", "genf"}, default "neighbf"
+        FC_Z's training set (Sect. IV-E): NEIGHB-F replaces each generated feature by
+        its L1-nearest real feature of the known objects, GEN-F keeps the generated
+        features. NEIGHB-F measured better (Table V); ``add_novel_classes`` can ask
+        for the other one for one enrolment.
+    one_shot_k : int, default 5
+        k of Sect. IV-F: a real sample of a novel class trains FC_Z together with its
+        k L1-nearest real features of the known objects. 0: the sample alone.
+    finetune_steps : int, default 30
+        Beyond the paper: Adam steps pulling G(a_z + ns) towards the CONV_XF features
+        of a novel class's newly arrived real samples, while Algorithm 1's loss on the
+        known classes keeps G from forgetting them. 0 leaves G as trained.
+    gmm_components : int, default 4
+        Number of Gaussian components of the GMM of ND(x) (Sect. III-B).
+    gmm_covariance : str, default "full"
+        Covariance type of that GMM, as scikit-learn names them ("full", "tied",
+        "diag" or "spherical").
+    novelty_pca_dims : int, default 16
+        Beyond the paper: the GMM models the first ``novelty_pca_dims`` principal
+        components of its inputs (a full-covariance GMM cannot be fitted in 960
+        dimensions from a few hundred samples).
+    novelty_space : {"input", "features"}, default "input"
+        What the GMM of ND(x) models: the scaled tactile samples x, as in the paper,
+        or their CONV_XF features f_ext (method ``paper-fgmm``).
+    novelty_val_fraction : float, default 0.1
+        Share of the known objects set aside as Y_val, the validation-novel objects,
+        when σ_nov is tuned (Sect. VI-B: 10 %); of every other object one whole trial
+        is held out as X_te, the known samples the GMM did not see.
+    """
 
     method = "paper"
+
+    _parameter_constraints = {
+        "synthesis": one_of(SYNTHESIS),
+        "novelty_space": one_of(NOVELTY_SPACES),
+        **{
+            name: at_least(1)
+            for name in (
+                "batch_size",
+                "samples_per_class",
+                "alg1_epochs",
+                "alg2_epochs",
+                "fc_z_epochs",
+            )
+        },
+    }
 
     def __init__(
         self,
@@ -92,49 +203,6 @@ class PaperRecognizer(TactileRecognizer):
         self.novelty_pca_dims = novelty_pca_dims
         self.novelty_space = novelty_space
         self.novelty_val_fraction = novelty_val_fraction
-        self._check_params()
-
-    _PARAMS = (
-        "seed",
-        "encoder_epochs",
-        "lr",
-        "weight_decay",
-        "batch_size",
-        "mlp_hidden",
-        "mlp_features",
-        "mlp_dropout",
-        "input_clip",
-        "alg1_epochs",
-        "alg2_epochs",
-        "sigma_d",
-        "sigma_g",
-        "max_phase_steps",
-        "noise_std",
-        "samples_per_class",
-        "fc_z_epochs",
-        "synthesis",
-        "one_shot_k",
-        "finetune_steps",
-        "gmm_components",
-        "gmm_covariance",
-        "novelty_pca_dims",
-        "novelty_space",
-        "novelty_val_fraction",
-    )
-
-    def get_params(self) -> dict[str, Any]:
-        return {p: getattr(self, p) for p in self._PARAMS}
-
-    def _check_params(self) -> None:
-        if self.synthesis not in SYNTHESIS:
-            raise FrameworkError(f"synthesis must be one of {SYNTHESIS}, got {self.synthesis!r}")
-        if self.novelty_space not in NOVELTY_SPACES:
-            raise FrameworkError(
-                f"novelty_space must be one of {NOVELTY_SPACES}, got {self.novelty_space!r}"
-            )
-        for p in ("batch_size", "samples_per_class", "alg1_epochs", "alg2_epochs", "fc_z_epochs"):
-            if int(getattr(self, p)) < 1:
-                raise FrameworkError(f"{p} must be at least 1, got {getattr(self, p)}")
 
     # ---------------------------------------------------------------- building
     def _build(self, n_known: int, n_attributes: int) -> None:
@@ -166,7 +234,6 @@ class PaperRecognizer(TactileRecognizer):
     # ----------------------------------------------------------------- fitting
     def _fit(self, dataset: TactileDataset, progress: bool) -> None:
         configure_torch()  # torch gets the process's threads (it may have loaded after they were chosen)
-        self._check_params()
         t0 = time.perf_counter()
         timings: dict[str, float] = {}
         self._build(dataset.n_classes, dataset.n_attributes)
@@ -428,7 +495,7 @@ class PaperRecognizer(TactileRecognizer):
         configure_torch()
         for key, value in meta["params"].items():
             setattr(self, key, value)
-        self._check_params()
+        self._validate_params()
         reg = self.registry
         self._build(len(reg.known_names), len(reg.attribute_names))
         self.generator_alg1_ = build_generator(
@@ -461,10 +528,72 @@ class PaperFeatureGMMRecognizer(PaperRecognizer):
     On PHAC-2's static features a GMM of the raw inputs barely separates known
     from novel objects (AUROC about 0.5); in the learned feature space it does.
     Reported beside the paper's GMM, never instead of it.
+
+    It takes every parameter of ``PaperRecognizer``, with the same meaning and
+    default, except for the default of ``novelty_space``.
+
+    Parameters
+    ----------
+    novelty_space : {"input", "features"}, default "features"
+        What the GMM of ND(x) models: here by default the CONV_XF features f_ext of
+        the samples; "input" makes this the paper's pipeline.
     """
 
     method = "paper-fgmm"
 
-    def __init__(self, **params: Any) -> None:
-        params.setdefault("novelty_space", "features")
-        super().__init__(**params)
+    # PaperRecognizer's signature, novelty_space's default aside (tests/framework compares them)
+    def __init__(
+        self,
+        seed: int = 0,
+        encoder_epochs: int | None = None,
+        lr: float = 1e-3,
+        weight_decay: float = 1e-4,
+        batch_size: int = 50,
+        mlp_hidden: int = 256,
+        mlp_features: int = 128,
+        mlp_dropout: float = 0.5,
+        input_clip: float = 4.0,
+        alg1_epochs: int = 200,
+        alg2_epochs: int = 60,
+        sigma_d: float = 0.45,
+        sigma_g: float = 0.8,
+        max_phase_steps: int = 25,
+        noise_std: float = 0.1,
+        samples_per_class: int = 10,
+        fc_z_epochs: int = 100,
+        synthesis: str = "neighbf",
+        one_shot_k: int = 5,
+        finetune_steps: int = 30,
+        gmm_components: int = 4,
+        gmm_covariance: str = "full",
+        novelty_pca_dims: int = 16,
+        novelty_space: str = "features",
+        novelty_val_fraction: float = 0.1,
+    ) -> None:
+        super().__init__(
+            seed=seed,
+            encoder_epochs=encoder_epochs,
+            lr=lr,
+            weight_decay=weight_decay,
+            batch_size=batch_size,
+            mlp_hidden=mlp_hidden,
+            mlp_features=mlp_features,
+            mlp_dropout=mlp_dropout,
+            input_clip=input_clip,
+            alg1_epochs=alg1_epochs,
+            alg2_epochs=alg2_epochs,
+            sigma_d=sigma_d,
+            sigma_g=sigma_g,
+            max_phase_steps=max_phase_steps,
+            noise_std=noise_std,
+            samples_per_class=samples_per_class,
+            fc_z_epochs=fc_z_epochs,
+            synthesis=synthesis,
+            one_shot_k=one_shot_k,
+            finetune_steps=finetune_steps,
+            gmm_components=gmm_components,
+            gmm_covariance=gmm_covariance,
+            novelty_pca_dims=novelty_pca_dims,
+            novelty_space=novelty_space,
+            novelty_val_fraction=novelty_val_fraction,
+        )

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import copy
 import difflib
+import inspect
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -26,12 +27,14 @@ from app.data.dataset import TactileDataset
 from app.framework.errors import (
     AttributeVectorError,
     DuplicateClassError,
+    FrameworkError,
     InputShapeError,
     NonFiniteInputError,
     NotFittedError,
     UnknownClassError,
     UnsupportedOperationError,
 )
+from app.framework.params import Constraint
 from app.framework.runtime import ensure_threads_configured
 
 
@@ -201,24 +204,79 @@ class ClassRegistry:
 
 
 class TactileRecognizer(ABC):
-    """Base class of recognition methods; see the module docstring."""
+    """Base class of recognition methods; see the module docstring.
+
+    Hyper-parameters follow scikit-learn's conventions (``app.framework.params``): a
+    subclass's constructor takes every hyper-parameter as a named argument and only
+    stores it under the same name; ``get_params`` and ``set_params`` work from that
+    signature (a model bundle stores ``get_params()`` and loading sets them back), and
+    ``fit`` checks the values against the class's ``_parameter_constraints`` first.
+    """
 
     method: ClassVar[str] = "abstract"
     #: True when enrolments never change what ``fit`` trained (the known part), so novel
     #: classes can be dropped and rebuilt from the registry alone: then a withdrawal needs
     #: no full retrain. False where one-shot samples fine-tune shared parts (``paper``).
     novel_part_separable: ClassVar[bool] = False
+    #: parameter name -> what its value must satisfy; checked by ``fit``. A subclass
+    #: extends its parent's: ``{**Parent._parameter_constraints, ...}``.
+    _parameter_constraints: ClassVar[dict[str, Constraint]] = {}
 
     def __init__(self) -> None:
+        # the state of an unfitted recognizer (not hyper-parameters): fit and bundle loading set it
         self.input_shape: tuple[int, ...] | None = None
         self.registry = ClassRegistry()
         self.novelty_threshold: float = float("inf")
         self.novelty_tuning: NoveltyTuning | None = None
         self.metrics: dict[str, Any] = {}
 
+    # --------------------------------------------------------- hyper-parameters
+    @classmethod
+    def _get_param_names(cls) -> list[str]:
+        """The constructor's parameter names, in its signature's order (scikit-learn's
+        ``BaseEstimator._get_param_names``, which sorts them)."""
+        init = cls.__init__
+        if init is TactileRecognizer.__init__:
+            return []
+        names = []
+        for p in inspect.signature(init).parameters.values():
+            if p.name == "self":
+                continue
+            if p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD):
+                raise TypeError(
+                    f"{cls.__name__}.__init__ must name every hyper-parameter "
+                    f"(no *args or **kwargs), as scikit-learn requires"
+                )
+            names.append(p.name)
+        return names
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """The hyper-parameters, by name, as the constructor takes them (``deep`` is
+        scikit-learn's; a recognizer has no nested estimators)."""
+        return {name: getattr(self, name) for name in self._get_param_names()}
+
+    def set_params(self, **params: Any) -> Self:
+        """Set hyper-parameters by name; they are checked by the next ``fit``."""
+        valid = self._get_param_names()
+        for name, value in params.items():
+            if name not in valid:
+                raise FrameworkError(
+                    f"invalid parameter {name!r} for {type(self).__name__}; "
+                    f"its parameters are: {', '.join(valid)}"
+                )
+            setattr(self, name, value)
+        return self
+
+    def _validate_params(self) -> None:
+        """Check every hyper-parameter against ``_parameter_constraints``; a subclass adds
+        the checks that involve several parameters. Raises FrameworkError."""
+        for name, constraint in self._parameter_constraints.items():
+            constraint.check(name, getattr(self, name))
+
     # ----------------------------------------------------------------- fitting
     def fit(self, dataset: TactileDataset, progress: bool = False) -> Self:
         """Train on ``dataset``; every class in it becomes a known class."""
+        self._validate_params()
         if len(dataset) == 0:
             raise NotFittedError("cannot fit on an empty dataset")
         ensure_threads_configured()  # the default thread limits, where no entry point chose them

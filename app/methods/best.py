@@ -41,6 +41,7 @@ import numpy as np
 
 from app.data.dataset import DatasetError, TactileDataset
 from app.framework.errors import FrameworkError
+from app.framework.params import either, integer, number, one_of
 from app.framework.recognizer import TactileRecognizer
 from app.framework.runtime import ensure_threads_configured
 from app.framework.scaling import flatten
@@ -54,11 +55,6 @@ from app.methods.attributes import (
 from app.methods.known import CUES, KnownModel, relabelled
 
 
-def _check(cond: bool, message: str) -> None:
-    if not cond:
-        raise FrameworkError(message)
-
-
 def signatures(known_proba: np.ndarray) -> np.ndarray:
     """Known-class posteriors scaled to unit length (the one-shot embedding)."""
     p = np.asarray(known_proba, np.float64)
@@ -66,28 +62,88 @@ def signatures(known_proba: np.ndarray) -> np.ndarray:
 
 
 class BestRecognizer(TactileRecognizer):
-    """See the module docstring; hyper-parameters are constructor arguments."""
+    """The ``best`` method; the module docstring describes its parts.
+
+    Parameters
+    ----------
+    seed : int, default 0
+        Seed of the forests and of the Sect. VI-B choice of validation objects (tuning
+        round r draws with ``seed + r``).
+    n_estimators : int, default 100
+        Trees in the extra-trees forest that classifies the known objects (FC_Y), and
+        in each probe forest of the novelty tuning. A positive integer.
+    max_features : {"sqrt", "log2"} or float, default "sqrt"
+        Features each split of a tree draws from, as scikit-learn's
+        ``ExtraTreesClassifier`` takes it: "sqrt" or "log2" of the number of input
+        features, a count (int) or a fraction (float).
+    attribute_C : float, default 0.1
+        Inverse strength of the L2 penalty of the logistic regressions that predict
+        each attribute from a sample (DAP's attribute classifiers). Positive.
+    dap_clip : float, default 0.02
+        DAP clips every attribute probability, and the attribute prior, to
+        [dap_clip, 1 - dap_clip], so that no single attribute classifier can veto a
+        novel class alone. In (0, 0.5).
+    shot_temperature : float, default 0.05
+        Temperature of the softmax over the cosine similarities between a sample's
+        signature and the prototypes of the novel classes that have real samples
+        (one-shot learning); smaller is sharper. Positive.
+    knn_weight : float, default 0.1
+        Weight, in the novelty score ND(x), of the log distance to the nearest
+        training sample (relative to the training set's own trial spacing), added to
+        ``1 - max p`` of the forest. Non-negative; 0 drops the cue.
+    top_weight : float, default 0.1
+        Weight, in ND(x), of the log distance to the nearest training sample of the
+        forest's top class. Non-negative; 0 drops the cue.
+    novelty_val_fraction : float, default 0.1
+        Share of the known objects that act as validation-novel objects (Y_val of
+        Sect. VI-B) when the novelty threshold is tuned. In (0, 1).
+    novelty_holdout_trials : int, default 1
+        Whole trials of every other known object held out as its known validation
+        samples (X_te of Sect. VI-B) in that tuning. A positive integer.
+    tuning_rounds : int, default 3
+        Sect. VI-B splits, each with other validation objects and a probe model of its
+        own, whose scores are pooled into one threshold choice (steadier than one
+        split). A positive integer.
+    distance_components : int, default 64
+        The distances of ``knn_weight`` and ``top_weight`` are measured on this many
+        principal directions of the feature-weighted training samples plus the norm of
+        the rest; 0 measures them exactly in the full space. A non-negative integer.
+    sae_lambda : float, default 400.0
+        λ of the semantic autoencoder (Kodirov et al., 2017) that projects samples onto
+        attribute space for zero-shot scores, beside DAP; 0 leaves DAP alone. A
+        non-negative number.
+    sae_temperature : float, default 10.0
+        Weight of the autoencoder's cosine between a sample's projection and a novel
+        class's attribute vector, added to DAP's log scores. A non-negative number.
+    n_jobs : int or None, default 1
+        Parallel jobs of scikit-learn when the forests are fitted (None: one, -1: every
+        core); recognition never uses them.
+    """
 
     method = "best"
     novel_part_separable = True  # enrolments never touch the forest or the attribute models
 
-    _PARAMS = (
-        "seed",
-        "n_estimators",
-        "max_features",
-        "attribute_C",
-        "dap_clip",
-        "shot_temperature",
-        "knn_weight",
-        "top_weight",
-        "novelty_val_fraction",
-        "novelty_holdout_trials",
-        "tuning_rounds",
-        "distance_components",
-        "sae_lambda",
-        "sae_temperature",
-        "n_jobs",
-    )
+    _parameter_constraints = {
+        "n_estimators": integer(1),
+        "max_features": either(
+            one_of(("sqrt", "log2")),
+            number(0, allow_bool=False),
+            must="be 'sqrt', 'log2' or a positive number",
+        ),
+        "attribute_C": number(0),
+        "dap_clip": number(0, 0.5),
+        "shot_temperature": number(0),
+        "novelty_val_fraction": number(0, 1),
+        "novelty_holdout_trials": integer(1),
+        "knn_weight": number(0, include_low=True, allow_bool=False),
+        "top_weight": number(0, include_low=True, allow_bool=False),
+        "tuning_rounds": integer(1),
+        "distance_components": integer(
+            0, "be a non-negative integer (0 = exact)", allow_bool=False
+        ),
+        "sae_lambda": number(0, include_low=True, allow_bool=False, finite=True),
+        "sae_temperature": number(0, include_low=True, allow_bool=False, finite=True),
+    }
 
     def __init__(
         self,
@@ -97,9 +153,9 @@ class BestRecognizer(TactileRecognizer):
         attribute_C: float = 0.1,
         dap_clip: float = 0.02,
         shot_temperature: float = 0.05,
-        novelty_val_fraction: float = 0.1,
         knn_weight: float = 0.1,
         top_weight: float = 0.1,
+        novelty_val_fraction: float = 0.1,
         novelty_holdout_trials: int = 1,
         tuning_rounds: int = 3,
         distance_components: int = 64,
@@ -108,86 +164,21 @@ class BestRecognizer(TactileRecognizer):
         n_jobs: int | None = 1,
     ) -> None:
         super().__init__()
-        self.seed = int(seed)
+        self.seed = seed
         self.n_estimators = n_estimators
         self.max_features = max_features
         self.attribute_C = attribute_C
         self.dap_clip = dap_clip
         self.shot_temperature = shot_temperature
-        self.novelty_val_fraction = novelty_val_fraction
         self.knn_weight = knn_weight
         self.top_weight = top_weight
+        self.novelty_val_fraction = novelty_val_fraction
         self.novelty_holdout_trials = novelty_holdout_trials
         self.tuning_rounds = tuning_rounds
         self.distance_components = distance_components
         self.sae_lambda = sae_lambda
         self.sae_temperature = sae_temperature
         self.n_jobs = n_jobs
-        self.sae_: np.ndarray | None = None
-        self._check_params()
-
-    def get_params(self) -> dict[str, Any]:
-        return {p: getattr(self, p) for p in self._PARAMS}
-
-    def _check_params(self) -> None:
-        _check(
-            isinstance(self.n_estimators, int | np.integer) and self.n_estimators >= 1,
-            f"n_estimators must be a positive integer, got {self.n_estimators!r}",
-        )
-        mf = self.max_features
-        _check(
-            mf in ("sqrt", "log2")
-            or (isinstance(mf, int | float) and not isinstance(mf, bool) and mf > 0),
-            f"max_features must be 'sqrt', 'log2' or a positive number, got {mf!r}",
-        )
-        _check(
-            isinstance(self.attribute_C, int | float) and self.attribute_C > 0,
-            f"attribute_C must be positive, got {self.attribute_C!r}",
-        )
-        _check(
-            isinstance(self.dap_clip, int | float) and 0 < self.dap_clip < 0.5,
-            f"dap_clip must lie in (0, 0.5), got {self.dap_clip!r}",
-        )
-        _check(
-            isinstance(self.shot_temperature, int | float) and self.shot_temperature > 0,
-            f"shot_temperature must be positive, got {self.shot_temperature!r}",
-        )
-        _check(
-            isinstance(self.novelty_val_fraction, int | float)
-            and 0 < self.novelty_val_fraction < 1,
-            f"novelty_val_fraction must lie in (0, 1), got {self.novelty_val_fraction!r}",
-        )
-        _check(
-            isinstance(self.novelty_holdout_trials, int | np.integer)
-            and self.novelty_holdout_trials >= 1,
-            f"novelty_holdout_trials must be a positive integer, got {self.novelty_holdout_trials!r}",
-        )
-        for name in ("knn_weight", "top_weight"):
-            value = getattr(self, name)
-            _check(
-                isinstance(value, int | float) and not isinstance(value, bool) and value >= 0,
-                f"{name} must be a non-negative number, got {value!r}",
-            )
-        _check(
-            isinstance(self.tuning_rounds, int | np.integer) and self.tuning_rounds >= 1,
-            f"tuning_rounds must be a positive integer, got {self.tuning_rounds!r}",
-        )
-        _check(
-            isinstance(self.distance_components, int | np.integer)
-            and not isinstance(self.distance_components, bool)
-            and self.distance_components >= 0,
-            f"distance_components must be a non-negative integer (0 = exact), got "
-            f"{self.distance_components!r}",
-        )
-        for name in ("sae_lambda", "sae_temperature"):
-            value = getattr(self, name)
-            _check(
-                isinstance(value, int | float)
-                and not isinstance(value, bool)
-                and value >= 0
-                and np.isfinite(value),
-                f"{name} must be a non-negative number, got {value!r}",
-            )
 
     def _cue_weights(self) -> np.ndarray:
         w = np.zeros(len(CUES))
@@ -202,7 +193,7 @@ class BestRecognizer(TactileRecognizer):
             self._cue_weights(),
             int(self.n_estimators),
             self.max_features,
-            self.seed,
+            int(self.seed),
             self.n_jobs,
             int(self.distance_components),
         )
@@ -212,7 +203,6 @@ class BestRecognizer(TactileRecognizer):
         # fitting's own imports (scikit-learn): recognising from a bundle never needs them
         from app.framework.novelty import novelty_validation_split, tune_threshold
 
-        self._check_params()
         if dataset.n_classes < 2:
             raise DatasetError("the best method needs at least 2 known classes")
         present = np.unique(dataset.labels)
@@ -227,7 +217,10 @@ class BestRecognizer(TactileRecognizer):
         known_scores, val_scores = [], []
         for r in range(int(self.tuning_rounds)):
             fit_idx, known_idx, val_idx = novelty_validation_split(
-                dataset, self.novelty_val_fraction, self.novelty_holdout_trials, seed=self.seed + r
+                dataset,
+                self.novelty_val_fraction,
+                self.novelty_holdout_trials,
+                seed=int(self.seed) + r,
             )
             if len(known_idx) == 0 or len(val_idx) == 0:
                 continue
@@ -360,11 +353,12 @@ class BestRecognizer(TactileRecognizer):
         ensure_threads_configured()  # the default thread limits, where no entry point chose them
         self.distance_components = 0  # bundles made before the parameter measure exact distances
         self.sae_lambda = 0.0  # and those made before the autoencoder have none
+        names = self._get_param_names()
         for key, value in meta["params"].items():
-            if key not in self._PARAMS:
+            if key not in names:
                 raise KeyError(f"unknown parameter {key!r} in the bundle")
             setattr(self, key, value)
-        self._check_params()
+        self._validate_params()
 
         def part(prefix: str) -> dict[str, np.ndarray]:
             return {k[len(prefix) :]: v for k, v in arrays.items() if k.startswith(prefix)}

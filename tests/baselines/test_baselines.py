@@ -104,19 +104,30 @@ def test_bad_input_and_bundles(fitted, small, method):
         bundle.to_bytes(model)
 
 
-def test_bad_hyper_parameters():
-    with pytest.raises(FrameworkError, match="n_estimators"):
-        ExtraTreesRecognizer(n_estimators=0)
-    with pytest.raises(FrameworkError, match="attribute_model"):
-        DAPRecognizer(attribute_model="svm")
-    with pytest.raises(FrameworkError, match="C must be"):
-        DAPRecognizer(C=-1.0)
-    with pytest.raises(FrameworkError, match="gamma"):
-        ESZSLRecognizer(gamma=0.0)
-    with pytest.raises(FrameworkError, match="signature modes"):
-        ESZSLRecognizer(signature="cosine")
-    with pytest.raises(FrameworkError, match="novelty_val_fraction"):
-        ESZSLRecognizer(novelty_val_fraction=1.5)
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda: ExtraTreesRecognizer(n_estimators=0), "n_estimators must be at least 1, got 0"),
+        (lambda: DAPRecognizer(attribute_model="svm"), "attribute_model must be one of"),
+        (lambda: DAPRecognizer(C=-1.0), "C must be positive or 'auto', got -1.0"),
+        (lambda: DAPRecognizer(clip=0.5), r"clip must lie in \(0, 0.5\), got 0.5"),
+        (lambda: ESZSLRecognizer(gamma=0.0), r"gamma must be positive or None \(chosen"),
+        (lambda: ESZSLRecognizer(signature="cosine"), "signature modes must be among"),
+        (lambda: ESZSLRecognizer(gammas=()), "gammas must be positive values"),
+        (lambda: ESZSLRecognizer(novelty_val_fraction=1.5), "novelty_val_fraction must lie in"),
+    ],
+)
+def test_bad_hyper_parameters(make, message, small):
+    model = make()  # the constructor only stores its arguments
+    with pytest.raises(FrameworkError, match=message):
+        model.fit(small)  # fit checks them before any work
+    assert model.input_shape is None
+
+
+def test_a_given_signature_needs_no_valid_candidates(small):
+    # as before: signature_modes are only the candidates when no signature is given
+    model = ESZSLRecognizer(n_estimators=5, signature="l2", signature_modes=("bogus",), gamma=1.0)
+    assert model.fit(small).signature_ == "l2"
 
 
 def test_dap_scores_follow_lampert():

@@ -116,9 +116,13 @@ def test_unfitted_model():
         PaperRecognizer().recognize(np.zeros((1, 32, 30)))
 
 
-def test_bad_hyper_parameter():
+def test_bad_hyper_parameter(sim_split):
+    model = PaperRecognizer(synthesis="magic")  # the constructor only stores its arguments
     with pytest.raises(ValueError, match="synthesis must be one of"):
-        PaperRecognizer(synthesis="magic")
+        model.fit(sim_split["train"])  # fit checks them before any work
+    assert model.input_shape is None
+    with pytest.raises(ValueError, match="alg1_epochs must be at least 1, got 0"):
+        PaperRecognizer(alg1_epochs=0).fit(sim_split["train"])
 
 
 def test_empty_dataset_is_rejected():

@@ -224,9 +224,26 @@ def test_bad_input_raises_framework_errors(fitted, enrolled, data):
         {"sae_lambda": True},
     ],
 )
-def test_bad_hyper_parameters(params):
-    with pytest.raises(FrameworkError):
-        BestRecognizer(**params)
+def test_bad_hyper_parameters(params, data):
+    model = BestRecognizer(**params)  # the constructor only stores its arguments
+    with pytest.raises(FrameworkError, match=f"^{next(iter(params))} must "):
+        model.fit(data[1])  # fit checks them before any work
+    assert model.input_shape is None
+
+
+@pytest.mark.parametrize(
+    "params, message",
+    [
+        ({"n_estimators": 0}, "n_estimators must be a positive integer, got 0"),
+        ({"dap_clip": 0.7}, r"dap_clip must lie in \(0, 0.5\), got 0.7"),
+        ({"max_features": "all"}, "max_features must be 'sqrt', 'log2' or a positive number"),
+        ({"distance_components": 2.5}, r"distance_components must be a non-negative integer \(0"),
+        ({"sae_lambda": True}, "sae_lambda must be a non-negative number, got True"),
+    ],
+)
+def test_hyper_parameter_errors_name_the_parameter_and_the_value(params, message, data):
+    with pytest.raises(FrameworkError, match=message):
+        BestRecognizer(**params).fit(data[1])
 
 
 def test_datasets_it_cannot_learn_from_are_refused():
