@@ -8,8 +8,9 @@ so a report can be rebuilt without re-running anything:
 - ``fig7_novelty_<method>.png``: the novelty-threshold tuning curve of split 1
   (accuracy of keeping held-out known trials known and of calling
   validation-novel objects novel, against the threshold; chosen threshold marked);
-- ``fig8_confusion_<method>.png``: split 1's ZSL (for ``paper``: GEN-F and
-  NEIGHB-F) and OSL confusion matrices, rows normalised;
+- ``fig8_confusion_<method>.png``: split 1's ZSL and OSL confusion matrices, rows
+  normalised; for ``paper`` ZSL is drawn twice, GEN-F and NEIGHB-F, as in the paper's
+  Fig. 8a-c (the title names the panels drawn);
 - ``fig8d_jaccard.png``: Jaccard similarity of split 1's novel objects' attribute vectors.
 """
 
@@ -285,6 +286,20 @@ def plot_jaccard(vectors: np.ndarray, labels: list[str], path: Path, title: str)
     plt.close(fig)
 
 
+# The paper's Fig. 8a, 8b and 8c, in the names of the panels that draw them.
+PAPER_FIG8_PANELS = ("ZSL GEN-F", "ZSL NEIGHB-F", "OSL")
+
+
+def confusion_title(panels: list[str], method: str) -> str:
+    """The title of a method's confusion figure, naming the panels it draws: "Fig. 8a-c"
+    only for the paper's three (GEN-F, NEIGHB-F, OSL); another method's ZSL and OSL
+    panels are Fig. 8's kind of figure, not its panels."""
+    figure = "Fig. 8a-c" if tuple(panels) == PAPER_FIG8_PANELS else "Fig. 8"
+    listed = panels[0] if len(panels) == 1 else ", ".join(panels[:-1]) + " and " + panels[-1]
+    matrices = "matrix" if len(panels) == 1 else "matrices"
+    return f"{figure}: split 1 confusion {matrices} of {listed}, {method}"
+
+
 def _short(labels: list[str]) -> list[str]:
     return [
         f"z{i + 1} {n}" if len(n) <= 24 else f"z{i + 1} {n[:22]}…" for i, n in enumerate(labels)
@@ -328,8 +343,8 @@ def write_report(
             panels.append(("OSL", details["confusion_osl"]))
         if panels:
             path = out / f"fig8_confusion_{m}.png"
-            plot_confusions(panels, labels, path, f"Fig. 8a-c: split 1 confusion matrices, {m}")
-            images.setdefault("Fig. 8a-c: confusion matrices", []).append(path.name)
+            plot_confusions(panels, labels, path, confusion_title([n for n, _ in panels], m))
+            images.setdefault("Fig. 8: split 1 confusion matrices", []).append(path.name)
             written.append(path)
     if novel_attributes is None:
         defs = results.get("split_definitions") or []

@@ -64,3 +64,19 @@ def test_twelve_novel_compares_with_table_ix(results):
     assert PAPER_12["zsl"] == pytest.approx(0.1657, abs=1e-4)
     assert PAPER_12["osl"] == pytest.approx(0.2914, abs=1e-4)
     assert "| `osl` | 0.291 |" in md and "| `known_acc` | — |" in md
+
+
+def test_fig8_is_titled_by_the_panels_it_draws(results, tmp_path, monkeypatch):
+    from app.evaluation import report
+
+    titles = []
+    monkeypatch.setattr(
+        report, "plot_confusions", lambda panels, labels, path, title: titles.append(title)
+    )
+    write_report(results, tmp_path / "rep")
+    assert titles == ["Fig. 8: split 1 confusion matrices of ZSL and OSL, oracle"]
+    paper = report.confusion_title(["ZSL GEN-F", "ZSL NEIGHB-F", "OSL"], "paper")
+    assert (
+        paper == "Fig. 8a-c: split 1 confusion matrices of ZSL GEN-F, ZSL NEIGHB-F and OSL, paper"
+    )
+    assert report.confusion_title(["ZSL"], "m") == "Fig. 8: split 1 confusion matrix of ZSL, m"
