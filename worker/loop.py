@@ -25,6 +25,7 @@ from app.framework import bundle
 from app.framework.recognizer import TactileRecognizer
 from app.service.bootstrap import model_classes
 from app.store import bundles, leases, repo, retention
+from app.store.enums import ClassKind, JobStatus
 from app.store.models import Job, ObjectClass, utcnow
 from worker.retrain import Plan, build, known_dataset, make_plan
 
@@ -57,7 +58,9 @@ class Worker:
     def run_once(self) -> int:
         """One round; returns how many jobs it finished."""
         with self.sessions() as s:
-            pending = s.scalar(select(exists().where(Job.status.in_(("queued", "running")))))
+            pending = s.scalar(
+                select(exists().where(Job.status.in_((JobStatus.QUEUED, JobStatus.RUNNING))))
+            )
             if not pending or not leases.try_acquire(
                 s, LEASE, self.id, self.settings.lease_seconds
             ):
@@ -145,7 +148,7 @@ class Worker:
                 return
             log.exception("job %s failed", job_ids[0])
             with self.sessions.begin() as s:
-                repo.finish_jobs(s, job_ids, "failed", error=f"{type(exc).__name__}: {exc}")
+                repo.finish_jobs(s, job_ids, JobStatus.FAILED, error=f"{type(exc).__name__}: {exc}")
 
     def _retrain(self, job_ids: list[int]) -> None:
         with self.sessions() as s:
@@ -172,9 +175,9 @@ class Worker:
         ok = [j for j in job_ids if j not in plan.rejected]
         with self.sessions.begin() as s:
             for job_id, reason in plan.rejected.items():
-                repo.finish_jobs(s, [job_id], "failed", error=reason)
+                repo.finish_jobs(s, [job_id], JobStatus.FAILED, error=reason)
             if not plan.changes_model:  # already in the active model (e.g. a re-run)
-                repo.finish_jobs(s, ok, "succeeded", version=base.version)
+                repo.finish_jobs(s, ok, JobStatus.SUCCEEDED, version=base.version)
                 return
             version = self._commit(s, base.version, new, split, plan, ok)
         self._cache = (version, new)
@@ -203,18 +206,18 @@ class Worker:
             sample_ids=plan.sample_ids,
         )
         repo.activate(s, row.version)
-        repo.finish_jobs(s, job_ids, "succeeded", version=row.version)
+        repo.finish_jobs(s, job_ids, JobStatus.SUCCEEDED, version=row.version)
         if plan.promote:
             s.execute(
                 update(ObjectClass)
                 .where(ObjectClass.id.in_([c.id for c in plan.promote]))
-                .values(kind="known", promoted_at=utcnow())
+                .values(kind=ClassKind.KNOWN, promoted_at=utcnow())
             )
         if plan.demote:
             s.execute(
                 update(ObjectClass)
                 .where(ObjectClass.id.in_([c.id for c in plan.demote]))
-                .values(kind="novel", promoted_at=None)
+                .values(kind=ClassKind.NOVEL, promoted_at=None)
             )
         return row.version
 

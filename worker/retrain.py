@@ -27,6 +27,7 @@ from app.data.dataset import TactileDataset
 from app.framework.recognizer import ClassRegistry, TactileRecognizer
 from app.framework.registry import make_method
 from app.store import repo
+from app.store.enums import ClassKind, JobKind, JobStatus, Origin, VersionReason
 from app.store.models import Job, ModelVersion, ObjectClass, Sample
 
 # enrolled samples get trial ids far above any dataset's, one trial per sample
@@ -57,8 +58,12 @@ class Plan:
         """The new model version's ``reason``. Changed attributes make the base model hold a
         class as it no longer is, as a withdrawal does; asked for by PATCH, that is an update."""
         if self.promote or (self.full_retrain and not self.withdrawal):
-            return "promotion"
-        return "withdrawal" if self.withdrawal and not self.redescribed else "update"
+            return VersionReason.PROMOTION
+        return (
+            VersionReason.WITHDRAWAL
+            if self.withdrawal and not self.redescribed
+            else VersionReason.UPDATE
+        )
 
     @property
     def sample_ids(self) -> list[int]:
@@ -76,16 +81,24 @@ def make_plan(
     live_classes = _live_registrations(s, claimed_ids)
     live_samples = set()
     for job in claimed:
-        if job.kind in ("register_class", "add_sample", "update_class") and job.class_id not in by_id:
+        if (
+            job.kind in (JobKind.REGISTER_CLASS, JobKind.ADD_SAMPLE, JobKind.UPDATE_CLASS)
+            and job.class_id not in by_id
+        ):
             plan.rejected[job.id] = f"class {job.class_id} was withdrawn"
-        elif job.kind == "update_class" and job.class_id not in live_classes:
-            plan.rejected[job.id] = f"class '{by_id[job.class_id].name}' is not enrolled: its registration failed"
-        elif job.kind == "update_class":
+        elif job.kind == JobKind.UPDATE_CLASS and job.class_id not in live_classes:
+            plan.rejected[job.id] = (
+                f"class '{by_id[job.class_id].name}' is not enrolled: its registration failed"
+            )
+        elif job.kind == JobKind.UPDATE_CLASS:
             plan.redescribed = True
     added = s.execute(
         select(Job.id, Job.class_id, Sample.id, Sample.withdrawn_at)
         .join(Sample, Sample.id == Job.sample_id)
-        .where(Job.kind == "add_sample", or_(Job.status == "succeeded", Job.id.in_(claimed_ids)))
+        .where(
+            Job.kind == JobKind.ADD_SAMPLE,
+            or_(Job.status == JobStatus.SUCCEEDED, Job.id.in_(claimed_ids)),
+        )
     ).all()
     for job_id, cid, sid, withdrawn_at in added:
         cls = by_id.get(cid)
@@ -95,7 +108,7 @@ def make_plan(
             if job_id in claimed_ids:
                 plan.rejected[job_id] = f"sample {sid} was withdrawn"
             continue
-        if cls.origin == "enrolled" and cid not in live_classes:
+        if cls.origin == Origin.ENROLLED and cid not in live_classes:
             if job_id in claimed_ids:
                 plan.rejected[job_id] = (
                     f"class '{cls.name}' is not enrolled: its registration failed"
@@ -111,15 +124,15 @@ def make_plan(
     in_base = set(base.sample_ids)
     in_model = []
     for cls in classes:
-        if cls.origin == "enrolled" and cls.id not in live_classes:
+        if cls.origin == Origin.ENROLLED and cls.id not in live_classes:
             continue  # failed, or queued for a later round
         in_model.append(cls)
         rows = plan.samples.get(cls.id, [])
         missing = [r for r in rows if r.id not in in_base]
-        if cls.kind == "known" and (cls.origin == "dataset" or len(rows) >= threshold):
+        if cls.kind == ClassKind.KNOWN and (cls.origin == Origin.DATASET or len(rows) >= threshold):
             # a promoted class the base lacks as known, or with samples it has not seen
             plan.full_retrain |= cls.name not in reg.known_names or bool(missing)
-        elif cls.kind == "known":  # withdrawals took it below the promotion threshold
+        elif cls.kind == ClassKind.KNOWN:  # withdrawals took it below the promotion threshold
             plan.demote.append(cls)
             plan.novel.append(cls)
             plan.full_retrain = True
@@ -146,12 +159,14 @@ def _live_registrations(s: Session, claimed_ids: set[int]) -> set[int]:
     """Classes whose latest registration succeeded or is being done now. Only the latest
     counts: a withdrawn class registered again must wait for its new registration."""
     latest = (
-        select(func.max(Job.id)).where(Job.kind == "register_class").group_by(Job.class_id)
+        select(func.max(Job.id)).where(Job.kind == JobKind.REGISTER_CLASS).group_by(Job.class_id)
     ).scalar_subquery()
-    rows = s.execute(
-        select(Job.id, Job.class_id, Job.status).where(Job.id.in_(latest))
-    ).all()
-    return {cid for job_id, cid, status in rows if status == "succeeded" or job_id in claimed_ids}
+    rows = s.execute(select(Job.id, Job.class_id, Job.status).where(Job.id.in_(latest))).all()
+    return {
+        cid
+        for job_id, cid, status in rows
+        if status == JobStatus.SUCCEEDED or job_id in claimed_ids
+    }
 
 
 def _holds_withdrawn(
@@ -163,17 +178,26 @@ def _holds_withdrawn(
     other way)."""
     live = {c.name: c for c in in_model}
     known, novel = set(reg.known_names), set(reg.novel_names)
-    stale_classes = set(s.scalars(
-        select(ObjectClass.name).join(Sample, Sample.class_id == ObjectClass.id)
-        .where(Sample.id.in_(stale_samples))
-    )) if stale_samples else set()
+    stale_classes = (
+        set(
+            s.scalars(
+                select(ObjectClass.name)
+                .join(Sample, Sample.class_id == ObjectClass.id)
+                .where(Sample.id.in_(stale_samples))
+            )
+        )
+        if stale_samples
+        else set()
+    )
     stale_classes |= set(reg.all_names) - set(live)
-    for names, vectors in ((reg.known_names, reg.known_attributes),
-                           (reg.novel_names, reg.novel_attributes)):
+    for names, vectors in (
+        (reg.known_names, reg.known_attributes),
+        (reg.novel_names, reg.novel_attributes),
+    ):
         for name, vector in zip(names, vectors, strict=True):
             if name in live and repo.vector_key(vector) != live[name].attribute_key:
                 stale_classes.add(name)
-    stale_classes |= {name for name in known if name in live and live[name].kind == "novel"}
+    stale_classes |= {name for name in known if name in live and live[name].kind == ClassKind.NOVEL}
     unplaced = stale_classes - known - novel  # cannot happen; if it does, retrain it all
     return bool(stale_classes & known or unplaced), bool(stale_classes & novel)
 
@@ -207,10 +231,15 @@ def known_dataset(s: Session, plan: Plan) -> TactileDataset:
     """Every known class (promoted ones included) with its stored samples, for a full retrain."""
     promoted, demoted = {c.id for c in plan.promote}, {c.id for c in plan.demote}
     live = set(plan.sample_ids)
-    known = [c for c in repo.list_classes(s)
-             if (c.kind == "known" and c.id not in demoted) or c.id in promoted]
+    known = [
+        c
+        for c in repo.list_classes(s)
+        if (c.kind == ClassKind.KNOWN and c.id not in demoted) or c.id in promoted
+    ]
     index = {c.id: i for i, c in enumerate(known)}
-    rows = [r for r in repo.samples_of(s, list(index)) if r.origin == "dataset" or r.id in live]
+    rows = [
+        r for r in repo.samples_of(s, list(index)) if r.origin == Origin.DATASET or r.id in live
+    ]
     return TactileDataset(
         samples=_stack(rows),
         labels=np.array([index[r.class_id] for r in rows]),

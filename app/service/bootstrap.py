@@ -21,6 +21,7 @@ from app.framework import bundle
 from app.framework.recognizer import TactileRecognizer
 from app.framework.registry import make_method
 from app.store import bundles, leases, migrate, repo
+from app.store.enums import ClassKind, Origin, VersionReason
 
 LEASE = "bootstrap"
 Trainer = Callable[[], tuple[TactileRecognizer, TactileDataset]]
@@ -88,11 +89,13 @@ def store_base_model(s: Session, model: TactileRecognizer, dataset: TactileDatas
     repo.add_attributes(s, dataset.attribute_names)
     ids = []
     for name, vector in zip(dataset.class_names, dataset.class_attributes, strict=True):
-        ids.append(repo.add_class(s, name, repo.vector_key(vector), "known", "dataset").id)
+        ids.append(
+            repo.add_class(s, name, repo.vector_key(vector), ClassKind.KNOWN, Origin.DATASET).id
+        )
     row = repo.add_version(
         s,
         method=model.method,
-        reason="bootstrap",
+        reason=VersionReason.BOOTSTRAP,
         base_version=None,
         bundle_sha256=bundles.store_model(s, bundle.split(model)),
         input_shape=list(model.input_shape),
@@ -107,6 +110,6 @@ def store_base_model(s: Session, model: TactileRecognizer, dataset: TactileDatas
 
 def model_classes(model: TactileRecognizer) -> list[dict[str, str]]:
     reg = model.registry
-    return [{"name": n, "kind": "known"} for n in reg.known_names] + [
-        {"name": n, "kind": "novel"} for n in reg.novel_names
+    return [{"name": n, "kind": ClassKind.KNOWN} for n in reg.known_names] + [
+        {"name": n, "kind": ClassKind.NOVEL} for n in reg.novel_names
     ]

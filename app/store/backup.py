@@ -20,6 +20,7 @@ from pathlib import Path
 from sqlalchemy import create_engine
 from sqlalchemy.engine import make_url
 
+from app.store.enums import Origin
 from app.store.in_use import StoreInUseError, closed_to_service
 from app.store.integrity import check_store
 
@@ -41,20 +42,29 @@ class StoreSummary:
     withdrawn_samples: int = 0
 
     def __str__(self) -> str:
-        withdrawn = (f" (withdrawn: {self.withdrawn_classes} classes, {self.withdrawn_samples} samples)"
-                     if self.withdrawn_classes or self.withdrawn_samples else "")
-        return (f"{self.classes} classes, {self.enrolled_samples} enrolled samples{withdrawn}, "
-                f"{self.versions} model versions (active: {self.active_version}), {self.bytes:,} bytes")
+        withdrawn = (
+            f" (withdrawn: {self.withdrawn_classes} classes, {self.withdrawn_samples} samples)"
+            if self.withdrawn_classes or self.withdrawn_samples
+            else ""
+        )
+        return (
+            f"{self.classes} classes, {self.enrolled_samples} enrolled samples{withdrawn}, "
+            f"{self.versions} model versions (active: {self.active_version}), {self.bytes:,} bytes"
+        )
 
 
 def sqlite_path(url: str) -> Path:
     """The file of a SQLite store URL; any other store is refused with what to use instead."""
     parsed = make_url(url)
     if parsed.get_backend_name() != "sqlite":
-        raise StoreBackupError(f"the store is {parsed.get_backend_name()}, not SQLite: back it up "
-                               "with the database's own tools (PostgreSQL: pg_dump -Fc, pg_restore)")
+        raise StoreBackupError(
+            f"the store is {parsed.get_backend_name()}, not SQLite: back it up "
+            "with the database's own tools (PostgreSQL: pg_dump -Fc, pg_restore)"
+        )
     if not parsed.database or parsed.database == ":memory:":
-        raise StoreBackupError("the store is an in-memory SQLite database: there is nothing to back up")
+        raise StoreBackupError(
+            "the store is an in-memory SQLite database: there is nothing to back up"
+        )
     return Path(parsed.database)
 
 
@@ -70,9 +80,13 @@ def summarize(path: Path) -> StoreSummary:
     with closing(sqlite3.connect(f"file:{path}?mode=ro", uri=True)) as conn:
         one = lambda sql: conn.execute(sql).fetchone()[0]  # noqa: E731
         # stores from before migration 0004 have no withdrawals
-        withdrawals = "withdrawn_at" in {row[1] for row in conn.execute("PRAGMA table_info(classes)")}
-        live, gone = ("withdrawn_at IS NULL", "withdrawn_at IS NOT NULL") if withdrawals else ("1", "0")
-        enrolled = "SELECT COUNT(*) FROM samples WHERE origin = 'enrolled' AND "
+        withdrawals = "withdrawn_at" in {
+            row[1] for row in conn.execute("PRAGMA table_info(classes)")
+        }
+        live, gone = (
+            ("withdrawn_at IS NULL", "withdrawn_at IS NOT NULL") if withdrawals else ("1", "0")
+        )
+        enrolled = f"SELECT COUNT(*) FROM samples WHERE origin = '{Origin.ENROLLED}' AND "
         return StoreSummary(
             classes=one(f"SELECT COUNT(*) FROM classes WHERE {live}"),
             enrolled_samples=one(enrolled + live),
@@ -98,8 +112,10 @@ def backup(url: str, out: Path) -> StoreSummary:
     partial = out.with_name(out.name + ".partial")
     partial.unlink(missing_ok=True)
     try:
-        with closing(sqlite3.connect(source, timeout=BUSY_MS / 1000)) as src, \
-                closing(sqlite3.connect(partial)) as dst:
+        with (
+            closing(sqlite3.connect(source, timeout=BUSY_MS / 1000)) as src,
+            closing(sqlite3.connect(partial)) as dst,
+        ):
             src.backup(dst)  # all pages in one step: one read transaction, one consistent copy
             dst.execute("PRAGMA journal_mode=DELETE")  # a self-contained file, no -wal beside it
         problems = _problems(partial)
@@ -121,15 +137,21 @@ def restore(backup_file: Path, url: str, replace: bool = False) -> StoreSummary:
         raise StoreBackupError(f"there is no backup at {backup_file}")
     problems = _problems(backup_file)
     if problems:
-        raise StoreBackupError(f"{backup_file} fails its checks, nothing was restored: {'; '.join(problems)}")
+        raise StoreBackupError(
+            f"{backup_file} fails its checks, nothing was restored: {'; '.join(problems)}"
+        )
     if target.exists() and target.stat().st_size > 0 and not replace:
-        raise StoreBackupError(f"{target} holds a store already; pass --replace to overwrite it "
-                               "(stop every API process and worker first)")
+        raise StoreBackupError(
+            f"{target} holds a store already; pass --replace to overwrite it "
+            "(stop every API process and worker first)"
+        )
     target.parent.mkdir(parents=True, exist_ok=True)
     try:
-        with closed_to_service(url), \
-                closing(sqlite3.connect(f"file:{backup_file}?mode=ro", uri=True)) as src, \
-                closing(sqlite3.connect(target, timeout=BUSY_MS / 1000)) as dst:
+        with (
+            closed_to_service(url),
+            closing(sqlite3.connect(f"file:{backup_file}?mode=ro", uri=True)) as src,
+            closing(sqlite3.connect(target, timeout=BUSY_MS / 1000)) as dst,
+        ):
             src.backup(dst)  # one write transaction: the old store or the new one, never a mix
     except StoreInUseError as exc:
         raise StoreBackupError(f"nothing was restored: {exc}") from None

@@ -15,19 +15,26 @@ from sqlalchemy.exc import DatabaseError
 
 from app.framework import bundle
 from app.store.db import make_engine
+from app.store.enums import JobStatus
 
 CONSISTENCY = {
     "active versions != 1": "SELECT COUNT(*) <> 1 FROM model_versions WHERE active",
-    "samples of missing classes":
-        "SELECT COUNT(*) > 0 FROM samples s LEFT JOIN classes c ON c.id = s.class_id WHERE c.id IS NULL",
-    "jobs of missing samples":
+    "samples of missing classes": (
+        "SELECT COUNT(*) > 0 FROM samples s LEFT JOIN classes c ON c.id = s.class_id "
+        "WHERE c.id IS NULL"
+    ),
+    "jobs of missing samples": (
         "SELECT COUNT(*) > 0 FROM jobs j LEFT JOIN samples s ON s.id = j.sample_id "
-        "WHERE j.sample_id IS NOT NULL AND s.id IS NULL",
-    "versions without bundle":
-        "SELECT COUNT(*) > 0 FROM model_versions v LEFT JOIN bundles b ON b.sha256 = v.bundle_sha256 "
-        "WHERE b.sha256 IS NULL",
-    "succeeded jobs without version":
-        "SELECT COUNT(*) > 0 FROM jobs WHERE status = 'succeeded' AND model_version IS NULL",
+        "WHERE j.sample_id IS NOT NULL AND s.id IS NULL"
+    ),
+    "versions without bundle": (
+        "SELECT COUNT(*) > 0 FROM model_versions v "
+        "LEFT JOIN bundles b ON b.sha256 = v.bundle_sha256 WHERE b.sha256 IS NULL"
+    ),
+    "succeeded jobs without version": (
+        f"SELECT COUNT(*) > 0 FROM jobs WHERE status = '{JobStatus.SUCCEEDED}' "
+        "AND model_version IS NULL"
+    ),
 }
 
 
@@ -58,13 +65,18 @@ def _check(engine: Engine, problems: list[str]) -> None:
                 problems.append(name)
         # one bundle row in memory at a time: a store may hold hundreds of megabytes
         rows = conn.execution_options(stream_results=True, yield_per=1).execute(
-            text("SELECT sha256, data FROM bundles"))
+            text("SELECT sha256, data FROM bundles")
+        )
         for sha, data in rows:
             if hashlib.sha256(bytes(data)).hexdigest() != sha:
                 problems.append(f"bundle {sha[:12]} does not match its hash")
         stored = set(conn.execute(text("SELECT sha256 FROM bundles")).scalars())
-        heads = conn.execution_options(stream_results=True, yield_per=1).execute(text(
-            "SELECT v.version, b.data FROM model_versions v JOIN bundles b ON b.sha256 = v.bundle_sha256"))
+        heads = conn.execution_options(stream_results=True, yield_per=1).execute(
+            text(
+                "SELECT v.version, b.data FROM model_versions v "
+                "JOIN bundles b ON b.sha256 = v.bundle_sha256"
+            )
+        )
         for version, data in heads:
             if set(bundle.part_refs(bytes(data)).values()) - stored:
                 problems.append(f"version {version} refers to bundle parts that are not stored")

@@ -25,6 +25,8 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, query_expression
 
+from app.store.enums import JobStatus, Origin
+
 # Stable constraint names so Alembic migrations (and SQLite batch mode) can refer to them.
 NAMING = {
     "ix": "ix_%(column_0_label)s",
@@ -70,7 +72,7 @@ class Attribute(Base):
     name: Mapped[str] = mapped_column(String(200), unique=True)
 
 
-LIVE_ENROLLED = "origin = 'enrolled' AND withdrawn_at IS NULL"
+LIVE_ENROLLED = f"origin = '{Origin.ENROLLED}' AND withdrawn_at IS NULL"
 
 
 class ObjectClass(Base):
@@ -78,8 +80,8 @@ class ObjectClass(Base):
 
     id: Mapped[int] = mapped_column(primary_key=True)
     name: Mapped[str] = mapped_column(String(200), unique=True)
-    kind: Mapped[str] = mapped_column(String(10))  # known | novel
-    origin: Mapped[str] = mapped_column(String(10))  # dataset | enrolled
+    kind: Mapped[str] = mapped_column(String(10))  # ClassKind
+    origin: Mapped[str] = mapped_column(String(10))  # Origin
     # the 0/1 attribute vector as a string of digits, e.g. "0110..."
     attribute_key: Mapped[str] = mapped_column(String(1000), index=True)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
@@ -109,7 +111,7 @@ class Sample(Base):
 
     id: Mapped[int] = mapped_column(primary_key=True)
     class_id: Mapped[int] = mapped_column(ForeignKey("classes.id"), index=True)
-    origin: Mapped[str] = mapped_column(String(10))  # dataset | enrolled
+    origin: Mapped[str] = mapped_column(String(10))  # Origin
     trial: Mapped[int | None] = mapped_column(Integer)  # dataset trial id, for grouped splits
     shape: Mapped[list[int]] = mapped_column(JSON)
     data: Mapped[bytes] = mapped_column(LargeBinary)
@@ -134,7 +136,7 @@ class ModelVersion(Base):
     version: Mapped[int] = mapped_column(primary_key=True)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     method: Mapped[str] = mapped_column(String(100))
-    reason: Mapped[str] = mapped_column(String(20))  # bootstrap | update | promotion | withdrawal
+    reason: Mapped[str] = mapped_column(String(20))  # VersionReason
     base_version: Mapped[int | None] = mapped_column(Integer)
     bundle_sha256: Mapped[str] = mapped_column(ForeignKey("bundles.sha256"))
     input_shape: Mapped[list[int]] = mapped_column(JSON)
@@ -173,8 +175,8 @@ class Job(Base):
     __tablename__ = "jobs"
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    kind: Mapped[str] = mapped_column(String(20))  # register_class | add_sample | withdraw_…
-    status: Mapped[str] = mapped_column(String(10), default="queued")
+    kind: Mapped[str] = mapped_column(String(20))  # JobKind
+    status: Mapped[str] = mapped_column(String(10), default=JobStatus.QUEUED)  # JobStatus
     class_id: Mapped[int] = mapped_column(ForeignKey("classes.id"), index=True)
     sample_id: Mapped[int | None] = mapped_column(ForeignKey("samples.id"))
     model_version: Mapped[int | None] = mapped_column(Integer)

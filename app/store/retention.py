@@ -19,6 +19,7 @@ from sqlalchemy.orm import Session
 
 from app.framework import bundle
 from app.store import repo
+from app.store.enums import VersionReason
 from app.store.models import Bundle, ModelVersion
 
 
@@ -40,14 +41,20 @@ def prunable(session: Session, keep: int) -> list[int]:
     if keep < 1:
         raise ValueError(f"keep must be at least 1, got {keep}")
     rows = session.execute(
-        select(ModelVersion.version, ModelVersion.active, ModelVersion.reason)
-        .order_by(ModelVersion.version.desc())
+        select(ModelVersion.version, ModelVersion.active, ModelVersion.reason).order_by(
+            ModelVersion.version.desc()
+        )
     ).all()
-    return sorted(v for i, (v, active, reason) in enumerate(rows)
-                  if i >= keep and not active and reason != "bootstrap")
+    return sorted(
+        v
+        for i, (v, active, reason) in enumerate(rows)
+        if i >= keep and not active and reason != VersionReason.BOOTSTRAP
+    )
 
 
-def prune(session: Session, keep: int, slack: int = 0, part_refs: dict[str, set[str]] | None = None) -> Pruned:
+def prune(
+    session: Session, keep: int, slack: int = 0, part_refs: dict[str, set[str]] | None = None
+) -> Pruned:
     """Delete the versions beyond the ``keep`` newest (see the module docstring) and
     the bundle rows only they used; nothing while at most ``slack`` versions are over.
 
@@ -60,7 +67,9 @@ def prune(session: Session, keep: int, slack: int = 0, part_refs: dict[str, set[
         return NOTHING
     for chunk in _chunks(doomed):
         # "not active" again in the statement: an activation may have committed since
-        session.execute(delete(ModelVersion).where(ModelVersion.version.in_(chunk), ~ModelVersion.active))
+        session.execute(
+            delete(ModelVersion).where(ModelVersion.version.in_(chunk), ~ModelVersion.active)
+        )
     kept = set(session.scalars(select(ModelVersion.version)))
     deleted = [v for v in doomed if v not in kept]
     if not deleted:
@@ -76,7 +85,9 @@ def prune(session: Session, keep: int, slack: int = 0, part_refs: dict[str, set[
     unused = [sha for sha in session.scalars(select(Bundle.sha256)) if sha not in used]
     size = 0
     for chunk in _chunks(unused):
-        size += session.scalar(select(func.coalesce(func.sum(Bundle.size), 0)).where(Bundle.sha256.in_(chunk)))
+        size += session.scalar(
+            select(func.coalesce(func.sum(Bundle.size), 0)).where(Bundle.sha256.in_(chunk))
+        )
         session.execute(delete(Bundle).where(Bundle.sha256.in_(chunk)))
     return Pruned(deleted, len(unused), int(size))
 
@@ -84,4 +95,4 @@ def prune(session: Session, keep: int, slack: int = 0, part_refs: dict[str, set[
 def _chunks(items: list, size: int = 500):
     """IN lists of bounded length (SQLite limits a statement's parameters)."""
     for start in range(0, len(items), size):
-        yield items[start:start + size]
+        yield items[start : start + size]

@@ -10,6 +10,7 @@ import numpy as np
 from sqlalchemy import Row, Select, func, insert, select, update
 from sqlalchemy.orm import Session, aliased, defer
 
+from app.store.enums import ClassKind, JobKind, Origin
 from app.store.models import Attribute, Job, ObjectClass, Sample, utcnow
 from app.store.repo.encoding import encode_sample
 
@@ -76,7 +77,11 @@ def class_ids_by_name(session: Session) -> dict[str, int]:
 
 
 def add_class(
-    session: Session, name: str, key: str, kind: str = "novel", origin: str = "enrolled"
+    session: Session,
+    name: str,
+    key: str,
+    kind: str = ClassKind.NOVEL,
+    origin: str = Origin.ENROLLED,
 ) -> ObjectClass:
     obj = ObjectClass(name=name, kind=kind, origin=origin, attribute_key=key)
     session.add(obj)
@@ -88,7 +93,7 @@ def add_class(
 
 
 def add_sample(
-    session: Session, class_id: int, sample: np.ndarray, origin: str = "enrolled"
+    session: Session, class_id: int, sample: np.ndarray, origin: str = Origin.ENROLLED
 ) -> Sample:
     data, shape = encode_sample(sample)
     row = Sample(class_id=class_id, origin=origin, shape=shape, data=data)
@@ -111,7 +116,7 @@ def add_dataset_samples(
         rows.append(
             {
                 "class_id": int(cid),
-                "origin": "dataset",
+                "origin": Origin.DATASET,
                 "trial": int(trial),
                 "shape": shape,
                 "data": data,
@@ -156,7 +161,9 @@ def _live_samples(class_id: int, *columns: Any) -> Select:
             enrolment.requested_by.label("enrolled_by"),
             *columns,
         )
-        .outerjoin(enrolment, (enrolment.sample_id == Sample.id) & (enrolment.kind == "add_sample"))
+        .outerjoin(
+            enrolment, (enrolment.sample_id == Sample.id) & (enrolment.kind == JobKind.ADD_SAMPLE)
+        )
         .where(Sample.class_id == class_id, LIVE_SAMPLE)
     )
 
@@ -194,6 +201,11 @@ def redescribe_class(session: Session, cls: ObjectClass, key: str) -> None:
 
 def revive_class(session: Session, cls: ObjectClass, key: str) -> ObjectClass:
     """A withdrawn class registered again: the same row, the new attributes, no samples."""
-    cls.withdrawn_at, cls.attribute_key, cls.kind, cls.promoted_at = None, key, "novel", None
+    cls.withdrawn_at, cls.attribute_key, cls.kind, cls.promoted_at = (
+        None,
+        key,
+        ClassKind.NOVEL,
+        None,
+    )
     session.flush()
     return cls

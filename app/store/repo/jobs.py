@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
+from app.store.enums import JobKind, JobStatus
 from app.store.models import Job, utcnow
 
 
@@ -20,7 +21,7 @@ def add_job(
 ) -> Job:
     job = Job(
         kind=kind,
-        status="queued",
+        status=JobStatus.QUEUED,
         class_id=class_id,
         sample_id=sample_id,
         requested_by=requested_by,
@@ -62,7 +63,7 @@ def claim_queued_jobs(session: Session, worker_id: str) -> list[Job]:
     """
     stmt = (
         select(Job.id)
-        .where(Job.status == "queued")
+        .where(Job.status == JobStatus.QUEUED)
         .order_by(Job.id)
         .with_for_update(skip_locked=True)
     )
@@ -73,11 +74,13 @@ def claim_queued_jobs(session: Session, worker_id: str) -> list[Job]:
     now = utcnow()
     session.execute(
         update(Job)
-        .where(Job.id.in_(ids), Job.status == "queued")
-        .values(status="running", claimed_by=worker_id, started_at=now)
+        .where(Job.id.in_(ids), Job.status == JobStatus.QUEUED)
+        .values(status=JobStatus.RUNNING, claimed_by=worker_id, started_at=now)
     )
     session.commit()
-    mine = select(Job).where(Job.id.in_(ids), Job.claimed_by == worker_id, Job.status == "running")
+    mine = select(Job).where(
+        Job.id.in_(ids), Job.claimed_by == worker_id, Job.status == JobStatus.RUNNING
+    )
     return list(session.scalars(mine.order_by(Job.id)))
 
 
@@ -85,8 +88,8 @@ def requeue_running(session: Session) -> int:
     """Jobs left ``running`` by a worker that died go back to the queue."""
     res = session.execute(
         update(Job)
-        .where(Job.status == "running")
-        .values(status="queued", claimed_by=None, started_at=None)
+        .where(Job.status == JobStatus.RUNNING)
+        .values(status=JobStatus.QUEUED, claimed_by=None, started_at=None)
     )
     return res.rowcount or 0
 
@@ -109,11 +112,11 @@ def registration_failed(session: Session, class_id: int) -> bool:
     """Whether the class's latest registration job failed (so it may be registered again)."""
     status = session.scalar(
         select(Job.status)
-        .where(Job.class_id == class_id, Job.kind == "register_class")
+        .where(Job.class_id == class_id, Job.kind == JobKind.REGISTER_CLASS)
         .order_by(Job.id.desc())
         .limit(1)
     )
-    return status == "failed"
+    return status == JobStatus.FAILED
 
 
 def jobs_finished_since(session: Session, since) -> list[tuple]:
@@ -125,7 +128,7 @@ def jobs_finished_since(session: Session, since) -> list[tuple]:
     return [tuple(row) for row in session.execute(stmt)]
 
 
-FINISHED_JOB_STATUSES = ("succeeded", "failed")
+FINISHED_JOB_STATUSES = (JobStatus.SUCCEEDED, JobStatus.FAILED)
 
 
 def finished_job_ids(session: Session, ids: Sequence[int]) -> list[int]:
