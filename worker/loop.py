@@ -17,7 +17,6 @@ from collections.abc import Callable
 from datetime import UTC, datetime, timedelta
 
 import numpy as np
-from sqlalchemy import exists, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
@@ -25,8 +24,7 @@ from app.framework import bundle
 from app.framework.recognizer import TactileRecognizer
 from app.service.bootstrap import model_classes
 from app.store import bundles, leases, repo, retention
-from app.store.enums import ClassKind, JobStatus
-from app.store.models import Job, ObjectClass, utcnow
+from app.store.enums import JobStatus
 from worker.retrain import Plan, build, known_dataset, make_plan
 
 log = logging.getLogger(__name__)
@@ -58,12 +56,9 @@ class Worker:
     def run_once(self) -> int:
         """One round; returns how many jobs it finished."""
         with self.sessions() as s:
-            pending = s.scalar(
-                select(exists().where(Job.status.in_((JobStatus.QUEUED, JobStatus.RUNNING))))
-            )
-            if not pending or not leases.try_acquire(
-                s, LEASE, self.id, self.settings.lease_seconds
-            ):
+            if not repo.jobs_pending(s):
+                return 0
+            if not leases.try_acquire(s, LEASE, self.id, self.settings.lease_seconds):
                 return 0
         try:
             with leases.Renewer(self.sessions, LEASE, self.id, self.settings.lease_seconds):
@@ -154,7 +149,7 @@ class Worker:
         with self.sessions() as s:
             base = repo.active_version(s)
             model = self._load(s, base.version, base.bundle_sha256)
-            jobs = list(s.scalars(select(Job).where(Job.id.in_(job_ids))))
+            jobs = repo.get_jobs(s, job_ids)
             plan = make_plan(s, base, model, jobs, self.settings.promotion_threshold)
             known = known_dataset(s, plan) if plan.full_retrain else None
         # the session is closed: no transaction stays open while training runs
@@ -207,18 +202,8 @@ class Worker:
         )
         repo.activate(s, row.version)
         repo.finish_jobs(s, job_ids, JobStatus.SUCCEEDED, version=row.version)
-        if plan.promote:
-            s.execute(
-                update(ObjectClass)
-                .where(ObjectClass.id.in_([c.id for c in plan.promote]))
-                .values(kind=ClassKind.KNOWN, promoted_at=utcnow())
-            )
-        if plan.demote:
-            s.execute(
-                update(ObjectClass)
-                .where(ObjectClass.id.in_([c.id for c in plan.demote]))
-                .values(kind=ClassKind.NOVEL, promoted_at=None)
-            )
+        repo.promote_classes(s, [c.id for c in plan.promote])
+        repo.demote_classes(s, [c.id for c in plan.demote])
         return row.version
 
     def _load(self, s: Session, version: int, sha256: str) -> TactileRecognizer:

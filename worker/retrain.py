@@ -19,7 +19,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from sqlalchemy import func, or_, select
 from sqlalchemy.orm import Session
 
 from app.config import Settings
@@ -92,15 +91,7 @@ def make_plan(
             )
         elif job.kind == JobKind.UPDATE_CLASS:
             plan.redescribed = True
-    added = s.execute(
-        select(Job.id, Job.class_id, Sample.id, Sample.withdrawn_at)
-        .join(Sample, Sample.id == Job.sample_id)
-        .where(
-            Job.kind == JobKind.ADD_SAMPLE,
-            or_(Job.status == JobStatus.SUCCEEDED, Job.id.in_(claimed_ids)),
-        )
-    ).all()
-    for job_id, cid, sid, withdrawn_at in added:
+    for job_id, cid, sid, withdrawn_at in repo.sample_enrolments(s, claimed_ids):
         cls = by_id.get(cid)
         if cls is None or job_id in plan.rejected:
             continue
@@ -115,10 +106,8 @@ def make_plan(
                 )
             continue
         live_samples.add(sid)
-    if live_samples:
-        rows = s.scalars(select(Sample).where(Sample.id.in_(live_samples)).order_by(Sample.id))
-        for row in rows:
-            plan.samples.setdefault(row.class_id, []).append(row)
+    for row in repo.samples_by_id(s, live_samples):
+        plan.samples.setdefault(row.class_id, []).append(row)
 
     reg = model.registry
     in_base = set(base.sample_ids)
@@ -158,13 +147,9 @@ def make_plan(
 def _live_registrations(s: Session, claimed_ids: set[int]) -> set[int]:
     """Classes whose latest registration succeeded or is being done now. Only the latest
     counts: a withdrawn class registered again must wait for its new registration."""
-    latest = (
-        select(func.max(Job.id)).where(Job.kind == JobKind.REGISTER_CLASS).group_by(Job.class_id)
-    ).scalar_subquery()
-    rows = s.execute(select(Job.id, Job.class_id, Job.status).where(Job.id.in_(latest))).all()
     return {
         cid
-        for job_id, cid, status in rows
+        for job_id, cid, status in repo.latest_registrations(s)
         if status == JobStatus.SUCCEEDED or job_id in claimed_ids
     }
 
@@ -178,17 +163,7 @@ def _holds_withdrawn(
     other way)."""
     live = {c.name: c for c in in_model}
     known, novel = set(reg.known_names), set(reg.novel_names)
-    stale_classes = (
-        set(
-            s.scalars(
-                select(ObjectClass.name)
-                .join(Sample, Sample.class_id == ObjectClass.id)
-                .where(Sample.id.in_(stale_samples))
-            )
-        )
-        if stale_samples
-        else set()
-    )
+    stale_classes = repo.class_names_of_samples(s, stale_samples)
     stale_classes |= set(reg.all_names) - set(live)
     for names, vectors in (
         (reg.known_names, reg.known_attributes),

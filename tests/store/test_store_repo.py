@@ -11,6 +11,7 @@ from sqlalchemy.exc import IntegrityError
 
 from app.framework.errors import BundleError
 from app.store import leases, repo
+from app.store.enums import ClassKind, JobKind, JobStatus
 from app.store.models import Bundle, Job, ModelVersion
 
 
@@ -28,7 +29,9 @@ def test_vector_key_round_trip():
 
 
 def test_jsonable_makes_strict_json():
-    out = repo.jsonable({"a": np.float32(1.5), "b": float("nan"), "c": np.arange(2), "d": (np.inf,)})
+    out = repo.jsonable(
+        {"a": np.float32(1.5), "b": float("nan"), "c": np.arange(2), "d": (np.inf,)}
+    )
     assert out == {"a": 1.5, "b": None, "c": [0, 1], "d": [None]}
 
 
@@ -73,13 +76,22 @@ def test_only_one_version_is_ever_active(store):
     with sessions.begin() as s:
         v1 = repo.active_version(s)
         v2 = repo.add_version(
-            s, method=v1.method, reason="update", base_version=1, bundle_sha256=v1.bundle_sha256,
-            input_shape=v1.input_shape, metrics={}, classes=v1.classes, sample_ids=[],
+            s,
+            method=v1.method,
+            reason="update",
+            base_version=1,
+            bundle_sha256=v1.bundle_sha256,
+            input_shape=v1.input_shape,
+            metrics={},
+            classes=v1.classes,
+            sample_ids=[],
         )
         repo.activate(s, v2.version)
     with sessions() as s:
         assert repo.active_version_number(s) == v2.version
-        assert s.scalar(select(func.count()).select_from(ModelVersion).where(ModelVersion.active)) == 1
+        assert (
+            s.scalar(select(func.count()).select_from(ModelVersion).where(ModelVersion.active)) == 1
+        )
     with sessions() as s, pytest.raises(IntegrityError):  # the database refuses a second one
         s.get(ModelVersion, 1).active = True
         s.commit()
@@ -170,6 +182,61 @@ def test_version_summaries_count_classes_without_reading_them(six_versions):
     with six_versions() as s:  # a fresh session: nothing loaded before
         summaries = repo.list_versions(s, after=2, limit=3, summary=True)
         assert [v.version for v in summaries] == [3, 4, 5]
-        assert all("classes" not in v.__dict__ and "sample_ids" not in v.__dict__ for v in summaries)
+        assert all(
+            "classes" not in v.__dict__ and "sample_ids" not in v.__dict__ for v in summaries
+        )
         assert [v.class_count for v in summaries] == [full[3], full[4], full[5]]
         assert full[5] == full[1] + 4
+
+
+def test_what_a_retrain_reads_of_the_jobs(store):
+    """The queries the worker plans a retrain with: pending jobs, each class's latest
+    registration, and the samples added by succeeded or claimed jobs."""
+    _, sessions = store
+    x = np.zeros((2, 3), np.float32)
+    with sessions.begin() as s:
+        assert not repo.jobs_pending(s)
+        mug, cup = repo.add_class(s, "mug", "10"), repo.add_class(s, "cup", "01")
+        first = repo.add_job(s, JobKind.REGISTER_CLASS, mug.id)
+        repo.finish_jobs(s, [first.id], JobStatus.FAILED)
+        again = repo.add_job(s, JobKind.REGISTER_CLASS, mug.id)
+        cup_reg = repo.add_job(s, JobKind.REGISTER_CLASS, cup.id)
+        samples = [repo.add_sample(s, mug.id, x) for _ in range(3)]
+        added = [repo.add_job(s, JobKind.ADD_SAMPLE, mug.id, r.id) for r in samples]
+        repo.finish_jobs(s, [added[0].id], JobStatus.SUCCEEDED, version=2)
+        repo.withdraw_sample(s, samples[1])
+        ids = mug.id, cup.id, again.id, cup_reg.id, [r.id for r in samples], [j.id for j in added]
+    mug_id, cup_id, again_id, cup_reg_id, sample_ids, added_ids = ids
+    with sessions() as s:
+        assert repo.jobs_pending(s)
+        assert [j.id for j in repo.get_jobs(s, {added_ids[1], again_id})] == [
+            again_id,
+            added_ids[1],
+        ]
+        latest = {(r.id, r.class_id, r.status) for r in repo.latest_registrations(s)}
+        assert latest == {(again_id, mug_id, "queued"), (cup_reg_id, cup_id, "queued")}
+        rows = repo.sample_enrolments(s, {added_ids[1]})  # the third job is neither
+        assert sorted(
+            (r.job_id, r.class_id, r.sample_id, r.withdrawn_at is None) for r in rows
+        ) == [
+            (added_ids[0], mug_id, sample_ids[0], True),
+            (added_ids[1], mug_id, sample_ids[1], False),
+        ]
+        assert [r.id for r in repo.samples_by_id(s, set(sample_ids[1:]))] == sample_ids[1:]
+        assert repo.class_names_of_samples(s, sample_ids[:1]) == {"mug"}
+        assert repo.class_names_of_samples(s, []) == set()
+
+
+def test_promotion_and_demotion(store):
+    _, sessions = store
+    with sessions.begin() as s:
+        cid = repo.add_class(s, "mug", "10").id
+        repo.promote_classes(s, [cid])
+        repo.promote_classes(s, [])  # nothing to do
+    with sessions.begin() as s:
+        cls = repo.get_class(s, cid)
+        assert cls.kind == ClassKind.KNOWN and cls.promoted_at is not None
+        repo.demote_classes(s, [cid])
+    with sessions() as s:
+        cls = repo.get_class(s, cid)
+        assert cls.kind == ClassKind.NOVEL and cls.promoted_at is None

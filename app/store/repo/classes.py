@@ -3,7 +3,7 @@ vocabulary that describes them."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from typing import Any
 
 import numpy as np
@@ -71,6 +71,18 @@ def sample_counts(session: Session, class_ids: Sequence[int] | None = None) -> d
     return {cid: n for cid, n in session.execute(stmt)}
 
 
+def class_names_of_samples(session: Session, sample_ids: Collection[int]) -> set[str]:
+    """The names of the classes the samples ``sample_ids`` belong to, withdrawn or not."""
+    if not sample_ids:
+        return set()
+    stmt = (
+        select(ObjectClass.name)
+        .join(Sample, Sample.class_id == ObjectClass.id)
+        .where(Sample.id.in_(sample_ids))
+    )
+    return set(session.scalars(stmt))
+
+
 def class_ids_by_name(session: Session) -> dict[str, int]:
     rows = session.execute(select(ObjectClass.id, ObjectClass.name).where(LIVE_CLASS))
     return {name: cid for cid, name in rows}
@@ -87,6 +99,26 @@ def add_class(
     session.add(obj)
     session.flush()
     return obj
+
+
+def promote_classes(session: Session, class_ids: Collection[int]) -> None:
+    """These novel classes are known from now on (they gathered enough real samples)."""
+    if class_ids:
+        session.execute(
+            update(ObjectClass)
+            .where(ObjectClass.id.in_(class_ids))
+            .values(kind=ClassKind.KNOWN, promoted_at=utcnow())
+        )
+
+
+def demote_classes(session: Session, class_ids: Collection[int]) -> None:
+    """These promoted classes are novel again (withdrawals left them too few samples)."""
+    if class_ids:
+        session.execute(
+            update(ObjectClass)
+            .where(ObjectClass.id.in_(class_ids))
+            .values(kind=ClassKind.NOVEL, promoted_at=None)
+        )
 
 
 # ------------------------------------------------------------------- samples
@@ -125,6 +157,12 @@ def add_dataset_samples(
         )
     if rows:
         session.execute(insert(Sample), rows)
+
+
+def samples_by_id(session: Session, sample_ids: Collection[int]) -> list[Sample]:
+    """The samples ``sample_ids``, by id."""
+    stmt = select(Sample).where(Sample.id.in_(sample_ids)).order_by(Sample.id)
+    return list(session.scalars(stmt))
 
 
 def samples_of(session: Session, class_ids: Sequence[int]) -> list[Sample]:

@@ -3,13 +3,13 @@ how they are claimed, finished and reported."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 
-from sqlalchemy import func, select, update
+from sqlalchemy import Row, exists, func, or_, select, update
 from sqlalchemy.orm import Session
 
 from app.store.enums import JobKind, JobStatus
-from app.store.models import Job, utcnow
+from app.store.models import Job, Sample, utcnow
 
 
 def add_job(
@@ -35,6 +35,11 @@ def get_job(session: Session, job_id: int) -> Job | None:
     return session.get(Job, job_id)
 
 
+def get_jobs(session: Session, job_ids: Collection[int]) -> list[Job]:
+    """The jobs ``job_ids``, by id."""
+    return list(session.scalars(select(Job).where(Job.id.in_(job_ids)).order_by(Job.id)))
+
+
 def list_jobs(
     session: Session,
     after: int | None = None,
@@ -52,6 +57,12 @@ def list_jobs(
         if value is not None:
             stmt = stmt.where(column == value)
     return list(session.scalars(stmt))
+
+
+def jobs_pending(session: Session) -> bool:
+    """Whether any job is queued, or running (perhaps left so by a worker that died)."""
+    active = (JobStatus.QUEUED, JobStatus.RUNNING)
+    return bool(session.scalar(select(exists().where(Job.status.in_(active)))))
 
 
 def claim_queued_jobs(session: Session, worker_id: str) -> list[Job]:
@@ -117,6 +128,34 @@ def registration_failed(session: Session, class_id: int) -> bool:
         .limit(1)
     )
     return status == JobStatus.FAILED
+
+
+def latest_registrations(session: Session) -> list[Row]:
+    """Rows of ``id, class_id, status`` of each class's latest registration job (a withdrawn
+    class registered again has several)."""
+    latest = (
+        select(func.max(Job.id))
+        .where(Job.kind == JobKind.REGISTER_CLASS)
+        .group_by(Job.class_id)
+        .scalar_subquery()
+    )
+    return list(session.execute(select(Job.id, Job.class_id, Job.status).where(Job.id.in_(latest))))
+
+
+def sample_enrolments(session: Session, claimed: Collection[int]) -> list[Row]:
+    """Rows of ``job_id, class_id, sample_id, withdrawn_at`` (the sample's) of every job that
+    added a sample and succeeded, or is one of the jobs ``claimed``."""
+    stmt = (
+        select(
+            Job.id.label("job_id"), Job.class_id, Sample.id.label("sample_id"), Sample.withdrawn_at
+        )
+        .join(Sample, Sample.id == Job.sample_id)
+        .where(
+            Job.kind == JobKind.ADD_SAMPLE,
+            or_(Job.status == JobStatus.SUCCEEDED, Job.id.in_(claimed)),
+        )
+    )
+    return list(session.execute(stmt))
 
 
 def jobs_finished_since(session: Session, since) -> list[tuple]:
