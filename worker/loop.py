@@ -25,7 +25,7 @@ from app.framework.recognizer import TactileRecognizer
 from app.service.bootstrap import model_classes
 from app.store import bundles, leases, repo, retention
 from app.store.enums import JobStatus
-from worker.retrain import Plan, build, known_dataset, make_plan
+from worker.retrain import Plan, Rebuild, build, known_dataset, make_plan
 
 log = logging.getLogger(__name__)
 
@@ -151,19 +151,16 @@ class Worker:
             model = self._load(s, base.version, base.bundle_sha256)
             jobs = repo.get_jobs(s, job_ids)
             plan = make_plan(s, base, model, jobs, self.settings.promotion_threshold)
-            known = known_dataset(s, plan) if plan.full_retrain else None
+            known = known_dataset(s, plan) if plan.rebuild is Rebuild.FULL else None
         # the session is closed: no transaction stays open while training runs
         if plan.changes_model:
             log.info(
-                "retraining v%d: %d new class(es), samples for %d, %s",
+                "retraining v%d (%s rebuild, %s): %d new class(es), samples for %d",
                 base.version,
+                plan.rebuild,
+                plan.reason,
                 len(plan.new_classes),
                 len(plan.new_samples),
-                f"full retrain ({plan.reason})"
-                if plan.full_retrain
-                else "novel classes rebuilt (withdrawal)"
-                if plan.rebuild_novel
-                else "incremental",
             )
             new = build(plan, model, self.settings, known)
             split = self._encoder.split(new)  # serialised before the transaction opens

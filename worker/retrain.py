@@ -3,13 +3,14 @@
 The rule is "bring the active model up to date with the store": every class and
 sample whose enrollment succeeded earlier or is claimed now belongs in the new
 model; failed enrollments and ones still queued for the next round do not.
-Usually that is an incremental update (new FC_Z, one-shot samples); when a novel
-class has gathered ``promotion_threshold`` real samples it becomes a known class
-and the whole model is retrained from the stored samples. So is it when the base
-model holds something the store has withdrawn (a class, a sample, or a class's old
-attributes, after a withdrawal or a PATCH of them) in its known part, or in its novel part where one-shot samples may have
-fine-tuned shared parts (the paper's generator): a fresh fit is the one way to leave no
-trace of it. Methods whose novel part is rebuilt from the registry alone
+How the new model is made is the plan's ``Rebuild``. Usually that is an incremental
+update (new FC_Z, one-shot samples); when a novel class has gathered
+``promotion_threshold`` real samples it becomes a known class and the whole model is
+fitted again from the stored samples. So is it when the base model holds something the
+store has withdrawn (a class, a sample, or a class's old attributes, after a withdrawal
+or a PATCH of them) in its known part, or in its novel part where one-shot samples may
+have fine-tuned shared parts (the paper's generator): a fresh fit is the one way to leave
+no trace of it. Methods whose novel part is rebuilt from the registry alone
 (``novel_part_separable``, e.g. ``best``) drop their novel classes and add the live
 ones back instead.
 """
@@ -17,6 +18,7 @@ ones back instead.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 import numpy as np
 from sqlalchemy.orm import Session
@@ -33,36 +35,32 @@ from app.store.models import Job, ModelVersion, ObjectClass, Sample
 ENROLLED_TRIAL_OFFSET = 1_000_000_000
 
 
+class Rebuild(StrEnum):
+    """How a retrain makes the new model from the base one."""
+
+    NONE = "none"  # the base model holds everything already: no new version
+    INCREMENTAL = "incremental"  # the plan's new classes and samples added to the base
+    NOVEL_PART = "novel part"  # the base's novel classes dropped, every live one added anew
+    FULL = "full"  # fitted again on the stored samples, every live novel class added
+
+
 @dataclass
 class Plan:
+    rebuild: Rebuild = Rebuild.NONE
+    reason: VersionReason = VersionReason.UPDATE  # the new model version's
+    # what an incremental rebuild adds: classes the base lacks, new samples by class name
     new_classes: list[ObjectClass] = field(default_factory=list)
-    new_samples: dict[str, list[Sample]] = field(default_factory=dict)  # by novel class name
-    full_retrain: bool = False
-    withdrawal: bool = False  # the new model leaves out what was withdrawn
-    rebuild_novel: bool = False  # every novel class added anew to the base's known part
+    new_samples: dict[str, list[Sample]] = field(default_factory=dict)
     promote: list[ObjectClass] = field(default_factory=list)
     # promoted classes left with fewer than ``promotion_threshold`` samples: novel again
     demote: list[ObjectClass] = field(default_factory=list)
     novel: list[ObjectClass] = field(default_factory=list)  # every novel class of the new model
     samples: dict[int, list[Sample]] = field(default_factory=dict)  # its enrolled samples by class
     rejected: dict[int, str] = field(default_factory=dict)  # job id -> why it cannot succeed
-    redescribed: bool = False  # an operator changed a class's attributes (PATCH)
 
     @property
     def changes_model(self) -> bool:
-        return bool(self.new_classes or self.new_samples or self.full_retrain or self.rebuild_novel)
-
-    @property
-    def reason(self) -> str:
-        """The new model version's ``reason``. Changed attributes make the base model hold a
-        class as it no longer is, as a withdrawal does; asked for by PATCH, that is an update."""
-        if self.promote or (self.full_retrain and not self.withdrawal):
-            return VersionReason.PROMOTION
-        return (
-            VersionReason.WITHDRAWAL
-            if self.withdrawal and not self.redescribed
-            else VersionReason.UPDATE
-        )
+        return self.rebuild is not Rebuild.NONE
 
     @property
     def sample_ids(self) -> list[int]:
@@ -79,6 +77,7 @@ def make_plan(
     by_id = {c.id: c for c in classes}
     live_classes = _live_registrations(s, claimed_ids)
     live_samples = set()
+    redescribed = False  # an operator changed a class's attributes (PATCH)
     for job in claimed:
         if (
             job.kind in (JobKind.REGISTER_CLASS, JobKind.ADD_SAMPLE, JobKind.UPDATE_CLASS)
@@ -90,7 +89,7 @@ def make_plan(
                 f"class '{by_id[job.class_id].name}' is not enrolled: its registration failed"
             )
         elif job.kind == JobKind.UPDATE_CLASS:
-            plan.redescribed = True
+            redescribed = True
     for job_id, cid, sid, withdrawn_at in repo.sample_enrolments(s, claimed_ids):
         cls = by_id.get(cid)
         if cls is None or job_id in plan.rejected:
@@ -112,6 +111,7 @@ def make_plan(
     reg = model.registry
     in_base = set(base.sample_ids)
     in_model = []
+    full = False  # the model must be fitted again
     for cls in classes:
         if cls.origin == Origin.ENROLLED and cls.id not in live_classes:
             continue  # failed, or queued for a later round
@@ -120,14 +120,14 @@ def make_plan(
         missing = [r for r in rows if r.id not in in_base]
         if cls.kind == ClassKind.KNOWN and (cls.origin == Origin.DATASET or len(rows) >= threshold):
             # a promoted class the base lacks as known, or with samples it has not seen
-            plan.full_retrain |= cls.name not in reg.known_names or bool(missing)
+            full |= cls.name not in reg.known_names or bool(missing)
         elif cls.kind == ClassKind.KNOWN:  # withdrawals took it below the promotion threshold
             plan.demote.append(cls)
             plan.novel.append(cls)
-            plan.full_retrain = True
+            full = True
         elif len(rows) >= threshold:
             plan.promote.append(cls)
-            plan.full_retrain = True
+            full = True
         else:
             plan.novel.append(cls)
             if cls.name not in reg.all_names:
@@ -136,11 +136,19 @@ def make_plan(
                 plan.new_samples[cls.name] = missing
     known_part, novel_part = _holds_withdrawn(s, reg, in_base - live_samples, in_model)
     known_part |= bool(plan.demote)
-    plan.withdrawal = known_part or novel_part
-    if known_part or (novel_part and not model.novel_part_separable):
-        plan.full_retrain = True
-    elif novel_part and not plan.full_retrain:
-        plan.rebuild_novel = True
+    stale = known_part or novel_part  # the base holds what the store withdrew or changed
+    if full or known_part or (novel_part and not model.novel_part_separable):
+        plan.rebuild = Rebuild.FULL
+    elif novel_part:
+        plan.rebuild = Rebuild.NOVEL_PART
+    elif plan.new_classes or plan.new_samples:
+        plan.rebuild = Rebuild.INCREMENTAL
+    # Changed attributes make the base hold a class as it no longer is, as a withdrawal
+    # does; asked for by PATCH, that is an update.
+    if plan.promote or (full and not stale):
+        plan.reason = VersionReason.PROMOTION
+    elif stale and not redescribed:
+        plan.reason = VersionReason.WITHDRAWAL
     return plan
 
 
@@ -183,8 +191,8 @@ def build(
     """The new recognizer; the base model is never modified. A full retrain fits a
     fresh model on ``known`` (from ``known_dataset``) first; a novel-part rebuild starts
     from the base's known part alone."""
-    if plan.full_retrain or plan.rebuild_novel:
-        if plan.full_retrain:
+    if plan.rebuild in (Rebuild.FULL, Rebuild.NOVEL_PART):
+        if plan.rebuild is Rebuild.FULL:
             model = make_method(settings.method, **settings.method_params).fit(known)
         else:
             model = model.without_novel_classes()
