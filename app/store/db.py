@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sqlalchemy import Engine, create_engine, event
+from sqlalchemy import Engine, create_engine, event, text
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -47,3 +47,9 @@ def _sqlite_pragmas(dbapi_conn, busy_ms: int) -> None:
 def make_sessionmaker(engine: Engine) -> sessionmaker[Session]:
     # expire_on_commit=False: routes serialise rows after the commit that makes them durable
     return sessionmaker(engine, expire_on_commit=False)
+
+
+def ping(session: Session) -> None:
+    """One round trip to the database; raises ``SQLAlchemyError`` when it does not answer
+    (a readiness check)."""
+    session.execute(text("SELECT 1"))

@@ -7,10 +7,10 @@ import time
 import numpy as np
 import pytest
 from sqlalchemy import func, select, update
-from sqlalchemy.exc import IntegrityError
+from sqlalchemy.exc import IntegrityError, OperationalError
 
 from app.framework.errors import BundleError
-from app.store import leases, repo
+from app.store import db, leases, repo
 from app.store.enums import ClassKind, JobKind, JobStatus
 from app.store.models import Bundle, Job, ModelVersion
 
@@ -240,3 +240,13 @@ def test_promotion_and_demotion(store):
     with sessions() as s:
         cls = repo.get_class(s, cid)
         assert cls.kind == ClassKind.NOVEL and cls.promoted_at is None
+
+
+def test_ping_answers_while_the_store_does(store):
+    _, sessions = store
+    with sessions() as s:
+        db.ping(s)
+    engine = db.make_engine("postgresql://nobody@127.0.0.1:1/none", timeout=1)  # nothing listens
+    with db.make_sessionmaker(engine)() as s, pytest.raises(OperationalError):
+        db.ping(s)
+    engine.dispose()
