@@ -250,8 +250,8 @@ def worker(app, client):
     """A worker on the app's store, run by hand with ``worker.run_once()``."""
     from worker import Worker
 
-    holder = app.state.holder
-    return Worker(app.state.settings, app.state.sessions, on_activate=holder.serve)
+    holder = app.state.service.holder
+    return Worker(app.state.service.settings, app.state.service.sessions, on_activate=holder.serve)
 
 
 @pytest.fixture
@@ -297,4 +297,4 @@ def best_service(tmp_path, best_base):
     app = create_app(quick_settings(tmp_path, method="best", method_params=BEST_PARAMS),
                      trainer=lambda: best_base)
     with TestClient(app) as client:
-        yield client, app, Worker(app.state.settings, app.state.sessions, on_activate=app.state.holder.serve)
+        yield client, app, Worker(app.state.service.settings, app.state.service.sessions, on_activate=app.state.service.holder.serve)

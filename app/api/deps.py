@@ -18,6 +18,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.api.problems import Problem
+from app.api.state import ServiceState
 from app.config import Settings
 from app.service.holder import LoadedModel, ModelHolder
 from app.service.job_watch import JobWatch
@@ -30,24 +31,28 @@ from app.store.bundles import ExportCache
 # async: trivial dependencies then run on the event loop, not in the thread pool
 
 
+def service(request: Request) -> ServiceState:
+    return request.app.state.service
+
+
 async def get_settings(request: Request) -> Settings:
-    return request.app.state.settings
+    return service(request).settings
 
 
 async def get_holder(request: Request) -> ModelHolder:
-    return request.app.state.holder
+    return service(request).holder
 
 
 async def get_job_watch(request: Request) -> JobWatch:
-    return request.app.state.job_watch
+    return service(request).job_watch
 
 
 async def get_metrics(request: Request) -> Metrics:
-    return request.app.state.metrics
+    return service(request).metrics
 
 
 async def get_exports(request: Request) -> ExportCache:
-    return request.app.state.exports
+    return service(request).exports
 
 
 async def get_session(request: Request) -> AsyncIterator[Session]:
@@ -56,11 +61,11 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
     around the route's own. Opening does no I/O (the route's first query checks out a connection in its thread);
     closing gives the connection back with a rollback, instant on SQLite and a network
     round trip elsewhere, which then goes to a worker thread."""
-    session = request.app.state.sessions()
+    session = service(request).sessions()
     try:
         yield session
     finally:
-        if session.in_transaction() and not request.app.state.local_store:
+        if session.in_transaction() and not service(request).local_store:
             await run_in_threadpool(session.close)
         else:
             session.close()
@@ -68,7 +73,7 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
 
 def current_model(request: Request) -> LoadedModel:
     """The snapshot a request works with from start to end, even if a swap happens."""
-    model = request.app.state.holder.current
+    model = service(request).holder.current
     if model is None:
         raise Problem(503, "no model is loaded yet; try again shortly", "model", {"Retry-After": "5"})
     return model
@@ -87,7 +92,7 @@ api_key_header = APIKeyHeader(
 def authorize(request: Request, key: str | None, scope: str) -> Principal:
     """The caller of ``request``: 401 without a valid key (once keys exist), 403 without
     ``scope``, 429 over the rate."""
-    state = request.app.state
+    state = service(request)
     if not state.keys.required:
         client = request.client.host if request.client else "unknown"
         principal = Principal(f"addr:{client}", "admin")
@@ -158,7 +163,7 @@ async def get_recognizing(request: Request) -> Recognizing:
     the five of the separate ones were a fifth of a single-sample request's CPU. The key
     is read from the header here; the route documents the same security scheme."""
     authorize(request, request.headers.get(api_key_header.model.name), "read")
-    return Recognizing(current_model(request), request.app.state.recognition)
+    return Recognizing(current_model(request), service(request).recognition)
 
 
 # one function object per scope, so a route depending on one twice runs it once

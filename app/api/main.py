@@ -22,6 +22,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from app.api import openapi, problems
 from app.api.deps import Replay, replay_handler
 from app.api.routes import attributes, classes, describe, health, jobs, models, recognize, samples
+from app.api.state import ServiceState
 from app.config import Settings
 from app.service.bootstrap import Trainer, ensure_ready
 from app.service.holder import ModelHolder
@@ -108,17 +109,19 @@ def create_app(
         redoc_url=None,
         generate_unique_id_function=operation_id,
     )
-    app.state.settings = settings
-    app.state.sessions = sessions
-    app.state.local_store = engine.dialect.name == "sqlite"  # no network round trips
-    app.state.holder = holder
-    app.state.metrics = metrics
-    app.state.job_metrics_at_scrape = process_index is None
-    app.state.recognition = RecognitionService(metrics, settings.top_k, settings.batch_limit)
-    app.state.keys = keys
-    app.state.job_watch = job_watch
-    app.state.exports = ExportCache()  # model files robots download, joined once per version
-    app.state.limiter = RateLimiter(settings.rate_limit, settings.rate_burst)
+    app.state.service = ServiceState(
+        settings=settings,
+        sessions=sessions,
+        local_store=engine.dialect.name == "sqlite",
+        holder=holder,
+        metrics=metrics,
+        job_metrics_at_scrape=process_index is None,
+        recognition=RecognitionService(metrics, settings.top_k, settings.batch_limit),
+        keys=keys,
+        job_watch=job_watch,
+        exports=ExportCache(),
+        limiter=RateLimiter(settings.rate_limit, settings.rate_burst),
+    )
     problems.install(app)
     app.add_exception_handler(Replay, replay_handler)
     # recognize first: routes are matched in order, and it is the hot path (robots call it

@@ -32,7 +32,7 @@ def document_for(app: FastAPI, fastapi_document: Callable[[], dict[str, Any]]) -
     done: dict[tuple[int, ...] | None, dict[str, Any]] = {}
 
     def document() -> dict[str, Any]:
-        model = app.state.holder.current
+        model = app.state.service.holder.current
         shape = tuple(model.recognizer.input_shape) if model is not None else None
         if shape not in done:
             doc = copy.deepcopy(fastapi_document())

@@ -215,7 +215,7 @@ async def validation_exception_handler(
     errors = readable_errors(exc.errors())
     first = errors[0] if errors else {"field": "body", "reason": "invalid request"}
     detail = f"{first['field']}: {first['reason']}"
-    model = request.app.state.holder.current
+    model = request.app.state.service.holder.current
     if model is not None and any(e["field"].startswith("sample") for e in errors):
         detail += f"; one sample has shape {list(model.recognizer.input_shape)}"
     return problem_response(request, 422, detail, errors)

@@ -118,7 +118,7 @@ def _run_one(overrides: dict[str, Any], server: dict[str, Any], index: int, serv
         async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
             # uvicorn waits for open requests before the app's own shutdown runs: robots
             # waiting for their jobs answer first, or they would hold it for up to 20 s
-            app.state.job_watch.release_all()
+            app.state.service.job_watch.release_all()
             await super().shutdown(sockets)
 
     from app.api.main import create_app

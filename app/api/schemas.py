@@ -7,6 +7,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StringConstraints, model_validator
 
+from app.store.enums import ClassKind, JobKind, JobStatus, Origin, VersionReason
+
 # One tactile sample: a [C, T] tactile image or a flat [D] feature vector.
 SampleData = list[list[float]] | list[float]
 
@@ -54,7 +56,7 @@ class ClassCreate(ClassDescription):
 class ClassOut(BaseModel):
     id: int
     name: str
-    kind: Literal["known", "novel"]
+    kind: ClassKind
     attributes: list[str]
     n_samples: int = Field(description="Real tactile samples stored for the class.")
     created_at: datetime
@@ -72,8 +74,6 @@ class ClassList(BaseModel):
 
 
 # ------------------------------------------------------------------------ jobs
-JobStatus = Literal["queued", "running", "succeeded", "failed"]
-JobKind = Literal["register_class", "add_sample", "update_class", "withdraw_class", "withdraw_sample"]
 
 
 class JobOut(BaseModel):
@@ -131,7 +131,7 @@ class SampleOut(BaseModel):
     """A stored sample, without its data."""
 
     id: int
-    origin: Literal["dataset", "enrolled"]
+    origin: Origin
     trial: int | None = Field(description="The dataset's trial id; null for enrolled samples.")
     created_at: datetime
     enrolled_by: str | None = Field(
@@ -181,7 +181,7 @@ class RecognitionOut(BaseModel):
 
     class_id: int | None = Field(description="The store's id of the answered class.")
     class_name: str
-    kind: Literal["known", "novel"] = Field(description="Whether the answered class is known or novel.")
+    kind: ClassKind = Field(description="Whether the answered class is known or novel.")
     is_novel: bool = Field(
         description="The novelty detector's verdict: the sample is unlike every known class. "
         "While no novel class is registered, a novel sample is still answered with the closest "
@@ -223,7 +223,7 @@ class DescribeResponse(BaseModel):
 # ---------------------------------------------------------------------- models
 class ModelClass(BaseModel):
     name: str
-    kind: Literal["known", "novel"]
+    kind: ClassKind
 
 
 class ModelSummary(BaseModel):
@@ -235,7 +235,7 @@ class ModelSummary(BaseModel):
     created_at: datetime
     active: bool
     method: str
-    reason: Literal["bootstrap", "update", "promotion", "withdrawal"]
+    reason: VersionReason
     base_version: int | None
     sha256: str = Field(validation_alias="bundle_sha256")
     input_shape: list[int] = Field(

@@ -11,6 +11,7 @@ from app.api.schemas import JobOut, Withdrawal
 from app.service.keys import Principal
 from app.service.metrics import Metrics
 from app.store import repo
+from app.store.enums import JobKind
 
 
 def queue_withdrawal(
@@ -18,7 +19,7 @@ def queue_withdrawal(
     principal: Principal, class_id: int, sample_id: int | None,
 ) -> Withdrawal:
     """Queue the withdrawal's job and commit it with the change; the 202's body."""
-    kind = "withdraw_class" if sample_id is None else "withdraw_sample"
+    kind = JobKind.WITHDRAW_CLASS if sample_id is None else JobKind.WITHDRAW_SAMPLE
     with idempotency.writing(session):  # a concurrent retry with this key may win
         job = repo.add_job(session, kind, class_id, sample_id, requested_by=principal.id)
         out = Withdrawal(class_id=class_id, sample_id=sample_id, job=JobOut.model_validate(job))

@@ -24,6 +24,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.service.polling import Poller
 from app.store import repo
+from app.store.enums import JobStatus
 from app.store.models import utcnow
 
 JOB_BUCKETS = (0.1, 0.25, 0.5, 1, 2, 3, 5, 10, 30, 60, 300, 1800)
@@ -95,7 +96,7 @@ class Metrics:
         stored model versions take, from the store (workers in any process finish jobs and
         prune versions)."""
         counts = repo.jobs_by_status(session)
-        for status in ("queued", "running", "succeeded", "failed"):
+        for status in JobStatus:
             self.jobs.labels(status).set(counts.get(status, 0))
         versions, size = repo.stored_model_figures(session)
         self.versions_stored.set(versions)

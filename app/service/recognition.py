@@ -14,6 +14,7 @@ from app.framework.recognizer import RecognitionBatch
 from app.service.batcher import RecognitionBatcher
 from app.service.holder import LoadedModel
 from app.service.metrics import Metrics
+from app.store.enums import ClassKind
 
 
 class RecognitionService:
@@ -36,7 +37,7 @@ class RecognitionService:
         else:
             results = await run_in_threadpool(rec.recognize_batch, samples, self.top_k)
         novel = int(results.is_novel_class.sum())
-        for kind, count in (("known", len(results) - novel), ("novel", novel)):
+        for kind, count in ((ClassKind.KNOWN, len(results) - novel), (ClassKind.NOVEL, novel)):
             if count:
                 self.metrics.recognitions.labels(kind).inc(count)
         return results

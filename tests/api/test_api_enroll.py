@@ -27,7 +27,7 @@ def test_register_by_attribute_names_is_committed_before_202(client, app, datase
     assert cls["n_samples"] == 0 and cls["in_active_model"] is False
     assert job["status"] == "queued" and job["kind"] == "register_class" and job["class_id"] == cls["id"]
     assert r.headers["location"] == f"/v1/jobs/{job['id']}"
-    with app.state.sessions() as s:  # a fresh session sees both rows: they are committed
+    with app.state.service.sessions() as s:  # a fresh session sees both rows: they are committed
         assert s.get(ObjectClass, cls["id"]).name == "mug"
         assert s.get(Job, job["id"]).status == "queued"
     assert client.get(f"/v1/jobs/{job['id']}").json()["status"] == "queued"
@@ -127,7 +127,7 @@ def test_add_sample_is_committed_before_202(client, app, novel_class, sample):
     assert r.status_code == 202
     body = r.json()
     assert body["job"]["kind"] == "add_sample" and body["job"]["sample_id"] == body["sample_id"]
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         row = s.get(Sample, body["sample_id"])
         assert row.class_id == novel_class and row.origin == "enrolled"
         stored = np.frombuffer(row.data, np.float32).reshape(row.shape)
@@ -177,11 +177,11 @@ def test_sample_missing_field(client, novel_class, sample):
 
 
 def test_rejected_writes_store_nothing(client, app, novel_class, sample):
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         before = (len(s.scalars(select(Sample.id)).all()), len(s.scalars(select(Job.id)).all()))
     client.post(f"/v1/classes/{novel_class}/samples", json={"sample": sample[:-1]})
     client.post("/v1/classes", json={"name": "x", "attributes": ["nope"]})
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         after = (len(s.scalars(select(Sample.id)).all()), len(s.scalars(select(Job.id)).all()))
     assert after == before
 
@@ -190,7 +190,7 @@ def test_rejected_writes_store_nothing(client, app, novel_class, sample):
 
 
 def test_keys_from_the_environment_are_admin_keys(client, app, new_vector, sample):
-    app.state.keys.set_env_keys(["k1", "k2"])
+    app.state.service.keys.set_env_keys(["k1", "k2"])
     body = {"name": "locked", "attribute_vector": new_vector}
     problem(client.post("/v1/classes", json=body), 401, "X-API-Key")
     problem(client.post("/v1/classes", json=body, headers={"X-API-Key": "wrong"}), 401, "X-API-Key")

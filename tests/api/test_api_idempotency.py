@@ -16,7 +16,7 @@ PROBLEM = "application/problem+json"
 
 
 def count(app, model) -> int:
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         return s.scalar(select(func.count()).select_from(model))
 
 
@@ -94,10 +94,10 @@ def test_concurrent_retries_with_one_key_enroll_once(client, app, dataset, sampl
 
 
 def test_keys_of_different_api_keys_do_not_collide(client, app, dataset):
-    with app.state.sessions.begin() as s:
+    with app.state.service.sessions.begin() as s:
         one, _ = repo.create_api_key(s, "enroll")
         two, _ = repo.create_api_key(s, "enroll")
-    app.state.keys.refresh()
+    app.state.service.keys.refresh()
     a, b = unused_vectors(dataset, 2)
     r1 = client.post("/v1/classes", json={"name": "a", "attribute_vector": a},
                      headers={"X-API-Key": one, "Idempotency-Key": "same"})
@@ -134,10 +134,10 @@ def test_keys_older_than_the_ttl_are_purged_by_the_worker(client, app, worker, d
     old, fresh = unused_vectors(dataset, 2)
     assert client.post("/v1/classes", json={"name": "old", "attribute_vector": old},
                        headers={"Idempotency-Key": "k-old"}).status_code == 202
-    with app.state.sessions.begin() as s:  # age the first record past the 24 h default
+    with app.state.service.sessions.begin() as s:  # age the first record past the 24 h default
         s.execute(update(IdempotencyRecord).values(created_at=datetime.now(UTC) - timedelta(hours=25)))
     assert client.post("/v1/classes", json={"name": "fresh", "attribute_vector": fresh},
                        headers={"Idempotency-Key": "k-fresh"}).status_code == 202
     worker.run_once()
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         assert set(s.scalars(select(IdempotencyRecord.key))) == {"k-fresh"}

@@ -27,15 +27,15 @@ def test_a_waiting_request_answers_when_the_job_succeeds(client, app, worker, da
         retrain.join()
     assert job["status"] == "succeeded" and job["model_version"] == 2
     # the process that said "succeeded" serves the version that includes the class
-    assert app.state.holder.current.version == 2
+    assert app.state.service.holder.current.version == 2
 
 
 def test_without_a_worker_the_wait_ends_with_the_status_then(client, app, dataset):
-    app.state.holder.stop()  # its poll checks a connection out too
+    app.state.service.holder.stop()  # its poll checks a connection out too
     job_id = register(client, dataset)
     job = client.get(f"/v1/jobs/{job_id}", params={"wait": 0.5}).json()
     assert job["status"] == "queued" and job["finished_at"] is None
-    assert app.state.sessions.kw["bind"].pool.checkedout() == 0  # none kept while waiting
+    assert app.state.service.sessions.kw["bind"].pool.checkedout() == 0  # none kept while waiting
     assert client.get(f"/v1/jobs/{job_id}").json() == job  # no wait: the status at once
 
 
@@ -63,14 +63,14 @@ def test_many_waiting_robots_are_woken_together_and_leave_nothing_behind(client,
     for robot in robots:
         robot.start()
     deadline = time.monotonic() + 15
-    while app.state.job_watch.waiting < 4 and time.monotonic() < deadline:
+    while app.state.service.job_watch.waiting < 4 and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert app.state.job_watch.waiting == 4  # one event each, no connection, no thread
+    assert app.state.service.job_watch.waiting == 4  # one event each, no connection, no thread
     worker.run_once()
     for robot in robots:
         robot.join()
     assert [a["status"] for a in answers] == ["succeeded"] * 4
-    assert app.state.job_watch.waiting == 0
+    assert app.state.service.job_watch.waiting == 0
 
 
 
@@ -112,7 +112,7 @@ def test_a_store_outage_while_robots_wait_is_logged_once_and_they_are_answered_a
 
 
 def test_a_shutdown_answers_waiting_robots_at_once_with_the_status_then(client, app, dataset):
-    app.state.holder.stop()
+    app.state.service.holder.stop()
     job_id = register(client, dataset)
     answers: list[tuple[float, dict]] = []
 
@@ -124,10 +124,10 @@ def test_a_shutdown_answers_waiting_robots_at_once_with_the_status_then(client, 
     thread = threading.Thread(target=robot)
     thread.start()
     deadline = time.monotonic() + 15
-    while app.state.job_watch.waiting < 1 and time.monotonic() < deadline:
+    while app.state.service.job_watch.waiting < 1 and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert app.state.job_watch.waiting == 1
-    client.portal.call(app.state.job_watch.release_all)  # what the server's shutdown calls
+    assert app.state.service.job_watch.waiting == 1
+    client.portal.call(app.state.service.job_watch.release_all)  # what the server's shutdown calls
     thread.join(15)
     (seconds, job), = answers
     assert job["status"] == "queued" and seconds < 15  # not the whole 20 s wait

@@ -52,7 +52,7 @@ def test_activate_a_corrupt_bundle_is_409_and_changes_nothing(client, app, worke
 
     enroll_and_retrain(client, worker, dataset)
     client.post("/v1/models/1/activate")
-    with app.state.sessions.begin() as s:
+    with app.state.service.sessions.begin() as s:
         sha = s.get(ModelVersion, 2).bundle_sha256
         s.execute(update(Bundle).where(Bundle.sha256 == sha).values(data=b"garbage"))
     r = client.post("/v1/models/2/activate")
@@ -67,7 +67,7 @@ def test_other_processes_pick_up_a_new_version_by_polling(client, app, worker, d
     worker.on_activate = None  # as if the worker ran in another process
     enroll_and_retrain(client, worker, dataset)
     deadline = time.monotonic() + 10
-    while app.state.holder.current.version != 2 and time.monotonic() < deadline:
+    while app.state.service.holder.current.version != 2 and time.monotonic() < deadline:
         time.sleep(0.02)
     assert client.post("/v1/recognize", json={"samples": [sample]}).json()["model_version"] == 2
 
@@ -77,7 +77,7 @@ def test_a_model_handed_over_by_an_embedded_worker_is_served_only_while_active(
 ):
     """The embedded worker hands its new model to the holder (no reload from the store);
     a version that was rolled back meanwhile is not served: the active one is."""
-    holder = app.state.holder
+    holder = app.state.service.holder
     enroll_and_retrain(client, worker, dataset)
     built = holder.current.recognizer
     assert client.post("/v1/recognize", json={"samples": [sample]}).json()["model_version"] == 2
@@ -144,7 +144,7 @@ def test_the_active_bundle_follows_activations_in_one_request(client, app, worke
     client.post("/v1/models/1/activate")  # a rollback: the held copy is no longer the active one
     back = client.get("/v1/models/active/bundle", headers={"If-None-Match": r.headers["etag"]})
     assert back.status_code == 200 and back.headers["x-model-version"] == "1"
-    with app.state.sessions.begin() as s:
+    with app.state.service.sessions.begin() as s:
         s.execute(update(ModelVersion).values(active=False))
     problem(client.get("/v1/models/active/bundle"), 404, "version")
 
@@ -159,7 +159,7 @@ def test_downloading_a_damaged_version_is_409(client, app, worker, dataset):
     from app.store.models import Bundle, ModelVersion
 
     enroll_and_retrain(client, worker, dataset)
-    with app.state.sessions.begin() as s:
+    with app.state.service.sessions.begin() as s:
         sha = s.get(ModelVersion, 2).bundle_sha256
         s.execute(update(Bundle).where(Bundle.sha256 == sha).values(data=b"garbage"))
     assert "the store is damaged" in problem(client.get("/v1/models/2/bundle"), 409, "version")["detail"]

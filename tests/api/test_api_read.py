@@ -98,7 +98,7 @@ def test_metrics_are_prometheus_text(client, app, sample):
     assert 'tactile_jobs{status="queued"} 0.0' in text
     assert "tactile_model_versions_stored 1.0" in text
     stored = float(re.search(r"^tactile_model_bundle_bytes (\S+)$", text, re.M).group(1))
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         assert stored == s.scalar(select(func.sum(Bundle.size))) > 0
 
 
@@ -141,16 +141,16 @@ def test_readiness_fails_without_a_store_or_a_model(client, app, monkeypatch):
 
     from app.store.db import make_sessionmaker
 
-    working = app.state.sessions
-    app.state.sessions = make_sessionmaker(create_engine("sqlite:////nonexistent-dir/tactile.db"))
+    working = app.state.service.sessions
+    app.state.service.sessions = make_sessionmaker(create_engine("sqlite:////nonexistent-dir/tactile.db"))
     try:
         r = client.get("/readyz")
         assert r.status_code == 503 and r.json()["errors"][0]["field"] == "database"
         assert client.get("/healthz").status_code == 200  # alive all the same
         assert client.get("/metrics").status_code == 200  # process metrics still served
     finally:
-        app.state.sessions = working
-    monkeypatch.setattr(app.state.holder, "_current", None)
+        app.state.service.sessions = working
+    monkeypatch.setattr(app.state.service.holder, "_current", None)
     r = client.get("/readyz")
     assert r.status_code == 503 and r.headers["retry-after"] == "5"
     r = client.post("/v1/recognize", json={"samples": [[0.0]]})
@@ -161,8 +161,8 @@ def test_every_request_gives_its_database_connection_back(client, app):
     """Sessions are opened and closed on the event loop (closing goes to a worker thread
     where giving a connection back is a network round trip): none may stay checked out,
     after answers and after errors alike."""
-    pool = app.state.sessions.kw["bind"].pool
-    app.state.holder.stop()  # its poll for new model versions checks a connection out too
+    pool = app.state.service.sessions.kw["bind"].pool
+    app.state.service.holder.stop()  # its poll for new model versions checks a connection out too
     for _ in range(5):
         assert client.get("/v1/classes").status_code == 200
         assert client.get("/v1/jobs/999999").status_code == 404

@@ -98,7 +98,7 @@ def test_empty_batch(client, dataset):
 
 
 def test_oversized_batch(client, app, dataset):
-    app.state.recognition.batch_limit = 2
+    app.state.service.recognition.batch_limit = 2
     x = dataset.samples[:3]
     body = problem(client.post("/v1/recognize", json={"samples": x.tolist()}), 422, "samples")
     assert "batch limit of 2" in body["detail"]

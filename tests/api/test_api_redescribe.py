@@ -25,7 +25,7 @@ def test_new_attributes_are_committed_before_the_202_and_the_samples_stay(client
     listed = client.get("/v1/jobs", params={"kind": "update_class"}).json()["jobs"]
     assert [j["id"] for j in listed] == [job["id"]]
     assert client.get(f"/v1/classes/{cid}").json()["attributes"] == names_of(vector, dataset)
-    with app.state.sessions() as s:  # a fresh session sees both: they are committed
+    with app.state.service.sessions() as s:  # a fresh session sees both: they are committed
         assert s.get(ObjectClass, cid).attribute_key == "".join(map(str, vector))
         assert s.get(Job, job["id"]).status == "queued"
     # the old vector is free again, the new one is taken
@@ -42,13 +42,13 @@ def test_a_description_the_model_could_not_tell_apart_is_refused(client, app, da
     assert "class 'cup' has the same attribute vector" in body["detail"]
     same = unused_vectors(dataset, 1)[0]  # its own description again is no conflict
     assert client.patch(f"/v1/classes/{mug}", json={"attribute_vector": same}).status_code == 202
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         assert s.get(ObjectClass, mug).attribute_key == "".join(map(str, same))
 
 
 def test_bad_redescriptions_are_named_and_change_nothing(client, app, dataset):
     mug = register(client, dataset, "mug", 0)["class"]["id"]
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         known = s.scalar(select(ObjectClass).where(ObjectClass.origin == "dataset").limit(1))
         jobs = s.query(Job).count()
     vector = unused_vectors(dataset, 2)[1]
@@ -61,7 +61,7 @@ def test_bad_redescriptions_are_named_and_change_nothing(client, app, dataset):
     problem(client.patch(f"/v1/classes/{mug}", json={"name": "cup", "attribute_vector": vector}), 422, "name")
     assert client.delete(f"/v1/classes/{mug}").status_code == 202
     problem(client.patch(f"/v1/classes/{mug}", json={"attribute_vector": vector}), 404, "class_id")
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         assert s.get(ObjectClass, known.id).attribute_key == known.attribute_key
         assert s.get(ObjectClass, mug).attribute_key == "".join(map(str, unused_vectors(dataset, 1)[0]))
         assert s.query(Job).count() == jobs + 1  # the withdrawal's only
@@ -73,5 +73,5 @@ def test_a_retried_redescription_is_answered_once(client, app, dataset):
     first, again = (client.patch(f"/v1/classes/{mug}", json={"attribute_vector": vector},
                                  headers={"Idempotency-Key": "fix-mug-1"}) for _ in range(2))
     assert first.status_code == again.status_code == 202 and first.json() == again.json()
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         assert s.query(Job).filter(Job.kind == "update_class").count() == 1

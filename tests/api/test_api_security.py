@@ -17,9 +17,9 @@ from tests.service_fixtures import PROBLEM, problem, unused_vectors
 
 
 def make_key(app, scope: str, name: str | None = None) -> str:
-    with app.state.sessions.begin() as s:
+    with app.state.service.sessions.begin() as s:
         key, _ = repo.create_api_key(s, scope, name)
-    app.state.keys.refresh()  # the background refresh would see it within a second
+    app.state.service.keys.refresh()  # the background refresh would see it within a second
     return key
 
 
@@ -99,17 +99,17 @@ def test_every_v1_operation_needs_a_key_once_one_exists(client, app):
 def test_revoked_keys_are_refused_and_the_service_stays_locked(client, app):
     key = make_key(app, "admin")
     assert client.get("/v1/classes", headers={"X-API-Key": key}).status_code == 200
-    with app.state.sessions.begin() as s:
+    with app.state.service.sessions.begin() as s:
         key_id = s.scalar(select(ApiKey.id))
         assert repo.revoke_api_key(s, key_id)
-    app.state.keys.refresh()
+    app.state.service.keys.refresh()
     problem(client.get("/v1/classes", headers={"X-API-Key": key}), 401, "X-API-Key")
     problem(client.get("/v1/classes"), 401, "X-API-Key")  # not open again
 
 
 def test_keys_are_stored_hashed_only(client, app):
     key = make_key(app, "enroll", "robot-7")
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         row = s.scalar(select(ApiKey))
         assert row.key_sha256 == hashlib.sha256(key.encode()).hexdigest()
         assert key not in (row.prefix, row.name, row.key_sha256) and len(key) >= 40
@@ -123,7 +123,7 @@ def test_cli_creates_a_key_printed_once_on_the_last_line(client, app, settings, 
     key = out[-1]
     assert key.startswith("tzk_") and " " not in key
     assert all(key not in line for line in out[:-1])
-    app.state.keys.refresh()
+    app.state.service.keys.refresh()
     assert client.get("/v1/classes", headers={"X-API-Key": key}).status_code == 200
     problem(client.post("/v1/models/1/activate", headers={"X-API-Key": key}), 403)
     assert cli(["apikey", "list"]) == 0
@@ -142,7 +142,7 @@ def test_cli_rejects_an_unknown_scope(capsys):
 
 def test_rate_limit_answers_429_with_retry_after_per_key(client, app):
     a, b = make_key(app, "read"), make_key(app, "read")
-    app.state.limiter = RateLimiter(rate=0.5, burst=3)
+    app.state.service.limiter = RateLimiter(rate=0.5, burst=3)
     for _ in range(3):
         assert client.get("/v1/attributes", headers={"X-API-Key": a}).status_code == 200
     r = client.get("/v1/attributes", headers={"X-API-Key": a})
@@ -218,7 +218,7 @@ def test_every_job_records_who_queued_it(client, app, vectors, sample):
     r = client.post("/v1/classes", json={"name": "open", "attribute_vector": vectors[0]})
     assert r.json()["job"]["requested_by"] == "addr:testclient"  # no keys yet: the address
     robot = make_key(app, "enroll", "robot-7")
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         key_id = s.scalar(select(ApiKey.id).where(ApiKey.name == "robot-7"))
     h = {"X-API-Key": robot}
     r = client.post("/v1/classes", json={"name": "by-key", "attribute_vector": vectors[1]}, headers=h)

@@ -26,7 +26,7 @@ def test_withdrawing_a_sample_is_committed_before_the_202(client, app, dataset):
     assert job["class_id"] == cid and job["sample_id"] == sid
     assert r.headers["location"] == f"/v1/jobs/{job['id']}"
     assert client.get(f"/v1/classes/{cid}").json()["n_samples"] == 0
-    with app.state.sessions() as s:  # kept, marked: jobs and model versions still refer to it
+    with app.state.service.sessions() as s:  # kept, marked: jobs and model versions still refer to it
         row = s.get(Sample, sid)
         assert row is not None and row.withdrawn_at is not None
         assert s.get(Job, job["id"]).status == "queued"
@@ -45,7 +45,7 @@ def test_withdrawing_a_class_takes_its_samples_and_frees_its_name(client, app, d
     problem(client.delete(f"/v1/classes/{cid}"), 404, "class_id")
     problem(client.post(f"/v1/classes/{cid}/samples", json={"sample": dataset.samples[0].tolist()}),
             404, "class_id")
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         assert s.get(ObjectClass, cid).withdrawn_at is not None
         assert s.get(Sample, sid).withdrawn_at is not None
 
@@ -69,14 +69,14 @@ def test_a_withdrawn_class_no_longer_holds_its_attribute_vector(client, dataset)
 
 
 def test_training_data_cannot_be_withdrawn(client, app):
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         cls = s.scalar(select(ObjectClass).where(ObjectClass.origin == "dataset").limit(1))
         sid = s.scalar(select(Sample.id).where(Sample.class_id == cls.id).limit(1))
     body = problem(client.delete(f"/v1/classes/{cls.id}"), 409, "class_id")
     assert "training dataset" in body["detail"]
     body = problem(client.delete(f"/v1/classes/{cls.id}/samples/{sid}"), 409, "sample_id")
     assert "training dataset" in body["detail"]
-    with app.state.sessions() as s:  # nothing was marked, nothing queued
+    with app.state.service.sessions() as s:  # nothing was marked, nothing queued
         assert s.get(ObjectClass, cls.id).withdrawn_at is None
         assert s.get(Sample, sid).withdrawn_at is None
         assert s.scalar(select(Job.id).limit(1)) is None
@@ -100,7 +100,7 @@ def test_a_retried_withdrawal_with_its_key_gets_the_first_answer(client, app, da
     again = client.delete(f"/v1/classes/{cid}/samples/{sid}", headers=headers)
     assert first.status_code == again.status_code == 202
     assert again.json() == first.json() and again.headers["Idempotent-Replayed"] == "true"
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         kinds = list(s.scalars(select(Job.kind).where(Job.kind == "withdraw_sample")))
     assert kinds == ["withdraw_sample"]
 

@@ -116,7 +116,7 @@ def test_replace_puts_the_backup_over_a_stopped_service_s_store(base_model, data
         summary = backup(settings.sqlalchemy_url, tmp_path / "b.db")
         from worker import Worker
 
-        enrol(client, Worker(settings, client.app.state.sessions), dataset, "cup", 0, sample)
+        enrol(client, Worker(settings, client.app.state.service.sessions), dataset, "cup", 0, sample)
     assert restore(tmp_path / "b.db", settings.sqlalchemy_url, replace=True) == summary
     assert check_store(settings.sqlalchemy_url) == []
     with TestClient(create_app(settings, trainer=lambda: base_model)) as client:

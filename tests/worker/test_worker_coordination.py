@@ -65,7 +65,7 @@ def test_two_workers_never_retrain_at_the_same_time(client, app, settings, datas
             e.dispose()
     assert statuses == ["succeeded"] * 4
     assert peak[0] == 1
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         versions = repo.list_versions(s)
         # each version builds on the one before it: one lineage, no fork
         assert [v.base_version for v in versions[1:]] == [v.version for v in versions[:-1]]
@@ -74,7 +74,7 @@ def test_two_workers_never_retrain_at_the_same_time(client, app, settings, datas
 
 def _orphan(app, holder: str, expires_in: float) -> None:
     """A worker elsewhere claimed the queued jobs, holds the lease, then died."""
-    with app.state.sessions.begin() as s:
+    with app.state.service.sessions.begin() as s:
         s.add(
             Lease(
                 name=loop.LEASE, holder=holder, expires_at=utcnow() + timedelta(seconds=expires_in)
@@ -109,7 +109,7 @@ def test_a_dead_local_workers_lease_is_taken_at_once(client, app, worker, datase
 def test_bundles_are_content_addressed(client, app, worker, dataset):
     register(client, dataset, "mug", 0)
     worker.run_once()
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         for v in s.scalars(select(ModelVersion)):
             data = repo.bundle_data(s, v.bundle_sha256)
             assert hashlib.sha256(data).hexdigest() == v.bundle_sha256

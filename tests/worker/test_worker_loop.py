@@ -29,7 +29,7 @@ def test_enrollment_makes_a_new_active_version(client, worker, dataset):
 
 def test_the_worker_holds_the_active_model_before_its_first_job(client, worker):
     worker.warm_up()
-    with client.app.state.sessions() as s:
+    with client.app.state.service.sessions() as s:
         active = repo.active_version(s)
     version, model = worker._cache
     assert version == active.version and isinstance(model, TactileRecognizer)
@@ -42,9 +42,9 @@ def test_one_shot_sample_is_folded_in(client, app, worker, dataset):
     added = add_sample(client, created["class"]["id"], dataset.samples[0])
     assert worker.run_once() == 1
     assert job(client, added["job"]["id"])["model_version"] == 3
-    model = app.state.holder.current.recognizer
+    model = app.state.service.holder.current.recognizer
     assert len(model.registry.novel_samples["mug"]) == 1
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         v3 = repo.get_version(s, 3)
         assert v3.sample_ids == [added["sample_id"]]
 
@@ -168,28 +168,28 @@ def test_sample_of_a_failed_class_fails_with_a_reason(client, worker, dataset, m
 
 def test_job_left_running_by_a_crashed_worker_is_requeued_and_done(client, app, worker, dataset):
     created = register(client, dataset, "orphan")
-    with app.state.sessions() as s:  # a worker claimed it, then died
+    with app.state.service.sessions() as s:  # a worker claimed it, then died
         repo.claim_queued_jobs(s, "crashed-host:1:dead")
     assert job(client, created["job"]["id"])["status"] == "running"
     assert worker.run_once() == 1  # a (re)started worker takes it up again
     done = job(client, created["job"]["id"])
     assert done["status"] == "succeeded" and done["model_version"] == 2
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         assert repo.jobs_by_status(s) == {"succeeded": 1}
 
 
 def test_a_worker_whose_lease_is_live_elsewhere_waits(client, app, worker, dataset):
     register(client, dataset, "wait")
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         assert leases.try_acquire(s, loop.LEASE, "other-host:1:live", ttl=60)
     assert worker.run_once() == 0  # another worker is retraining
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         leases.release(s, loop.LEASE, "other-host:1:live")
     assert worker.run_once() == 1
 
 
 def test_promotion_to_known_after_threshold_real_samples(client, app, worker, dataset):
-    app.state.settings.promotion_threshold = 2
+    app.state.service.settings.promotion_threshold = 2
     created = register(client, dataset, "promoted")
     cid = created["class"]["id"]
     worker.run_once()
@@ -205,7 +205,7 @@ def test_promotion_to_known_after_threshold_real_samples(client, app, worker, da
     assert active["reason"] == "promotion"
     assert {"name": "promoted", "kind": "known"} in active["classes"]
     assert sum(c["kind"] == "known" for c in active["classes"]) == dataset.n_classes + 1
-    assert app.state.holder.current.recognizer.registry.known_names[-1] == "promoted"
+    assert app.state.service.holder.current.recognizer.registry.known_names[-1] == "promoted"
 
 
 def test_rollback_then_retrain_brings_enrollments_back(client, worker, dataset):
@@ -298,8 +298,8 @@ def test_old_versions_are_pruned_and_the_kept_ones_still_roll_back(client, app, 
     from app.store.integrity import check_store
     from worker import Worker
 
-    settings = app.state.settings.model_copy(update={"keep_versions": 2})
-    worker = Worker(settings, app.state.sessions, on_activate=app.state.holder.serve)
+    settings = app.state.service.settings.model_copy(update={"keep_versions": 2})
+    worker = Worker(settings, app.state.service.sessions, on_activate=app.state.service.holder.serve)
     for i, name in enumerate(["a", "b", "c", "d"]):
         register(client, dataset, name, i)
         assert worker.run_once() == 1

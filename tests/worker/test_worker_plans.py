@@ -32,7 +32,7 @@ def test_enrolments_add_to_the_model_and_a_promotion_or_a_withdrawal_refits_it(
     """The default method's one-shot step tunes shared parts, so a withdrawal from its novel
     part fits the model again too."""
     plans = recorded_plans(monkeypatch)
-    app.state.settings.promotion_threshold = 2
+    app.state.service.settings.promotion_threshold = 2
     mug = register(client, dataset, "mug", 0)["class"]["id"]
     cup = register(client, dataset, "cup", 1)["class"]["id"]
     worker.run_once()

@@ -16,7 +16,7 @@ def redescribe(client, class_id: int, vector: list[int]) -> dict:
 
 
 def served(app):
-    return app.state.holder.current.recognizer
+    return app.state.service.holder.current.recognizer
 
 
 def test_the_served_model_takes_the_new_attributes_and_keeps_the_samples(client, app, worker, dataset):
@@ -66,7 +66,7 @@ def test_a_redescription_of_what_is_gone_or_never_enrolled_fails(client, worker,
 
 
 def test_a_promoted_class_described_anew_is_fitted_again(client, app, worker, dataset):
-    app.state.settings.promotion_threshold = 2
+    app.state.service.settings.promotion_threshold = 2
     cid = register(client, dataset, "promoted")["class"]["id"]
     for k in (0, 1):
         add_sample(client, cid, dataset.samples[k] + 0.01)

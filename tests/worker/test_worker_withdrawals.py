@@ -23,7 +23,7 @@ def withdraw(client, path: str) -> dict:
 
 
 def served(app):
-    return app.state.holder.current.recognizer
+    return app.state.service.holder.current.recognizer
 
 
 def test_a_withdrawn_sample_leaves_the_model_and_the_class_stays(client, app, worker, dataset):
@@ -39,7 +39,7 @@ def test_a_withdrawn_sample_leaves_the_model_and_the_class_stays(client, app, wo
     active = client.get("/v1/models/active").json()
     assert done["status"] == "succeeded" and done["model_version"] == active["version"]
     assert active["reason"] == "withdrawal"
-    with app.state.sessions() as s:
+    with app.state.service.sessions() as s:
         assert repo.get_version(s, active["version"]).sample_ids == [kept]
     shots = served(app).registry.novel_samples["mug"]
     assert len(shots) == 1 and np.allclose(shots[0], dataset.samples[0] + 0.01)
@@ -111,7 +111,7 @@ def test_a_sample_withdrawn_before_training_fails_its_own_job_only(client, app, 
 
 
 def test_a_promoted_class_below_the_threshold_again_is_novel_again(client, app, worker, dataset):
-    app.state.settings.promotion_threshold = 2
+    app.state.service.settings.promotion_threshold = 2
     cid = register(client, dataset, "promoted")["class"]["id"]
     first = add_sample(client, cid, dataset.samples[0] + 0.01)["sample_id"]
     add_sample(client, cid, dataset.samples[1] + 0.01)
@@ -155,7 +155,7 @@ def test_best_withdraws_from_its_novel_part_without_fitting_again(best_service, 
         unused_vectors(dataset, 2)[0], unused_vectors(dataset, 2)[1]]).astype(np.float32))
     reference = reference.add_one_shot("mug", dataset.samples[4:5] + 0.01)
     reference = reference.add_one_shot("cup", dataset.samples[3:5] + 0.01)
-    served = app.state.holder.current.recognizer
+    served = app.state.service.holder.current.recognizer
     assert served.registry.novel_names == ["mug", "cup"]
     x = dataset.samples[::3]
     assert np.allclose(served.novel_proba(x), reference.novel_proba(x))

@@ -30,6 +30,7 @@ from app.api.schemas import (
 from app.api.withdrawals import queue_withdrawal
 from app.service.holder import LoadedModel
 from app.store import repo
+from app.store.enums import JobKind, Origin
 from app.store.models import Job, ObjectClass
 
 router = APIRouter(
@@ -98,7 +99,7 @@ def register_class(
             withdrawn = repo.class_by_name(session, body.name, withdrawn=True)
             cls = (repo.revive_class(session, withdrawn, key) if withdrawn is not None
                    else repo.add_class(session, body.name, key))
-        job = repo.add_job(session, "register_class", cls.id, requested_by=principal.id)
+        job = repo.add_job(session, JobKind.REGISTER_CLASS, cls.id, requested_by=principal.id)
         out = _class_accepted(session, cls, job, model)
         idempotency.accept(session, out, job.id, response)
     metrics.enrollments.labels("class").inc()
@@ -127,7 +128,7 @@ def redescribe_class(
     # a concurrent registration of this vector (or a retry with this key) may win
     with idempotency.writing(session, recheck=lambda: _check_unique_vector(session, key, field, cls.id)):
         repo.redescribe_class(session, cls, key)
-        job = repo.add_job(session, "update_class", cls.id, requested_by=principal.id)
+        job = repo.add_job(session, JobKind.UPDATE_CLASS, cls.id, requested_by=principal.id)
         out = _class_accepted(session, cls, job, model)
         idempotency.accept(session, out, job.id, response)
     metrics.enrollments.labels("redescription").inc()
@@ -145,7 +146,7 @@ def _enrolled_class(session: Session, class_id: int, done: str) -> ObjectClass:
     cls = repo.get_class(session, class_id)
     if cls is None:
         raise not_found("class", "class_id", class_id)
-    if cls.origin != "enrolled":
+    if cls.origin != Origin.ENROLLED:
         raise Problem(
             409, f"class '{cls.name}' comes from the training dataset; only enrolled classes "
             f"can be {done}", "class_id",
@@ -164,7 +165,7 @@ def _attribute_vector(body: ClassDescription, model: LoadedModel) -> np.ndarray:
 
 def _failed_registration(session: Session, name: str, key: str) -> ObjectClass | None:
     cls = repo.class_by_name(session, name)
-    if cls is None or cls.origin != "enrolled" or cls.attribute_key != key:
+    if cls is None or cls.origin != Origin.ENROLLED or cls.attribute_key != key:
         return None
     return cls if repo.registration_failed(session, cls.id) else None
 

@@ -2,13 +2,13 @@ import logging
 
 from fastapi import APIRouter, Request, Response
 from prometheus_client import CONTENT_TYPE_LATEST
-from sqlalchemy import text
 from sqlalchemy.exc import SQLAlchemyError
 
 from app.api import problems
 from app.api.deps import HolderDep, MetricsDep, SessionDep
 from app.api.problems import Problem
 from app.api.schemas import Health
+from app.store.db import ping
 
 log = logging.getLogger(__name__)
 
@@ -26,7 +26,7 @@ async def healthz(holder: HolderDep) -> Health:
 def readyz(session: SessionDep, holder: HolderDep) -> Health:
     """The store answers and a model is loaded."""
     try:
-        session.execute(text("SELECT 1"))
+        ping(session)
     except SQLAlchemyError:
         raise Problem(503, "the store is not reachable", "database") from None
     model = holder.current
@@ -42,7 +42,7 @@ def readyz(session: SessionDep, holder: HolderDep) -> Health:
 def metrics(request: Request, session: SessionDep, metrics: MetricsDep) -> Response:
     """Prometheus metrics: requests, latencies, recognitions, enrollments, jobs, model version
     (of every process when `serve` runs several)."""
-    if request.app.state.job_metrics_at_scrape:  # else one process reads them on a timer
+    if request.app.state.service.job_metrics_at_scrape:  # else one process reads them on a timer
         try:
             metrics.read_store(session)
         except SQLAlchemyError:  # the process's own metrics are still worth a scrape

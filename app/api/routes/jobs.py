@@ -8,8 +8,9 @@ from sqlalchemy.orm import Session
 from app.api import problems
 from app.api.deps import MAX_ROW_ID, HolderDep, JobWatchDep, PageDep, ReadAccess, RowId, SessionDep
 from app.api.problems import not_found
-from app.api.schemas import JobKind, JobList, JobOut, JobStatus
+from app.api.schemas import JobList, JobOut
 from app.store import repo
+from app.store.enums import JobKind, JobStatus
 from app.store.models import Job
 
 router = APIRouter(

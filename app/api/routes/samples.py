@@ -30,6 +30,7 @@ from app.api.schemas import (
 )
 from app.api.withdrawals import queue_withdrawal
 from app.store import repo
+from app.store.enums import ClassKind, JobKind, Origin
 
 router = APIRouter(
     prefix="/v1/classes", tags=["samples"], responses=problems.responses(401, 403, 422, 429)
@@ -93,7 +94,7 @@ def add_sample(
     cls = repo.get_class(session, class_id)
     if cls is None:
         raise not_found("class", "class_id", class_id)
-    if cls.kind != "novel":
+    if cls.kind != ClassKind.NOVEL:
         raise Problem(
             409, f"class '{cls.name}' is a known class; samples can be added to novel classes only",
             "class_id",
@@ -105,7 +106,7 @@ def add_sample(
     recognized_as = rec.recognize_batch(x).records(model.class_ids)[0]
     with idempotency.writing(session):  # a concurrent retry with this key may win
         row = repo.add_sample(session, class_id, x[0])
-        job = repo.add_job(session, "add_sample", class_id, row.id, requested_by=principal.id)
+        job = repo.add_job(session, JobKind.ADD_SAMPLE, class_id, row.id, requested_by=principal.id)
         out = SampleCreated(sample_id=row.id, job=JobOut.model_validate(job),
                             recognized_as=recognized_as, model_version=model.version)
         idempotency.accept(session, out, job.id, response)
@@ -143,7 +144,7 @@ def withdraw_sample(
     row = repo.get_sample(session, class_id, sample_id)
     if row is None:
         raise not_found("sample", "sample_id", sample_id)
-    if row.origin != "enrolled":
+    if row.origin != Origin.ENROLLED:
         raise Problem(
             409, f"sample {sample_id} comes from the training dataset; only enrolled samples "
             "can be withdrawn", "sample_id",

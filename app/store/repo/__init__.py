@@ -13,6 +13,7 @@ leave committing to the caller unless their name or docstring says otherwise, so
 request or one retrain is one transaction.
 """
 
+from app.framework.jsonable import jsonable
 from app.store.repo.classes import (
     LIVE_CLASS,
     LIVE_SAMPLE,
@@ -44,7 +45,6 @@ from app.store.repo.encoding import (
     attribute_labels,
     decode_sample,
     encode_sample,
-    jsonable,
     key_vector,
     vector_key,
 )

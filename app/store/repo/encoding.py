@@ -28,18 +28,3 @@ def encode_sample(sample: np.ndarray) -> tuple[bytes, list[int]]:
 
 def decode_sample(data: bytes, shape: Sequence[int]) -> np.ndarray:
     return np.frombuffer(data, dtype=np.float32).reshape(tuple(shape))
-
-
-def jsonable(obj):
-    """Metrics as strict JSON: numpy scalars to Python, NaN and infinities to None."""
-    if isinstance(obj, dict):
-        return {str(k): jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return jsonable(obj.tolist())
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not np.isfinite(obj):
-        return None
-    return obj
