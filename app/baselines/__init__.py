@@ -1,4 +1,4 @@
-"""Baselines measured beside the paper's pipeline (issue 5), each a ``TactileRecognizer``.
+"""Baselines measured beside the paper's pipeline (docs/RESULTS.md), each a ``TactileRecognizer``.
 
 - ``extratrees``  extra-trees for known classes and max-probability novelty; DAP with
   extra-trees attribute classifiers for zero-shot; nearest class mean for one-shot

@@ -11,15 +11,15 @@ METHODS: dict[str, str] = {
     "paper": "app.framework.paper:PaperRecognizer",
     # the paper's pipeline with its GMM fitted on CONV_XF features instead of raw inputs
     "paper-fgmm": "app.framework.paper:PaperFeatureGMMRecognizer",
-    # baselines of issue 5 (evaluation-only: no model bundles)
+    # baselines measured beside the paper (evaluation-only: no model bundles)
     "extratrees": "app.baselines.extra_trees:ExtraTreesRecognizer",
     "dap": "app.baselines.dap:DAPRecognizer",
     "eszsl": "app.baselines.eszsl:ESZSLRecognizer",
-    # issue 5: the method that measured best on PHAC-2 (storable in bundles)
+    # the method that measured best on PHAC-2 (docs/RESULTS.md; storable in bundles)
     "best": "app.methods.best:BestRecognizer",
 }
 
-# issue 5: the service uses the method that measured better on the mixed known/novel
+# the service uses the method that measured better on the mixed known/novel
 # figure (gzsl_h, docs/RESULTS.md); the paper pipeline stays selectable as "paper".
 DEFAULT_METHOD = "best"
 

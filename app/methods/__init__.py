@@ -1,4 +1,4 @@
-"""Recognition methods beyond the paper's pipeline (issue 5).
+"""Recognition methods beyond the paper's pipeline, measured in docs/RESULTS.md.
 
 - ``best``  the ``best`` method: extra-trees known-class forest whose max-probability
   is the novelty score, DAP with logistic attribute classifiers for zero-shot, and
