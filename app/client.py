@@ -54,9 +54,16 @@ class TactileClient:
     keeps the model for offline recognition (with ``<model_file>.json`` beside it: its
     version, ETag and class ids). ``http`` replaces the HTTP client (e.g. a TestClient)."""
 
-    def __init__(self, base_url: str = "", api_key: str | None = None,
-                 model_file: str | Path | None = None, timeout: float = 10.0, retries: int = 2,
-                 offline_top_k: int = 3, http: httpx.Client | None = None) -> None:
+    def __init__(
+        self,
+        base_url: str = "",
+        api_key: str | None = None,
+        model_file: str | Path | None = None,
+        timeout: float = 10.0,
+        retries: int = 2,
+        offline_top_k: int = 3,
+        http: httpx.Client | None = None,
+    ) -> None:
         if retries < 0 or offline_top_k < 1 or timeout <= 0:
             raise ValueError("retries must be ≥ 0, offline_top_k ≥ 1 and timeout > 0")
         self._owns_http = http is None
@@ -83,21 +90,33 @@ class TactileClient:
         """Recognise one sample or a batch (N, *input shape)."""
         x = np.asarray(samples, dtype=np.float32)
         try:
-            r = self._send("POST", "/v1/recognize", content=_npy(x),
-                           headers={"Content-Type": "application/x-npy"})
+            r = self._send(
+                "POST",
+                "/v1/recognize",
+                content=_npy(x),
+                headers={"Content-Type": "application/x-npy"},
+            )
         except ServiceUnreachable as exc:
             model, meta = self._offline_model(exc)
             batch = model.recognize_batch(x, top_k=self.offline_top_k)
-            return {"model_version": meta.get("version"), "results": batch.records(meta.get("class_ids", {})),
-                    "source": "offline"}
+            return {
+                "model_version": meta.get("version"),
+                "results": batch.records(meta.get("class_ids", {})),
+                "source": "offline",
+            }
         return {**r.json(), "source": "service"}
 
     def describe(self, samples: Any, same_object: bool = False) -> dict[str, Any]:
         """What each touch feels like (``POST /v1/describe``): every attribute's probability
         and a suggested description, for a person to check before registering the object;
         with ``same_object``, also one description from all the touches (``"object"``)."""
-        return self._send("POST", "/v1/describe", content=_npy(samples), params={"same_object": same_object},
-                          headers={"Content-Type": "application/x-npy"}).json()
+        return self._send(
+            "POST",
+            "/v1/describe",
+            content=_npy(samples),
+            params={"same_object": same_object},
+            headers={"Content-Type": "application/x-npy"},
+        ).json()
 
     def sync_model(self) -> bool:
         """Keep ``model_file`` at the service's active version; True when a new one was
@@ -105,33 +124,61 @@ class TactileClient:
         if self.model_file is None:
             raise ValueError("this client has no model_file to keep the model in")
         held = self._meta().get("etag") if self.model_file.is_file() else None
-        r = self._send("GET", "/v1/models/active/bundle", headers={"If-None-Match": held} if held else {})
+        r = self._send(
+            "GET", "/v1/models/active/bundle", headers={"If-None-Match": held} if held else {}
+        )
         if r.status_code == 304:
             return False
         version = int(r.headers["X-Model-Version"])
-        bundle.from_bytes(r.content)  # raises BundleError rather than keep a file that does not load
+        bundle.from_bytes(
+            r.content
+        )  # raises BundleError rather than keep a file that does not load
         class_ids = {c["name"]: c["id"] for c in self._every("/v1/classes", "classes")}
         bundle.write_atomic(self.model_file, r.content)
-        bundle.write_atomic(self._meta_file(), json.dumps({
-            "version": version, "etag": r.headers.get("etag"), "class_ids": class_ids,
-            "sha256": hashlib.sha256(r.content).hexdigest()}).encode())
+        bundle.write_atomic(
+            self._meta_file(),
+            json.dumps(
+                {
+                    "version": version,
+                    "etag": r.headers.get("etag"),
+                    "class_ids": class_ids,
+                    "sha256": hashlib.sha256(r.content).hexdigest(),
+                }
+            ).encode(),
+        )
         return True
 
     # --------------------------------------------------------------- enrolment
-    def register_class(self, name: str, attributes: list[str] | None = None,
-                       attribute_vector: list[int] | None = None, wait: float = 0) -> dict[str, Any]:
+    def register_class(
+        self,
+        name: str,
+        attributes: list[str] | None = None,
+        attribute_vector: list[int] | None = None,
+        wait: float = 0,
+    ) -> dict[str, Any]:
         """Register a never-touched object by its attribute names or 0/1 vector; returns its
         job (``class_id`` names the class), after up to ``wait`` seconds for it to finish."""
         body = {"name": name, **_attributes_body(attributes, attribute_vector)}
-        job = self._send("POST", "/v1/classes", json=body, idempotency_key=str(uuid.uuid4())).json()["job"]
+        job = self._send(
+            "POST", "/v1/classes", json=body, idempotency_key=str(uuid.uuid4())
+        ).json()["job"]
         return self.job(job["id"], wait) if wait else job
 
-    def redescribe_class(self, class_id: int, attributes: list[str] | None = None,
-                         attribute_vector: list[int] | None = None, wait: float = 0) -> dict[str, Any]:
+    def redescribe_class(
+        self,
+        class_id: int,
+        attributes: list[str] | None = None,
+        attribute_vector: list[int] | None = None,
+        wait: float = 0,
+    ) -> dict[str, Any]:
         """Correct the attributes a class was registered with, keeping its samples; returns
         its job, after up to ``wait`` seconds for it to finish."""
-        job = self._send("PATCH", f"/v1/classes/{int(class_id)}", json=_attributes_body(attributes, attribute_vector),
-                         idempotency_key=str(uuid.uuid4())).json()["job"]
+        job = self._send(
+            "PATCH",
+            f"/v1/classes/{int(class_id)}",
+            json=_attributes_body(attributes, attribute_vector),
+            idempotency_key=str(uuid.uuid4()),
+        ).json()["job"]
         return self.job(job["id"], wait) if wait else job
 
     def add_sample(self, class_id: int, sample: Any, wait: float = 0) -> dict[str, Any]:
@@ -139,14 +186,21 @@ class TactileClient:
         ``sample_id``, ``job`` (after up to ``wait`` seconds for it to finish) and what the
         served model made of the sample before learning from it (``recognized_as``)."""
         body = {"sample": np.asarray(sample, dtype=np.float32).tolist()}
-        added = self._send("POST", f"/v1/classes/{int(class_id)}/samples", json=body,
-                           idempotency_key=str(uuid.uuid4())).json()
+        added = self._send(
+            "POST",
+            f"/v1/classes/{int(class_id)}/samples",
+            json=body,
+            idempotency_key=str(uuid.uuid4()),
+        ).json()
         return {**added, "job": self.job(added["job"]["id"], wait)} if wait else added
 
     def sample(self, class_id: int, sample_id: int) -> np.ndarray:
         """A stored sample's data, e.g. to look at an enrolment again."""
-        r = self._send("GET", f"/v1/classes/{int(class_id)}/samples/{int(sample_id)}",
-                       headers={"Accept": "application/x-npy"})
+        r = self._send(
+            "GET",
+            f"/v1/classes/{int(class_id)}/samples/{int(sample_id)}",
+            headers={"Accept": "application/x-npy"},
+        )
         return np.load(io.BytesIO(r.content), allow_pickle=False)
 
     def job(self, job_id: int, wait: float = 0) -> dict[str, Any]:
@@ -157,8 +211,9 @@ class TactileClient:
         return self._send("GET", f"/v1/jobs/{int(job_id)}", params={"wait": wait}, **extra).json()
 
     # ----------------------------------------------------------------- helpers
-    def _send(self, method: str, path: str, idempotency_key: str | None = None,
-              **kwargs: Any) -> httpx.Response:
+    def _send(
+        self, method: str, path: str, idempotency_key: str | None = None, **kwargs: Any
+    ) -> httpx.Response:
         """One request, retried after transport errors (the same Idempotency-Key each time)."""
         headers = {**self.headers, **kwargs.pop("headers", {})}
         if idempotency_key:
@@ -169,13 +224,16 @@ class TactileClient:
                 r = self.http.request(method, path, headers=headers, **kwargs)
             except httpx.TransportError as exc:
                 if attempt == self.retries:
-                    raise ServiceUnreachable(f"{method} {path}: the service cannot be reached: {exc}") from exc
+                    raise ServiceUnreachable(
+                        f"{method} {path}: the service cannot be reached: {exc}"
+                    ) from exc
                 time.sleep(0.2 * 2**attempt)
                 attempt += 1
                 continue
             if r.status_code in UNREACHABLE_STATUS:
-                raise ServiceUnreachable(f"{method} {path}: the service answered {r.status_code}",
-                                         r.status_code)
+                raise ServiceUnreachable(
+                    f"{method} {path}: the service answered {r.status_code}", r.status_code
+                )
             if r.status_code >= 400:
                 raise ServiceError(f"{method} {path}: {r.status_code} {_detail(r)}", r.status_code)
             return r
@@ -183,7 +241,9 @@ class TactileClient:
     def _every(self, path: str, key: str) -> list[dict[str, Any]]:
         rows, after = [], None
         while True:
-            page = self._send("GET", path, params={"limit": 1000, **({"after": after} if after else {})}).json()
+            page = self._send(
+                "GET", path, params={"limit": 1000, **({"after": after} if after else {})}
+            ).json()
             rows += page[key]
             after = page.get("next_after")
             if after is None:
@@ -203,8 +263,10 @@ class TactileClient:
         """The model file (read again only when it changed) and what is known of it: its
         version and class ids only when the sidecar describes this very file."""
         if self._offline is None or not self.model_file.is_file():
-            raise ServiceUnreachable(f"{cause}; and there is no model file to recognise offline "
-                                     "(call sync_model while the service is reachable)") from cause
+            raise ServiceUnreachable(
+                f"{cause}; and there is no model file to recognise offline "
+                "(call sync_model while the service is reachable)"
+            ) from cause
         model, fresh = self._offline.load()
         if fresh:  # a sidecar of another file: the answers still hold, the labels may not
             meta = self._meta()
@@ -218,10 +280,16 @@ def _npy(samples: Any) -> bytes:
     return body.getvalue()
 
 
-def _attributes_body(attributes: list[str] | None, attribute_vector: list[int] | None) -> dict[str, Any]:
+def _attributes_body(
+    attributes: list[str] | None, attribute_vector: list[int] | None
+) -> dict[str, Any]:
     if (attributes is None) == (attribute_vector is None):
         raise ValueError("give either attributes or attribute_vector")
-    return {"attributes": attributes} if attributes is not None else {"attribute_vector": attribute_vector}
+    return (
+        {"attributes": attributes}
+        if attributes is not None
+        else {"attribute_vector": attribute_vector}
+    )
 
 
 def _detail(r: httpx.Response) -> str:

@@ -28,18 +28,22 @@ class Settings(BaseSettings):
     host: str = "127.0.0.1"
     port: int = Field(8000, ge=0, le=65535)
     processes: int | None = Field(
-        None, ge=1, description="API processes `serve` runs on its port, each with its own "
+        None,
+        ge=1,
+        description="API processes `serve` runs on its port, each with its own "
         "interpreter so that recognition uses every core; default one per available CPU core, "
-        f"at most {MAX_DEFAULT_PROCESSES}."
+        f"at most {MAX_DEFAULT_PROCESSES}.",
     )
     access_log: bool = Field(
-        False, description="Log every request (uvicorn's access log); off by default because at "
-        "robot request rates it costs about a tenth of the API's CPU. /metrics counts requests."
+        False,
+        description="Log every request (uvicorn's access log); off by default because at "
+        "robot request rates it costs about a tenth of the API's CPU. /metrics counts requests.",
     )
     opentelemetry: bool = Field(
-        False, description="FastAPI's native OpenTelemetry traces, metrics and logs, sent to the "
+        False,
+        description="FastAPI's native OpenTelemetry traces, metrics and logs, sent to the "
         "providers an OpenTelemetry SDK configures; off by default: /metrics serves Prometheus, and "
-        "even unconfigured the per-request check costs several microseconds."
+        "even unconfigured the per-request check costs several microseconds.",
     )
     # NoDecode: a plain comma-separated list in the environment, not JSON.
     api_keys: Annotated[list[str], NoDecode] = Field(
@@ -50,8 +54,10 @@ class Settings(BaseSettings):
         1.0, gt=0, description="How often an API process re-reads the stored API keys."
     )
     rate_limit: float = Field(
-        1000.0, ge=0, description="Requests per second per API key (per client address when "
-        "no keys exist) in each API process; 0 = no limit."
+        1000.0,
+        ge=0,
+        description="Requests per second per API key (per client address when "
+        "no keys exist) in each API process; 0 = no limit.",
     )
     rate_burst: int = Field(
         2000, ge=1, description="Requests a key may send at once before the rate limit applies."
@@ -74,7 +80,8 @@ class Settings(BaseSettings):
         10, ge=1, description="Real samples after which a novel class becomes a known class."
     )
     keep_versions: int = Field(
-        100, ge=0,
+        100,
+        ge=0,
         description="Model versions kept for listing and rollback: the newest ones, plus the active and "
         "the bootstrap version; the worker deletes older ones and the bundle data only they use. "
         "0 keeps every version.",
@@ -95,11 +102,16 @@ class Settings(BaseSettings):
     )
     worker_poll_seconds: float = Field(0.2, gt=0, description="How often a worker looks for jobs.")
     worker_nice: int = Field(
-        5, ge=0, le=19, description="Scheduling niceness of the retraining worker, so retrains "
-        "yield the CPU to recognition on a shared machine; 0 = same priority."
+        5,
+        ge=0,
+        le=19,
+        description="Scheduling niceness of the retraining worker, so retrains "
+        "yield the CPU to recognition on a shared machine; 0 = same priority.",
     )
     lease_seconds: float = Field(
-        30.0, gt=0, description="A worker or bootstrap lock not renewed for this long is taken over."
+        30.0,
+        gt=0,
+        description="A worker or bootstrap lock not renewed for this long is taken over.",
     )
 
     @field_validator("api_keys", "cors_origins", mode="before")

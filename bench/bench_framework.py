@@ -32,12 +32,17 @@ def timed(fn, repeat: int) -> list[float]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--phac2", default=os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "phac2"))
+    ap.add_argument(
+        "--phac2",
+        default=os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "phac2"),
+    )
     ap.add_argument("--method", default="paper")
     ap.add_argument("--repeat", type=int, default=5)
     args = ap.parse_args()
-    report: dict = {"machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs",
-                    "method": args.method}
+    report: dict = {
+        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs",
+        "method": args.method,
+    }
 
     # Base training on all 60 PHAC-2 objects.
     ds = load_phac2(args.phac2)
@@ -51,18 +56,25 @@ def main() -> None:
 
     # Zero-shot enrolment of one class, then a one-shot update of it.
     names = [f"bench-{n}" for n in novel.class_names]
-    zsl = timed(lambda: model.add_novel_classes(names[:1], novel.class_attributes[:1],
-                                                allow_known_vectors=True), args.repeat)
+    zsl = timed(
+        lambda: model.add_novel_classes(
+            names[:1], novel.class_attributes[:1], allow_known_vectors=True
+        ),
+        args.repeat,
+    )
     report["zero_shot_enrolment_s_median"] = statistics.median(zsl)
-    enrolled = model.add_novel_classes(names[:1], novel.class_attributes[:1], allow_known_vectors=True)
+    enrolled = model.add_novel_classes(
+        names[:1], novel.class_attributes[:1], allow_known_vectors=True
+    )
     osl = timed(lambda: enrolled.add_one_shot(names[0], novel.samples[:1]), args.repeat)
     report["one_shot_update_s_median"] = statistics.median(osl)
 
     # Batch inference on the paper's 32 x 30 tactile images.
     sim = simulate_dataset(n_objects=30, trials_per_object=10, seed=0)
     sim_model = make_method(args.method).fit(sim.select_classes(np.arange(24)), progress=False)
-    sim_model = sim_model.add_novel_classes(sim.class_names[24:], sim.class_attributes[24:],
-                                            allow_known_vectors=True)
+    sim_model = sim_model.add_novel_classes(
+        sim.class_names[24:], sim.class_attributes[24:], allow_known_vectors=True
+    )
     batch = np.tile(sim.samples, (4, 1, 1))[:1024]
     sim_model.recognize(batch)
     runs = timed(lambda: sim_model.recognize(batch), args.repeat)

@@ -83,7 +83,9 @@ def main() -> int:
         )
         with TestClient(create_app(settings)) as client:
             worker = Worker(
-                settings, client.app.state.service.sessions, on_activate=client.app.state.service.holder.serve
+                settings,
+                client.app.state.service.sessions,
+                on_activate=client.app.state.service.holder.serve,
             )
             for i in range(args.novel):
                 r = client.post(

@@ -100,7 +100,9 @@ def main() -> int:
         }
         with TestClient(app) as client:
             print(f"bootstrapped in {time.perf_counter() - started:.1f} s", file=sys.stderr)
-            worker = Worker(settings, app.state.service.sessions, on_activate=app.state.service.holder.serve)
+            worker = Worker(
+                settings, app.state.service.sessions, on_activate=app.state.service.holder.serve
+            )
             worker.warm_up()
             shape = app.state.service.holder.current.recognizer.input_shape
             rng = np.random.default_rng(0)

@@ -31,8 +31,15 @@ from app.framework.registry import make_method
 # service only uses the TactileRecognizer interface, which tests/methods checks for `best`.
 QUICK_METHOD = "paper"
 QUICK_PARAMS: dict = {
-    "seed": 0, "encoder_epochs": 3, "alg1_epochs": 5, "alg2_epochs": 2, "fc_z_epochs": 5,
-    "finetune_steps": 3, "mlp_hidden": 32, "mlp_features": 16, "gmm_components": 2,
+    "seed": 0,
+    "encoder_epochs": 3,
+    "alg1_epochs": 5,
+    "alg2_epochs": 2,
+    "fc_z_epochs": 5,
+    "finetune_steps": 3,
+    "mlp_hidden": 32,
+    "mlp_features": 16,
+    "gmm_components": 2,
     "novelty_pca_dims": 4,
 }
 QUICK_OBJECTS = 10
@@ -128,9 +135,15 @@ def error_contract_breach(label: str, response) -> str | None:
 
 def quick_settings(data_dir, **overrides) -> Settings:
     values = {
-        "data_dir": data_dir, "embedded_worker": False, "dataset": QUICK_DATASET,
-        "method": QUICK_METHOD, "method_params": QUICK_PARAMS, "model_poll_seconds": 0.05, "worker_poll_seconds": 0.05,
-        "lease_seconds": 10.0, "promotion_threshold": 10,
+        "data_dir": data_dir,
+        "embedded_worker": False,
+        "dataset": QUICK_DATASET,
+        "method": QUICK_METHOD,
+        "method_params": QUICK_PARAMS,
+        "model_poll_seconds": 0.05,
+        "worker_poll_seconds": 0.05,
+        "lease_seconds": 10.0,
+        "promotion_threshold": 10,
     }
     return Settings(**{**values, **overrides})
 
@@ -294,7 +307,17 @@ def best_service(tmp_path, best_base):
     from app.api.main import create_app
     from worker import Worker
 
-    app = create_app(quick_settings(tmp_path, method="best", method_params=BEST_PARAMS),
-                     trainer=lambda: best_base)
+    app = create_app(
+        quick_settings(tmp_path, method="best", method_params=BEST_PARAMS),
+        trainer=lambda: best_base,
+    )
     with TestClient(app) as client:
-        yield client, app, Worker(app.state.service.settings, app.state.service.sessions, on_activate=app.state.service.holder.serve)
+        yield (
+            client,
+            app,
+            Worker(
+                app.state.service.settings,
+                app.state.service.sessions,
+                on_activate=app.state.service.holder.serve,
+            ),
+        )

@@ -38,12 +38,21 @@ def chromium() -> str:
 def service(tmp_path_factory) -> Iterator[str]:
     data_dir = tmp_path_factory.mktemp("docs-service")
     port = free_port()
-    env = {**os.environ, "TACTILE_DATA_DIR": str(data_dir), "TACTILE_DATASET": QUICK_DATASET,
-           "TACTILE_METHOD": QUICK_METHOD, "TACTILE_METHOD_PARAMS": json.dumps(QUICK_PARAMS)}
+    env = {
+        **os.environ,
+        "TACTILE_DATA_DIR": str(data_dir),
+        "TACTILE_DATASET": QUICK_DATASET,
+        "TACTILE_METHOD": QUICK_METHOD,
+        "TACTILE_METHOD_PARAMS": json.dumps(QUICK_PARAMS),
+    }
     log = data_dir / "serve.log"
     with open(log, "wb") as out:
-        proc = subprocess.Popen([*tactile_zsl(), "serve", "--processes", "1", "--no-worker",
-                                 "--port", str(port)], env=env, stdout=out, stderr=subprocess.STDOUT)
+        proc = subprocess.Popen(
+            [*tactile_zsl(), "serve", "--processes", "1", "--no-worker", "--port", str(port)],
+            env=env,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
     url = f"http://127.0.0.1:{port}"
     try:
         wait_for(lambda: httpx.get(f"{url}/readyz").status_code == 200, STARTUP_TIMEOUT, "serve")
@@ -56,13 +65,21 @@ def service(tmp_path_factory) -> Iterator[str]:
 
 def render(url: str, screenshot: Path | None = None) -> str:
     """The page's DOM after its scripts ran; other hosts resolve to nothing."""
-    args = [chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-            "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1",
-            "--virtual-time-budget=15000", "--window-size=1280,2400"]
+    args = [
+        chromium(),
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1",
+        "--virtual-time-budget=15000",
+        "--window-size=1280,2400",
+    ]
     if screenshot is not None:
         screenshot.parent.mkdir(parents=True, exist_ok=True)
-        subprocess.run([*args, f"--screenshot={screenshot}", url], capture_output=True, timeout=120,
-                       check=True)
+        subprocess.run(
+            [*args, f"--screenshot={screenshot}", url], capture_output=True, timeout=120, check=True
+        )
     run = subprocess.run([*args, "--dump-dom", url], capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr[-2000:]
     return run.stdout
@@ -73,8 +90,11 @@ def test_docs_lists_every_operation_without_a_render_error(service):
     dom = render(f"{service}/docs", SCREENSHOT_DIR / "docs.png")
     assert "Unable to render" not in dom and "valid version field" not in dom
     rendered = set(re.findall(r'id="operations-(?!tag-)([\w-]+)"', dom))  # not the tag headings
-    expected = {f"{op['tags'][0]}-{op['operationId']}" for ops in spec["paths"].values()
-                for op in ops.values()}
+    expected = {
+        f"{op['tags'][0]}-{op['operationId']}"
+        for ops in spec["paths"].values()
+        for op in ops.values()
+    }
     assert len(expected) > 20 and rendered == expected
     assert "Tactile recognition service" in dom
     assert (SCREENSHOT_DIR / "docs.png").stat().st_size > 20_000  # a drawn page, not a blank one

@@ -49,13 +49,20 @@ class Service:
     def start(self) -> None:
         n = next(self.starts)
         self.data_dir.mkdir(parents=True, exist_ok=True)
-        for name, args in (("serve", ["serve", "--no-worker", "--port", str(self.port)]),
-                           ("worker", ["worker"])):
+        for name, args in (
+            ("serve", ["serve", "--no-worker", "--port", str(self.port)]),
+            ("worker", ["worker"]),
+        ):
             log = open(self.data_dir / f"{name}-{n}.log", "wb")  # noqa: SIM115 - closed with the process
-            self.procs.append(subprocess.Popen(
-                [*tactile_zsl(), *args], env=self.env, cwd=self.data_dir, stdout=log,
-                stderr=subprocess.STDOUT,
-            ))
+            self.procs.append(
+                subprocess.Popen(
+                    [*tactile_zsl(), *args],
+                    env=self.env,
+                    cwd=self.data_dir,
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                )
+            )
 
     def stop(self) -> None:
         for p in self.procs:
@@ -152,15 +159,31 @@ def test_robot_session_survives_a_restart(tmp_path):
             assert r.status_code == 200, r.text
             (tmp_path / "robot.bundle").write_bytes(r.content)
             np.save(tmp_path / "touches.npy", np.stack([touch, samples[3]]))
-            online = client.post("/v1/recognize", json={"samples": [touch.tolist(), samples[3].tolist()]})
+            online = client.post(
+                "/v1/recognize", json={"samples": [touch.tolist(), samples[3].tolist()]}
+            )
             offline = subprocess.run(
-                [*tactile_zsl(), "recognize", "--model", str(tmp_path / "robot.bundle"),
-                 str(tmp_path / "touches.npy")], capture_output=True, text=True, timeout=120)
+                [
+                    *tactile_zsl(),
+                    "recognize",
+                    "--model",
+                    str(tmp_path / "robot.bundle"),
+                    str(tmp_path / "touches.npy"),
+                ],
+                capture_output=True,
+                text=True,
+                timeout=120,
+            )
             assert offline.returncode == 0, offline.stderr
             assert [a["class_name"] for a in json.loads(offline.stdout)["results"]] == [
-                a["class_name"] for a in online.json()["results"]]
-            assert client.get(f"/v1/models/{version}/bundle",
-                              headers={"If-None-Match": r.headers["etag"]}).status_code == 304
+                a["class_name"] for a in online.json()["results"]
+            ]
+            assert (
+                client.get(
+                    f"/v1/models/{version}/bundle", headers={"If-None-Match": r.headers["etag"]}
+                ).status_code
+                == 304
+            )
             assert [c for c in before["classes"] if c["id"] == teapot][0]["n_samples"] == 1
 
         service.stop()
@@ -186,8 +209,12 @@ def test_robot_session_survives_a_restart(tmp_path):
 
             # and the operator's description missed an attribute: corrected, the model follows
             taken = {tuple(c["attributes"]) for c in list_all(client, "/v1/classes", "classes")}
-            fixed = next(f for a in attributes if a not in names
-                         and tuple(f := sorted([*names, a], key=attributes.index)) not in taken)
+            fixed = next(
+                f
+                for a in attributes
+                if a not in names
+                and tuple(f := sorted([*names, a], key=attributes.index)) not in taken
+            )
             r = client.patch(f"/v1/classes/{teapot}", json={"attributes": fixed})
             assert r.status_code == 202, r.text
             job = wait_job(client, r.json()["job"]["id"], service)

@@ -46,18 +46,30 @@ def serving(data_dir: Path, port: int) -> Iterator[subprocess.Popen]:
 
 def two_serving(url: str, timeout: float = STARTUP_TIMEOUT, without: int | None = None) -> set[int]:
     """Wait until two processes (neither of them ``without``) serve; their pids."""
-    return wait_for(lambda: len(p := serving_pids(url)) == 2 and without not in p and p, timeout,
-                    "2 serving processes")
+    return wait_for(
+        lambda: len(p := serving_pids(url)) == 2 and without not in p and p,
+        timeout,
+        "2 serving processes",
+    )
 
 
 def start(data_dir: Path, port: int) -> subprocess.Popen:
-    env = {**os.environ, "TACTILE_DATA_DIR": str(data_dir), "TACTILE_DATASET": QUICK_DATASET,
-           "TACTILE_METHOD": QUICK_METHOD, "TACTILE_METHOD_PARAMS": json.dumps(QUICK_PARAMS),
-           "TACTILE_RATE_LIMIT": "0"}
+    env = {
+        **os.environ,
+        "TACTILE_DATA_DIR": str(data_dir),
+        "TACTILE_DATASET": QUICK_DATASET,
+        "TACTILE_METHOD": QUICK_METHOD,
+        "TACTILE_METHOD_PARAMS": json.dumps(QUICK_PARAMS),
+        "TACTILE_RATE_LIMIT": "0",
+    }
     data_dir.mkdir(parents=True, exist_ok=True)
     log = open(data_dir / "serve.log", "wb")  # noqa: SIM115 - the process writes it
-    return subprocess.Popen([*tactile_zsl(), "serve", "--processes", "2", "--no-worker", "--port", str(port)],
-                            env=env, stdout=log, stderr=subprocess.STDOUT)
+    return subprocess.Popen(
+        [*tactile_zsl(), "serve", "--processes", "2", "--no-worker", "--port", str(port)],
+        env=env,
+        stdout=log,
+        stderr=subprocess.STDOUT,
+    )
 
 
 def serving_pids(url: str) -> set[int]:
@@ -86,8 +98,11 @@ def test_processes_serve_together_restart_and_stop_together(tmp_path):
 
         for _ in range(30):  # a new connection each: the kernel spreads them over the processes
             assert httpx.get(f"{url}/healthz").status_code == 200
-        counted = re.findall(r'^tactile_http_requests_total\{[^}]*route="/healthz"[^}]*\} (\S+)',
-                             httpx.get(f"{url}/metrics").text, re.M)
+        counted = re.findall(
+            r'^tactile_http_requests_total\{[^}]*route="/healthz"[^}]*\} (\S+)',
+            httpx.get(f"{url}/metrics").text,
+            re.M,
+        )
         assert sum(float(c) for c in counted) == 30  # summed over both processes
 
         victim = min(pids)
@@ -95,7 +110,9 @@ def test_processes_serve_together_restart_and_stop_together(tmp_path):
         again = two_serving(url, 120, without=victim)  # the killed process is replaced
         assert httpx.get(f"{url}/readyz").status_code == 200
         refused = restore(tmp_path)  # while processes serve, the store is theirs
-        assert refused.returncode == 2 and "in use by a running API process" in refused.stderr, refused.stderr
+        assert refused.returncode == 2 and "in use by a running API process" in refused.stderr, (
+            refused.stderr
+        )
 
         # a robot waits for a job no worker will take; a stop answers it with the status then
         vector = unused_vectors(quick_dataset(), 1)[0]
@@ -113,7 +130,7 @@ def test_processes_serve_together_restart_and_stop_together(tmp_path):
         time.sleep(1.0)  # the request is waiting in one of the processes
         proc.send_signal(signal.SIGTERM)
         waiting.join(30)
-        (seconds, answer), = answers
+        ((seconds, answer),) = answers
         assert answer.status_code == 200 and answer.json()["status"] == "queued"
         assert seconds < 15  # answered at the stop, not after its 20 s
         assert proc.wait(60) == 0
@@ -129,10 +146,18 @@ def restore(tmp_path: Path) -> subprocess.CompletedProcess:
     env = {**os.environ, "TACTILE_DATA_DIR": str(tmp_path / "data")}
     backup = tmp_path / "backup.db"
     if not backup.exists():
-        subprocess.run([*tactile_zsl(), "store", "backup", str(backup)], env=env, check=True,
-                       capture_output=True)
-    return subprocess.run([*tactile_zsl(), "store", "restore", str(backup), "--replace"], env=env,
-                          capture_output=True, text=True)
+        subprocess.run(
+            [*tactile_zsl(), "store", "backup", str(backup)],
+            env=env,
+            check=True,
+            capture_output=True,
+        )
+    return subprocess.run(
+        [*tactile_zsl(), "store", "restore", str(backup), "--replace"],
+        env=env,
+        capture_output=True,
+        text=True,
+    )
 
 
 def test_a_process_that_cannot_start_stops_the_service(tmp_path):
@@ -147,7 +172,9 @@ def test_a_process_that_cannot_start_stops_the_service(tmp_path):
 def test_the_default_is_one_process_per_core_within_bounds():
     default = Settings().api_processes
     assert 1 <= default <= MAX_DEFAULT_PROCESSES
-    assert default <= (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count())
+    assert default <= (
+        len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    )
     assert Settings(processes=3).api_processes == 3
 
 

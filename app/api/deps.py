@@ -75,7 +75,9 @@ def current_model(request: Request) -> LoadedModel:
     """The snapshot a request works with from start to end, even if a swap happens."""
     model = service(request).holder.current
     if model is None:
-        raise Problem(503, "no model is loaded yet; try again shortly", "model", {"Retry-After": "5"})
+        raise Problem(
+            503, "no model is loaded yet; try again shortly", "model", {"Retry-After": "5"}
+        )
     return model
 
 
@@ -84,7 +86,8 @@ async def get_model(request: Request) -> LoadedModel:
 
 
 api_key_header = APIKeyHeader(
-    name="X-API-Key", auto_error=False,
+    name="X-API-Key",
+    auto_error=False,
     description="Needed on every /v1 request once any API key exists.",
 )
 
@@ -100,18 +103,23 @@ def authorize(request: Request, key: str | None, scope: str) -> Principal:
         principal = state.keys.authenticate(key) if key else None
         if principal is None:
             raise Problem(
-                401, "a valid X-API-Key header is required", "X-API-Key",
+                401,
+                "a valid X-API-Key header is required",
+                "X-API-Key",
                 {"WWW-Authenticate": "APIKey"},
             )
         if not principal.allows(scope):
             raise Problem(
-                403, f"this API key has scope '{principal.scope}'; this request needs "
-                f"'{scope}'", "X-API-Key",
+                403,
+                f"this API key has scope '{principal.scope}'; this request needs '{scope}'",
+                "X-API-Key",
             )
     wait = state.limiter.acquire(principal.id)
     if wait:
         raise Problem(
-            429, "rate limit exceeded for this API key; slow down", "X-API-Key",
+            429,
+            "rate limit exceeded for this API key; slow down",
+            "X-API-Key",
             {"Retry-After": retry_after(wait)},
         )
     request.state.principal = principal
@@ -137,14 +145,22 @@ def media_type(request: Request, accepted: tuple[str, ...]) -> str:
     ``accepted``; a 415 naming them otherwise. A request without a body needs none."""
     given = request.headers.get("content-type")
     if given is None:
-        if request.headers.get("content-length", "0") == "0" and "transfer-encoding" not in request.headers:
+        if (
+            request.headers.get("content-length", "0") == "0"
+            and "transfer-encoding" not in request.headers
+        ):
             return accepted[0]
-        raise Problem(415, f"the body has no Content-Type; send one of: {', '.join(accepted)}",
-                      "Content-Type")
+        raise Problem(
+            415, f"the body has no Content-Type; send one of: {', '.join(accepted)}", "Content-Type"
+        )
     kind = given.split(";", 1)[0].strip().lower()
     if kind not in accepted:
-        raise Problem(415, f"Content-Type {kind or '(empty)'!r} is not accepted here; send one "
-                      f"of: {', '.join(accepted)}", "Content-Type")
+        raise Problem(
+            415,
+            f"Content-Type {kind or '(empty)'!r} is not accepted here; send one "
+            f"of: {', '.join(accepted)}",
+            "Content-Type",
+        )
     return kind
 
 
@@ -188,7 +204,8 @@ class Idempotency:
             return
         if not hmac.compare_digest(row.fingerprint, self.fingerprint):
             raise Problem(
-                422, "this Idempotency-Key was used for a different request; use a new key",
+                422,
+                "this Idempotency-Key was used for a different request; use a new key",
                 "Idempotency-Key",
             )
         headers = {"Idempotent-Replayed": "true"}
@@ -206,7 +223,9 @@ class Idempotency:
             )
 
     @contextmanager
-    def writing(self, session: Session, recheck: Callable[[], None] | None = None) -> Iterator[None]:
+    def writing(
+        self, session: Session, recheck: Callable[[], None] | None = None
+    ) -> Iterator[None]:
         """Around a write route's changes: a unique constraint broken by a concurrent request
         replays that request's answer when it was a retry with this key, or lets ``recheck``
         name the conflict (a 409), before the error is raised as it is."""
@@ -238,12 +257,19 @@ async def replay_handler(_request: Request, exc: Replay) -> JSONResponse:
 
 
 async def get_idempotency(
-    request: Request, principal: Annotated[Principal, Depends(require_enroll)],
-    key: Annotated[str | None, Header(
-        alias="Idempotency-Key", min_length=1, max_length=200, pattern=r"^[\x21-\x7e]+$",
-        description="Any unique string (e.g. a UUID): a retry with the same key and body gets "
-        "the first answer instead of enrolling twice; the same key with another body is a 422.",
-    )] = None,
+    request: Request,
+    principal: Annotated[Principal, Depends(require_enroll)],
+    key: Annotated[
+        str | None,
+        Header(
+            alias="Idempotency-Key",
+            min_length=1,
+            max_length=200,
+            pattern=r"^[\x21-\x7e]+$",
+            description="Any unique string (e.g. a UUID): a retry with the same key and body gets "
+            "the first answer instead of enrolling twice; the same key with another body is a 422.",
+        ),
+    ] = None,
 ) -> Idempotency:
     if key is None:
         return Idempotency(principal.id, None, "")
@@ -269,15 +295,22 @@ class Page(NamedTuple):
     def cut(self, rows: list, key) -> tuple[list, int | None]:
         """``rows`` read with a limit of ``limit + 1``: this page's rows, and the
         ``next_after`` cursor (None when the extra row did not come: the last page)."""
-        page = rows[:self.limit]
+        page = rows[: self.limit]
         return page, (key(page[-1]) if len(rows) > self.limit else None)
 
 
 async def get_page(
-    after: Annotated[int | None, Query(
-        ge=0, le=MAX_ROW_ID, description="Return the rows after this one: the `next_after` of the previous page.",
-    )] = None,
-    limit: Annotated[int, Query(ge=1, le=PAGE_MAX, description="Most rows in the page.")] = PAGE_DEFAULT,
+    after: Annotated[
+        int | None,
+        Query(
+            ge=0,
+            le=MAX_ROW_ID,
+            description="Return the rows after this one: the `next_after` of the previous page.",
+        ),
+    ] = None,
+    limit: Annotated[
+        int, Query(ge=1, le=PAGE_MAX, description="Most rows in the page.")
+    ] = PAGE_DEFAULT,
 ) -> Page:
     return Page(after, limit)
 

@@ -42,7 +42,9 @@ real samples (one-shot). Every error is an RFC 9457 `application/problem+json` b
 
 
 def create_app(
-    settings: Settings | None = None, trainer: Trainer | None = None, process_index: int | None = None,
+    settings: Settings | None = None,
+    trainer: Trainer | None = None,
+    process_index: int | None = None,
 ) -> FastAPI:
     """``trainer`` replaces the bootstrap training (tests hand in a trained model);
     ``process_index`` is this process's number when ``serve`` runs several (process 0
@@ -104,7 +106,9 @@ def create_app(
         version="1",
         description=DESCRIPTION,
         lifespan=lifespan,
-        telemetry=None if settings.opentelemetry else {"tracing": False, "metrics": False, "logs": False},
+        telemetry=None
+        if settings.opentelemetry
+        else {"tracing": False, "metrics": False, "logs": False},
         docs_url=None,  # served below from the package: no CDN
         redoc_url=None,
         generate_unique_id_function=operation_id,
@@ -133,7 +137,9 @@ def create_app(
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     if settings.cors_origins:  # closed by default: no CORS headers at all
         app.add_middleware(
-            CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "POST", "PATCH", "DELETE"],
+            CORSMiddleware,
+            allow_origins=settings.cors_origins,
+            allow_methods=["GET", "POST", "PATCH", "DELETE"],
             allow_headers=["Content-Type", "X-API-Key", "Idempotency-Key"],
         )
     app.add_middleware(RequestMetrics, metrics=metrics)
@@ -149,7 +155,8 @@ def operation_id(route: APIRoute) -> str:
 def _mount_docs(app: FastAPI) -> None:
     # Swagger UI 5 from the fastapi-swagger package: it reads OpenAPI 3.1, which FastAPI writes
     app.mount(
-        "/static/swagger-ui", StaticFiles(directory=str(files("fastapi_swagger") / "resources")),
+        "/static/swagger-ui",
+        StaticFiles(directory=str(files("fastapi_swagger") / "resources")),
         name="swagger-ui",
     )
 

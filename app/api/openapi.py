@@ -28,7 +28,9 @@ def install(app: FastAPI) -> None:
     app.openapi = document_for(app, app.openapi)
 
 
-def document_for(app: FastAPI, fastapi_document: Callable[[], dict[str, Any]]) -> Callable[[], dict]:
+def document_for(
+    app: FastAPI, fastapi_document: Callable[[], dict[str, Any]]
+) -> Callable[[], dict]:
     done: dict[tuple[int, ...] | None, dict[str, Any]] = {}
 
     def document() -> dict[str, Any]:
@@ -51,8 +53,10 @@ def document_for(app: FastAPI, fastapi_document: Callable[[], dict[str, Any]]) -
 
 def _state_shape(doc: dict[str, Any], shape: list[int]) -> None:
     """Say the served model's sample shape in the sample fields and the introduction."""
-    note = (f" On this service one sample has shape {shape} (nested lists, outermost first); "
-            "`input_shape` of `GET /v1/models/active` says so too.")
+    note = (
+        f" On this service one sample has shape {shape} (nested lists, outermost first); "
+        "`input_shape` of `GET /v1/models/active` says so too."
+    )
     schemas = doc["components"]["schemas"]
     for body, field in (("RecognizeRequest", "samples"), (SampleCreate.__name__, "sample")):
         prop = schemas.get(body, {}).get("properties", {}).get(field)
@@ -60,4 +64,5 @@ def _state_shape(doc: dict[str, Any], shape: list[int]) -> None:
             prop["description"] = prop.get("description", "") + note
     doc["info"]["description"] += (
         f"\n\nThe served model takes samples of shape `{shape}`: `POST /v1/recognize` and "
-        f"`POST /v1/describe` take a batch of them, `POST /v1/classes/{{id}}/samples` one.")
+        f"`POST /v1/describe` take a batch of them, `POST /v1/classes/{{id}}/samples` one."
+    )

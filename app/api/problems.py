@@ -53,7 +53,10 @@ class Problem(HTTPException):
     """An HTTPException that names the field at fault."""
 
     def __init__(
-        self, status: int, detail: str, field: str | None = None,
+        self,
+        status: int,
+        detail: str,
+        field: str | None = None,
         headers: dict[str, str] | None = None,
     ) -> None:
         super().__init__(status, detail, headers)
@@ -85,7 +88,10 @@ class ProblemResponse(JSONResponse):
 
 
 def problem_response(
-    request: Request, status: int, detail: str, errors: Sequence[dict[str, Any]] = (),
+    request: Request,
+    status: int,
+    detail: str,
+    errors: Sequence[dict[str, Any]] = (),
     headers: dict[str, str] | None = None,
 ) -> ProblemResponse:
     body = {
@@ -171,11 +177,22 @@ def _closest_union_member(errors: Sequence[dict[str, Any]]) -> list[dict[str, An
         else:
             groups.setdefault(loc[:at], {}).setdefault(loc[at], []).append(err)
     for members in groups.values():
-        best = max(members.values(), key=lambda errs: (max(len(e["loc"]) for e in errs), -len(errs)))
-        kept.extend(_closest_union_member([
-            {**e, "loc": tuple(p for i, p in enumerate(e["loc"]) if i != _first_union(e["loc"]))}
-            for e in best
-        ]))
+        best = max(
+            members.values(), key=lambda errs: (max(len(e["loc"]) for e in errs), -len(errs))
+        )
+        kept.extend(
+            _closest_union_member(
+                [
+                    {
+                        **e,
+                        "loc": tuple(
+                            p for i, p in enumerate(e["loc"]) if i != _first_union(e["loc"])
+                        ),
+                    }
+                    for e in best
+                ]
+            )
+        )
     return kept
 
 
@@ -192,8 +209,11 @@ def readable_errors(errors: Sequence[dict[str, Any]]) -> list[dict[str, str]]:
         # a JSON syntax error's location is a character offset, not a field
         name = "body" if err.get("type") == "json_invalid" else field_name(err.get("loc", ()))
         reason = _validation_reason(err)
-        place = "".join("[*]" if isinstance(p, int) else f".{p}" for p in err.get("loc", ())
-                        if not _union_member(p))
+        place = "".join(
+            "[*]" if isinstance(p, int) else f".{p}"
+            for p in err.get("loc", ())
+            if not _union_member(p)
+        )
         problems.setdefault((place, reason), []).append((name, reason + _value_shown(err)))
     out = []
     for same in list(problems.values())[:MAX_ERRORS]:
@@ -227,14 +247,19 @@ async def framework_exception_handler(request: Request, exc: FrameworkError) -> 
     )
     field = getattr(exc, "field", None) or default_field
     headers = {"Retry-After": "5"} if status == 503 else None
-    return problem_response(request, status, str(exc), [{"field": field, "reason": str(exc)}], headers)
+    return problem_response(
+        request, status, str(exc), [{"field": field, "reason": str(exc)}], headers
+    )
 
 
 async def store_unavailable_handler(request: Request, exc: OperationalError) -> ProblemResponse:
     """A timed-out statement or an unreachable database: retryable, and no SQL leaves."""
     log.warning("store error on %s %s: %s", request.method, request.url.path, exc.orig)
     return problem_response(
-        request, 503, "the store is busy or unreachable; try again shortly", [],
+        request,
+        503,
+        "the store is busy or unreachable; try again shortly",
+        [],
         {"Retry-After": "1"},
     )
 
@@ -253,8 +278,10 @@ def install(app: FastAPI) -> None:
 
 
 class ProblemError(BaseModel):
-    field: str = Field(description="What was wrong: a body path such as `samples[0][3]`, a "
-                       "parameter, or a header such as `X-API-Key`.")
+    field: str = Field(
+        description="What was wrong: a body path such as `samples[0][3]`, a "
+        "parameter, or a header such as `X-API-Key`."
+    )
     reason: str
 
 
@@ -267,7 +294,8 @@ class ProblemDetails(BaseModel):
     detail: str = Field(description="What went wrong, for a person.")
     instance: str | None = Field(None, description="The request's path.")
     errors: list[ProblemError] = Field(
-        default_factory=list, description="Each thing the request got wrong, by field.")
+        default_factory=list, description="Each thing the request got wrong, by field."
+    )
 
 
 class ValidationProblem(ProblemDetails):
@@ -279,7 +307,8 @@ class ValidationProblem(ProblemDetails):
 
 # component name -> model; app/api/openapi.py adds them to the schema
 COMPONENTS: dict[str, type[BaseModel]] = {
-    "Problem": ProblemDetails, "ValidationProblem": ValidationProblem,
+    "Problem": ProblemDetails,
+    "ValidationProblem": ValidationProblem,
 }
 
 
@@ -289,8 +318,13 @@ def responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
     return {
         s: {
             "description": HTTPStatus(s).phrase,
-            "content": {MEDIA_TYPE: {"schema": {
-                "$ref": f"#/components/schemas/{'ValidationProblem' if s == 422 else 'Problem'}"}}},
+            "content": {
+                MEDIA_TYPE: {
+                    "schema": {
+                        "$ref": f"#/components/schemas/{'ValidationProblem' if s == 422 else 'Problem'}"
+                    }
+                }
+            },
         }
         for s in statuses
     }

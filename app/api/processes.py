@@ -50,12 +50,15 @@ def serve(overrides: dict[str, Any], n: int, server: dict[str, Any]) -> int:
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    procs: dict[int, tuple[multiprocessing.Process, Any]] = {}  # index -> (process, its "serving" event)
+    procs: dict[
+        int, tuple[multiprocessing.Process, Any]
+    ] = {}  # index -> (process, its "serving" event)
 
     def start(index: int) -> None:
         serving = context.Event()
-        proc = context.Process(target=_run_one, args=(overrides, server, index, serving),
-                               name=f"tactile-api-{index}")
+        proc = context.Process(
+            target=_run_one, args=(overrides, server, index, serving), name=f"tactile-api-{index}"
+        )
         proc.start()
         procs[index] = (proc, serving)
 
@@ -68,12 +71,20 @@ def serve(overrides: dict[str, Any], n: int, server: dict[str, Any]) -> int:
                 if proc.is_alive():
                     continue
                 if not serving.is_set():
-                    log.error("API process %d exited (%s) before it served; stopping", index, proc.exitcode)
+                    log.error(
+                        "API process %d exited (%s) before it served; stopping",
+                        index,
+                        proc.exitcode,
+                    )
                     status = 1
                     stop.set()
                     break
-                log.warning("API process %d (pid %s) exited (%s); starting it again", index, proc.pid,
-                            proc.exitcode)
+                log.warning(
+                    "API process %d (pid %s) exited (%s); starting it again",
+                    index,
+                    proc.pid,
+                    proc.exitcode,
+                )
                 multiprocess.mark_process_dead(proc.pid)  # drop its per-process gauges
                 start(index)
     finally:

@@ -15,7 +15,9 @@ SampleData = list[list[float]] | list[float]
 # no control characters: PostgreSQL text cannot hold NUL, and no one names an object with a tab
 ClassName = Annotated[
     str,
-    StringConstraints(strip_whitespace=True, min_length=1, max_length=200, pattern=r"^[^\x00-\x1f\x7f]+$"),
+    StringConstraints(
+        strip_whitespace=True, min_length=1, max_length=200, pattern=r"^[^\x00-\x1f\x7f]+$"
+    ),
 ]
 Bit = Annotated[int, Field(ge=0, le=1)]
 
@@ -63,9 +65,7 @@ class ClassOut(BaseModel):
     in_active_model: bool = Field(description="Whether the model now serving covers the class.")
 
 
-NEXT_AFTER = Field(
-    None, description="Pass as `after` to get the next page; null on the last page."
-)
+NEXT_AFTER = Field(None, description="Pass as `after` to get the next page; null on the last page.")
 
 
 class ClassList(BaseModel):
@@ -114,7 +114,8 @@ class ClassCreated(BaseModel):
 # --------------------------------------------------------------------- samples
 class SampleCreate(Strict):
     sample: SampleData = Field(
-        description="One sample, of the shape `input_shape` of `GET /v1/models/active` says.")
+        description="One sample, of the shape `input_shape` of `GET /v1/models/active` says."
+    )
 
 
 class SampleCreated(BaseModel):
@@ -123,7 +124,8 @@ class SampleCreated(BaseModel):
     recognized_as: RecognitionOut = Field(
         description="What the model served when the sample arrived said of it, before learning "
         "from it (as `POST /v1/recognize` answers). Advisory: a sample recognised confidently as "
-        "another class may be of the wrong object (withdraw it with `DELETE`).")
+        "another class may be of the wrong object (withdraw it with `DELETE`)."
+    )
     model_version: int = Field(description="The version that gave `recognized_as`.")
 
 
@@ -164,8 +166,10 @@ class Withdrawal(BaseModel):
 # ------------------------------------------------------------------- recognize
 class RecognizeRequest(Strict):
     samples: list[SampleData] = Field(
-        min_length=1, description="1 … batch_limit samples (`TACTILE_BATCH_LIMIT`), each of the "
-        "shape `input_shape` of `GET /v1/models/active` says.")
+        min_length=1,
+        description="1 … batch_limit samples (`TACTILE_BATCH_LIMIT`), each of the "
+        "shape `input_shape` of `GET /v1/models/active` says.",
+    )
 
 
 class ScoreOut(BaseModel):
@@ -185,12 +189,15 @@ class RecognitionOut(BaseModel):
     is_novel: bool = Field(
         description="The novelty detector's verdict: the sample is unlike every known class. "
         "While no novel class is registered, a novel sample is still answered with the closest "
-        "known class (`kind` `known`): a cue to register the object.")
+        "known class (`kind` `known`): a cue to register the object."
+    )
     novelty_score: float = Field(
         description="How unlike the known classes the sample is; above the model's tuned "
-        "threshold it is novel. Comparable within one model version only.")
+        "threshold it is novel. Comparable within one model version only."
+    )
     top_k: list[ScoreOut] = Field(
-        description="The most probable classes of the group answered from, best first.")
+        description="The most probable classes of the group answered from, best first."
+    )
 
 
 class RecognizeResponse(BaseModel):
@@ -206,18 +213,23 @@ class AttributeScore(BaseModel):
 class Description(BaseModel):
     """What one touch feels like."""
 
-    attributes: list[AttributeScore] = Field(description="Every attribute, the most probable first.")
+    attributes: list[AttributeScore] = Field(
+        description="Every attribute, the most probable first."
+    )
     suggested: list[str] = Field(
         description="The attributes more probable than not (at least the most probable one), in "
-        "`GET /v1/attributes` order: a starting point for `POST /v1/classes`, for a person to check.")
+        "`GET /v1/attributes` order: a starting point for `POST /v1/classes`, for a person to check."
+    )
 
 
 class DescribeResponse(BaseModel):
     model_version: int
     results: list[Description]
     object: Description | None = Field(
-        None, description="With `same_object`: the object described from all its touches together "
-        "(their mean probabilities), right more often than any one touch (docs/RESULTS.md).")
+        None,
+        description="With `same_object`: the object described from all its touches together "
+        "(their mean probabilities), right more often than any one touch (docs/RESULTS.md).",
+    )
 
 
 # ---------------------------------------------------------------------- models
@@ -240,7 +252,8 @@ class ModelSummary(BaseModel):
     sha256: str = Field(validation_alias="bundle_sha256")
     input_shape: list[int] = Field(
         description="The shape of one sample to send: `POST /v1/recognize` and `POST /v1/describe` "
-        "take a batch of samples of this shape (nested lists), `POST /v1/classes/{id}/samples` one.")
+        "take a batch of samples of this shape (nested lists), `POST /v1/classes/{id}/samples` one."
+    )
     metrics: dict[str, Any]
     class_count: int = Field(description="Classes the version recognises, known and novel.")
 
@@ -258,4 +271,5 @@ class ModelList(BaseModel):
 class Health(BaseModel):
     status: Literal["ok", "ready"]
     model_version: int | None = Field(
-        None, description="The model version this process serves; null until one is loaded.")
+        None, description="The model version this process serves; null until one is loaded."
+    )

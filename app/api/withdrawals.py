@@ -15,8 +15,13 @@ from app.store.enums import JobKind
 
 
 def queue_withdrawal(
-    session: Session, idempotency: Idempotency, metrics: Metrics, response: Response,
-    principal: Principal, class_id: int, sample_id: int | None,
+    session: Session,
+    idempotency: Idempotency,
+    metrics: Metrics,
+    response: Response,
+    principal: Principal,
+    class_id: int,
+    sample_id: int | None,
 ) -> Withdrawal:
     """Queue the withdrawal's job and commit it with the change; the 202's body."""
     kind = JobKind.WITHDRAW_CLASS if sample_id is None else JobKind.WITHDRAW_SAMPLE

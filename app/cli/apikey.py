@@ -19,7 +19,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--data-dir", help="folder for the SQLite store (TACTILE_DATA_DIR)")
     actions = p.add_subparsers(dest="action", required=True, metavar="ACTION")
     create = actions.add_parser(
-        "create", help="create a key; it is printed once, alone on the last line",
+        "create",
+        help="create a key; it is printed once, alone on the last line",
         description="Create a key. The key is printed once, alone on the last line of the "
         "output; only its SHA-256 is stored, so it cannot be shown again.",
     )
@@ -43,14 +44,18 @@ def run(args: argparse.Namespace) -> int:
         with make_sessionmaker(engine).begin() as s:
             if args.action == "create":
                 key, row = repo.create_api_key(s, args.scope, args.name)
-                print(f"created API key {row.id} ({row.prefix}…) with scope '{row.scope}'; "
-                      "it is shown once, now:")
+                print(
+                    f"created API key {row.id} ({row.prefix}…) with scope '{row.scope}'; "
+                    "it is shown once, now:"
+                )
                 print(key)
             elif args.action == "list":
                 for row in repo.list_api_keys(s):
                     revoked = row.revoked_at.isoformat() if row.revoked_at else "-"
-                    print(f"{row.id}\t{row.prefix}…\t{row.scope}\t{row.name or '-'}\t"
-                          f"{row.created_at.isoformat()}\trevoked: {revoked}")
+                    print(
+                        f"{row.id}\t{row.prefix}…\t{row.scope}\t{row.name or '-'}\t"
+                        f"{row.created_at.isoformat()}\trevoked: {revoked}"
+                    )
             elif not repo.revoke_api_key(s, args.id):
                 raise ValueError(f"no active API key with id {args.id}")
             else:

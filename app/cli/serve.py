@@ -15,14 +15,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--host", help="interface to listen on (TACTILE_HOST, default 127.0.0.1)")
     p.add_argument("--port", type=int, help="port to listen on (TACTILE_PORT, default 8000)")
-    p.add_argument("--processes", type=int,
-                   help="API processes on the port (TACTILE_PROCESSES; default one per CPU core, "
-                   "at most 4)")
-    p.add_argument("--dataset", help="bootstrap data: simulated, simulated:N or phac2:PATH "
-                   "(TACTILE_DATASET, default simulated)")
+    p.add_argument(
+        "--processes",
+        type=int,
+        help="API processes on the port (TACTILE_PROCESSES; default one per CPU core, at most 4)",
+    )
+    p.add_argument(
+        "--dataset",
+        help="bootstrap data: simulated, simulated:N or phac2:PATH "
+        "(TACTILE_DATASET, default simulated)",
+    )
     p.add_argument("--data-dir", help="folder for the SQLite store (TACTILE_DATA_DIR)")
-    p.add_argument("--no-worker", action="store_true",
-                   help="do not run the retraining worker in this process (run 'tactile-zsl worker')")
+    p.add_argument(
+        "--no-worker",
+        action="store_true",
+        help="do not run the retraining worker in this process (run 'tactile-zsl worker')",
+    )
     p.set_defaults(handler=run)
 
 
@@ -39,8 +47,12 @@ def run(args: argparse.Namespace) -> int:
     from app.store.db import make_engine, make_sessionmaker
 
     overrides = {
-        "host": args.host, "port": args.port, "processes": args.processes, "dataset": args.dataset,
-        "data_dir": args.data_dir, "embedded_worker": False if args.no_worker else None,
+        "host": args.host,
+        "port": args.port,
+        "processes": args.processes,
+        "dataset": args.dataset,
+        "data_dir": args.data_dir,
+        "embedded_worker": False if args.no_worker else None,
     }
     overrides = {k: v for k, v in overrides.items() if v is not None}
     settings = Settings(**overrides)
@@ -52,12 +64,23 @@ def run(args: argparse.Namespace) -> int:
         ensure_ready(settings, engine, make_sessionmaker(engine))
     finally:
         engine.dispose()
-    server = {"log_level": "info", "access_log": settings.access_log, "http": CoalescingHttpToolsProtocol}
+    server = {
+        "log_level": "info",
+        "access_log": settings.access_log,
+        "http": CoalescingHttpToolsProtocol,
+    }
     n = settings.api_processes if processes.supported() else 1
     port = settings.port or processes.free_port(settings.host)  # one port for all of them
     log = logging.getLogger("tactile")
-    log.info("serving on http://%s:%d with %d API process%s; API docs at http://%s:%d/docs",
-             settings.host, port, n, "" if n == 1 else "es", settings.host, port)
+    log.info(
+        "serving on http://%s:%d with %d API process%s; API docs at http://%s:%d/docs",
+        settings.host,
+        port,
+        n,
+        "" if n == 1 else "es",
+        settings.host,
+        port,
+    )
     if n == 1:
         uvicorn.run(create_app(settings), host=settings.host, port=port, **server)
         return 0

@@ -22,8 +22,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     backup.add_argument("out", type=Path, help="the backup file to write (must not exist)")
     restore = actions.add_parser("restore", help="replace the SQLite store by a checked backup")
     restore.add_argument("backup", type=Path, help="a file written by 'store backup'")
-    restore.add_argument("--replace", action="store_true",
-                         help="overwrite a store that holds data already")
+    restore.add_argument(
+        "--replace", action="store_true", help="overwrite a store that holds data already"
+    )
     p.set_defaults(handler=run)
 
 

@@ -37,7 +37,9 @@ class RecognitionBatcher:
         self._queue: deque[_Request] = deque()
         self._draining = False  # only touched on the event loop: no lock needed
 
-    async def recognize(self, model: LoadedModel, samples: np.ndarray, top_k: int) -> RecognitionBatch:
+    async def recognize(
+        self, model: LoadedModel, samples: np.ndarray, top_k: int
+    ) -> RecognitionBatch:
         loop = asyncio.get_running_loop()
         request = _Request(model, samples, top_k, loop.create_future())
         self._queue.append(request)

@@ -36,7 +36,9 @@ class ModelHolder(Poller):
     _failure = "could not load the active model version"
 
     def __init__(
-        self, sessions: sessionmaker[Session], poll_seconds: float = 0.5,
+        self,
+        sessions: sessionmaker[Session],
+        poll_seconds: float = 0.5,
         metrics: Metrics | None = None,
     ) -> None:
         super().__init__(poll_seconds)

@@ -64,8 +64,10 @@ class JobWatch:
                 finished = await run_in_threadpool(self._finished, ids)
             except Exception:  # the store is unreachable: waiters time out, or it comes back
                 if not self._failing:
-                    log.exception("could not read the jobs that requests wait for; retrying "
-                                  "every %.1f s", self.interval)
+                    log.exception(
+                        "could not read the jobs that requests wait for; retrying every %.1f s",
+                        self.interval,
+                    )
                 self._failing = True
                 continue
             if self._failing:
@@ -77,8 +79,11 @@ class JobWatch:
 
     def _finished(self, ids: Sequence[int]) -> set[int]:
         with self._sessions() as s:
-            return {j for start in range(0, len(ids), QUERY_CHUNK)
-                    for j in repo.finished_job_ids(s, ids[start:start + QUERY_CHUNK])}
+            return {
+                j
+                for start in range(0, len(ids), QUERY_CHUNK)
+                for j in repo.finished_job_ids(s, ids[start : start + QUERY_CHUNK])
+            }
 
     def release_all(self) -> None:
         """The process is shutting down: every waiting request answers now, with its job's

@@ -42,8 +42,11 @@ class Metrics:
             "tactile_http_requests", "HTTP requests.", ["method", "route", "status"], registry=r
         )
         self.latency = Histogram(
-            "tactile_http_request_duration_seconds", "HTTP request latency.", ["method", "route"],
-            buckets=LATENCY_BUCKETS, registry=r,
+            "tactile_http_request_duration_seconds",
+            "HTTP request latency.",
+            ["method", "route"],
+            buckets=LATENCY_BUCKETS,
+            registry=r,
         )
         self.recognitions = Counter(
             "tactile_recognitions", "Samples recognised.", ["kind"], registry=r
@@ -55,26 +58,43 @@ class Metrics:
             "tactile_withdrawals", "Withdrawn classes and samples.", ["kind"], registry=r
         )
         self.job_duration = Histogram(
-            "tactile_job_duration_seconds", "Retrain time of finished jobs (start to end).",
-            ["status"], buckets=JOB_BUCKETS, registry=r,
+            "tactile_job_duration_seconds",
+            "Retrain time of finished jobs (start to end).",
+            ["status"],
+            buckets=JOB_BUCKETS,
+            registry=r,
         )
         self.enrollment_to_live = Histogram(
-            "tactile_enrollment_to_live_seconds", "From an enrollment's 202 to its job's end.",
-            ["status"], buckets=JOB_BUCKETS, registry=r,
+            "tactile_enrollment_to_live_seconds",
+            "From an enrollment's 202 to its job's end.",
+            ["status"],
+            buckets=JOB_BUCKETS,
+            registry=r,
         )
         # read from the store: with several processes, the newest reading is the figure
-        self.jobs = Gauge("tactile_jobs", "Jobs in the store by status.", ["status"], registry=r,
-                          multiprocess_mode="mostrecent")
+        self.jobs = Gauge(
+            "tactile_jobs",
+            "Jobs in the store by status.",
+            ["status"],
+            registry=r,
+            multiprocess_mode="mostrecent",
+        )
         self.versions_stored = Gauge(
-            "tactile_model_versions_stored", "Model versions in the store (TACTILE_KEEP_VERSIONS bounds them).",
-            registry=r, multiprocess_mode="mostrecent",
+            "tactile_model_versions_stored",
+            "Model versions in the store (TACTILE_KEEP_VERSIONS bounds them).",
+            registry=r,
+            multiprocess_mode="mostrecent",
         )
         self.bundle_bytes = Gauge(
-            "tactile_model_bundle_bytes", "Bytes of model bundles in the store.", registry=r,
+            "tactile_model_bundle_bytes",
+            "Bytes of model bundles in the store.",
+            registry=r,
             multiprocess_mode="mostrecent",
         )
         self.active_version = Gauge(  # with several processes, one series per process (pid)
-            "tactile_active_model_version", "Model version this process serves.", registry=r,
+            "tactile_active_model_version",
+            "Model version this process serves.",
+            registry=r,
             multiprocess_mode="liveall",
         )
 
@@ -127,7 +147,9 @@ class JobMetricsPoller(Poller):
     _thread_name = "job-metrics"
     _failure = "metrics: could not read the jobs from the store"
 
-    def __init__(self, metrics: Metrics, sessions: sessionmaker[Session], poll_seconds: float = 5.0) -> None:
+    def __init__(
+        self, metrics: Metrics, sessions: sessionmaker[Session], poll_seconds: float = 5.0
+    ) -> None:
         super().__init__(poll_seconds)
         self._metrics = metrics
         self._sessions = sessions

@@ -19,7 +19,11 @@ from app.store.enums import ClassKind
 
 class RecognitionService:
     def __init__(
-        self, metrics: Metrics, top_k: int, batch_limit: int, coalesce: int = 64,
+        self,
+        metrics: Metrics,
+        top_k: int,
+        batch_limit: int,
+        coalesce: int = 64,
         batcher: RecognitionBatcher | None = None,
     ) -> None:
         self.metrics = metrics
@@ -28,7 +32,9 @@ class RecognitionService:
         self.coalesce = coalesce
         self.batcher = batcher or RecognitionBatcher()
 
-    async def recognize(self, model: LoadedModel, samples: np.ndarray | list, n: int) -> RecognitionBatch:
+    async def recognize(
+        self, model: LoadedModel, samples: np.ndarray | list, n: int
+    ) -> RecognitionBatch:
         """Recognise ``n`` samples with ``model``, the caller's snapshot to the end."""
         rec = model.recognizer
         if n <= self.coalesce:

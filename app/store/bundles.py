@@ -55,7 +55,9 @@ class PartCache:
 def read_part(session: Session, sha256: str) -> np.ndarray:
     data = repo.bundle_data(session, sha256)
     if data is None:
-        raise BundleError(f"bundle part {sha256[:12]}… is missing from the store: the store is damaged")
+        raise BundleError(
+            f"bundle part {sha256[:12]}… is missing from the store: the store is damaged"
+        )
     return bundle.decode_part(data)
 
 

@@ -35,7 +35,11 @@ class StoreInUseError(RuntimeError):
 def lock_path(url: str) -> Path | None:
     """The lock file of a SQLite store file, or None where there is nothing to guard."""
     parsed = make_url(url)
-    if fcntl is None or parsed.get_backend_name() != "sqlite" or parsed.database in (None, "", ":memory:"):
+    if (
+        fcntl is None
+        or parsed.get_backend_name() != "sqlite"
+        or parsed.database in (None, "", ":memory:")
+    ):
         return None
     store = Path(parsed.database)
     return store.with_name(store.name + ".in-use")
@@ -58,7 +62,8 @@ def closed_to_service(url: str) -> Iterator[None]:
         if fd is not None and not _try(fd, fcntl.LOCK_EX):
             raise StoreInUseError(
                 f"the store {make_url(url).database} is in use by a running API process or worker: "
-                "stop every 'tactile-zsl serve' and 'tactile-zsl worker' on it first")
+                "stop every 'tactile-zsl serve' and 'tactile-zsl worker' on it first"
+            )
         yield
 
 

@@ -39,7 +39,8 @@ def try_acquire(session: Session, name: str, holder: str, ttl: float) -> bool:
     if current is not None and _dead_local(current):
         takeable.append(Lease.holder == current)
     res = session.execute(
-        update(Lease).where(Lease.name == name, or_(*takeable))
+        update(Lease)
+        .where(Lease.name == name, or_(*takeable))
         .values(holder=holder, expires_at=expires)
     )
     if res.rowcount == 1:
@@ -59,7 +60,8 @@ def try_acquire(session: Session, name: str, holder: str, ttl: float) -> bool:
 
 def renew(session: Session, name: str, holder: str, ttl: float) -> bool:
     res = session.execute(
-        update(Lease).where(Lease.name == name, Lease.holder == holder)
+        update(Lease)
+        .where(Lease.name == name, Lease.holder == holder)
         .values(expires_at=utcnow() + timedelta(seconds=ttl))
     )
     session.commit()

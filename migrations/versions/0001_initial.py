@@ -124,7 +124,9 @@ def upgrade() -> None:
         sa.Column("created_at", UTC_TS, nullable=False),
         sa.Column("started_at", UTC_TS, nullable=True),
         sa.Column("finished_at", UTC_TS, nullable=True),
-        sa.ForeignKeyConstraint(["class_id"], ["classes.id"], name=op.f("fk_jobs_class_id_classes")),
+        sa.ForeignKeyConstraint(
+            ["class_id"], ["classes.id"], name=op.f("fk_jobs_class_id_classes")
+        ),
         sa.ForeignKeyConstraint(
             ["sample_id"], ["samples.id"], name=op.f("fk_jobs_sample_id_samples")
         ),
@@ -136,5 +138,13 @@ def upgrade() -> None:
 
 def downgrade() -> None:
     # dropping a table drops its indexes; children before parents
-    for table in ("jobs", "samples", "model_versions", "leases", "classes", "bundles", "attributes"):
+    for table in (
+        "jobs",
+        "samples",
+        "model_versions",
+        "leases",
+        "classes",
+        "bundles",
+        "attributes",
+    ):
         op.drop_table(table)

@@ -24,12 +24,21 @@ depends_on = None
 
 UTC_TS = sa.DateTime(timezone=True)
 OLD_INDEX, OLD_WHERE = "uq_classes_enrolled_attribute_key", "origin = 'enrolled'"
-NEW_INDEX, NEW_WHERE = "uq_classes_live_enrolled_attribute_key", "origin = 'enrolled' AND withdrawn_at IS NULL"
+NEW_INDEX, NEW_WHERE = (
+    "uq_classes_live_enrolled_attribute_key",
+    "origin = 'enrolled' AND withdrawn_at IS NULL",
+)
 
 
 def _vector_index(name: str, where: str) -> None:
-    op.create_index(name, "classes", ["attribute_key"], unique=True,
-                    sqlite_where=sa.text(where), postgresql_where=sa.text(where))
+    op.create_index(
+        name,
+        "classes",
+        ["attribute_key"],
+        unique=True,
+        sqlite_where=sa.text(where),
+        postgresql_where=sa.text(where),
+    )
 
 
 def upgrade() -> None:
@@ -41,10 +50,16 @@ def upgrade() -> None:
 
 
 def downgrade() -> None:
-    withdrawn = op.get_bind().execute(sa.text(
-        "SELECT (SELECT count(*) FROM classes WHERE withdrawn_at IS NOT NULL)"
-        " + (SELECT count(*) FROM samples WHERE withdrawn_at IS NOT NULL)"
-    )).scalar()
+    withdrawn = (
+        op.get_bind()
+        .execute(
+            sa.text(
+                "SELECT (SELECT count(*) FROM classes WHERE withdrawn_at IS NOT NULL)"
+                " + (SELECT count(*) FROM samples WHERE withdrawn_at IS NOT NULL)"
+            )
+        )
+        .scalar()
+    )
     if withdrawn:
         # the older schema cannot say that they were withdrawn: they would come back
         raise RuntimeError(

@@ -71,11 +71,15 @@ def test_a_failing_pass_fails_its_requests_and_the_batcher_recovers():
 def test_concurrent_http_requests_match_single_ones(client, dataset):
     import concurrent.futures
 
-    singles = [client.post("/v1/recognize", json={"samples": [s.tolist()]}).json()["results"][0]
-               for s in dataset.samples[:12]]
+    singles = [
+        client.post("/v1/recognize", json={"samples": [s.tolist()]}).json()["results"][0]
+        for s in dataset.samples[:12]
+    ]
     with concurrent.futures.ThreadPoolExecutor(8) as pool:
-        futures = [pool.submit(client.post, "/v1/recognize", json={"samples": [s.tolist()]})
-                   for s in dataset.samples[:12]]
+        futures = [
+            pool.submit(client.post, "/v1/recognize", json={"samples": [s.tolist()]})
+            for s in dataset.samples[:12]
+        ]
         concurrent_answers = [f.result().json()["results"][0] for f in futures]
     for one, other in zip(singles, concurrent_answers, strict=True):
         assert one["class_name"] == other["class_name"]

@@ -23,25 +23,38 @@ def test_each_touch_gets_every_attribute_and_a_suggestion(best_service, best_bas
     for result, proba in zip(body["results"], expected, strict=True):
         scores = result["attributes"]
         assert sorted(s["name"] for s in scores) == sorted(names)
-        assert [s["probability"] for s in scores] == sorted((s["probability"] for s in scores), reverse=True)
-        assert {s["name"]: s["probability"] for s in scores} == {n: float(p) for n, p in zip(names, proba, strict=True)}
-        likely = [n for n, p in zip(names, proba, strict=True) if p > 0.5] or [names[int(proba.argmax())]]
+        assert [s["probability"] for s in scores] == sorted(
+            (s["probability"] for s in scores), reverse=True
+        )
+        assert {s["name"]: s["probability"] for s in scores} == {
+            n: float(p) for n, p in zip(names, proba, strict=True)
+        }
+        likely = [n for n, p in zip(names, proba, strict=True) if p > 0.5] or [
+            names[int(proba.argmax())]
+        ]
         assert result["suggested"] == likely  # in vocabulary order, ready to register with
     assert body["object"] is None  # unless the touches are said to be of one object
 
     # several touches of one object: one description from their mean too
-    one = client.post("/v1/describe", params={"same_object": "true"},
-                      json={"samples": dataset.samples[:3].tolist()}).json()["object"]
+    one = client.post(
+        "/v1/describe",
+        params={"same_object": "true"},
+        json={"samples": dataset.samples[:3].tolist()},
+    ).json()["object"]
     mean = model.attribute_proba(dataset.samples[:3]).mean(axis=0)
     assert {s["name"]: s["probability"] for s in one["attributes"]} == pytest.approx(
-        {n: float(p) for n, p in zip(names, mean, strict=True)})
-    assert one["suggested"] == ([n for n, p in zip(names, mean, strict=True) if p > 0.5]
-                                or [names[int(mean.argmax())]])
+        {n: float(p) for n, p in zip(names, mean, strict=True)}
+    )
+    assert one["suggested"] == (
+        [n for n, p in zip(names, mean, strict=True) if p > 0.5] or [names[int(mean.argmax())]]
+    )
 
     # the same touches as .npy answer the same
     buf = io.BytesIO()
     np.save(buf, touches.astype(np.float32))
-    npy = client.post("/v1/describe", content=buf.getvalue(), headers={"Content-Type": "application/x-npy"})
+    npy = client.post(
+        "/v1/describe", content=buf.getvalue(), headers={"Content-Type": "application/x-npy"}
+    )
     assert npy.json() == body
 
 
@@ -66,4 +79,9 @@ def test_bad_touches_are_named(best_service):
     client, _, _ = best_service
     problem(client.post("/v1/describe", json={"samples": [[0.0]]}), 422, "samples")
     problem(client.post("/v1/describe", json={"samples": []}), 422)
-    problem(client.post("/v1/describe", content=b"not json", headers={"Content-Type": "application/json"}), 422)
+    problem(
+        client.post(
+            "/v1/describe", content=b"not json", headers={"Content-Type": "application/json"}
+        ),
+        422,
+    )

@@ -33,8 +33,9 @@ def test_same_key_and_body_replays_the_first_answer(client, app, dataset):
     assert (count(app, ObjectClass), count(app, Job)) == (classes, jobs)
     # the same JSON spaced differently is the same request
     raw = json.dumps(body, indent=4).encode()
-    spaced = client.post("/v1/classes", content=raw, headers={
-        **headers, "Content-Type": "application/json"})
+    spaced = client.post(
+        "/v1/classes", content=raw, headers={**headers, "Content-Type": "application/json"}
+    )
     assert spaced.status_code == 202 and spaced.json() == first.json()
     # without the key the same body is a new (here: conflicting) registration
     assert client.post("/v1/classes", json=body).status_code == 409
@@ -43,8 +44,12 @@ def test_same_key_and_body_replays_the_first_answer(client, app, dataset):
 def test_same_key_with_another_body_is_a_422(client, dataset):
     a, b = unused_vectors(dataset, 2)
     headers = {"Idempotency-Key": "k-1"}
-    assert client.post("/v1/classes", json={"name": "a", "attribute_vector": a},
-                       headers=headers).status_code == 202
+    assert (
+        client.post(
+            "/v1/classes", json={"name": "a", "attribute_vector": a}, headers=headers
+        ).status_code
+        == 202
+    )
     r = client.post("/v1/classes", json={"name": "b", "attribute_vector": b}, headers=headers)
     assert r.status_code == 422 and r.headers["content-type"] == PROBLEM
     assert [e["field"] for e in r.json()["errors"]] == ["Idempotency-Key"]
@@ -80,8 +85,9 @@ def test_concurrent_retries_with_one_key_enroll_once(client, app, dataset, sampl
 
     def retry():
         gate.wait()
-        answers.append(client.post(path, json={"sample": sample},
-                                   headers={"Idempotency-Key": "burst"}))
+        answers.append(
+            client.post(path, json={"sample": sample}, headers={"Idempotency-Key": "burst"})
+        )
 
     threads = [threading.Thread(target=retry) for _ in range(6)]
     for t in threads:
@@ -99,10 +105,16 @@ def test_keys_of_different_api_keys_do_not_collide(client, app, dataset):
         two, _ = repo.create_api_key(s, "enroll")
     app.state.service.keys.refresh()
     a, b = unused_vectors(dataset, 2)
-    r1 = client.post("/v1/classes", json={"name": "a", "attribute_vector": a},
-                     headers={"X-API-Key": one, "Idempotency-Key": "same"})
-    r2 = client.post("/v1/classes", json={"name": "b", "attribute_vector": b},
-                     headers={"X-API-Key": two, "Idempotency-Key": "same"})
+    r1 = client.post(
+        "/v1/classes",
+        json={"name": "a", "attribute_vector": a},
+        headers={"X-API-Key": one, "Idempotency-Key": "same"},
+    )
+    r2 = client.post(
+        "/v1/classes",
+        json={"name": "b", "attribute_vector": b},
+        headers={"X-API-Key": two, "Idempotency-Key": "same"},
+    )
     assert (r1.status_code, r2.status_code) == (202, 202)
     assert r1.json()["class"]["id"] != r2.json()["class"]["id"]
     assert count(app, IdempotencyRecord) == 2
@@ -113,8 +125,11 @@ def test_errors_are_not_remembered(client, dataset):
     r = client.post("/v1/classes", json={"name": "x", "attributes": ["nope"]}, headers=headers)
     assert r.status_code == 422
     # the first try failed and changed nothing; the key is still free
-    r = client.post("/v1/classes", json={"name": "x", "attribute_vector": unused_vectors(dataset, 1)[0]},
-                    headers=headers)
+    r = client.post(
+        "/v1/classes",
+        json={"name": "x", "attribute_vector": unused_vectors(dataset, 1)[0]},
+        headers=headers,
+    )
     assert r.status_code == 202
 
 
@@ -132,12 +147,26 @@ def test_keys_older_than_the_ttl_are_purged_by_the_worker(client, app, worker, d
     from sqlalchemy import update
 
     old, fresh = unused_vectors(dataset, 2)
-    assert client.post("/v1/classes", json={"name": "old", "attribute_vector": old},
-                       headers={"Idempotency-Key": "k-old"}).status_code == 202
+    assert (
+        client.post(
+            "/v1/classes",
+            json={"name": "old", "attribute_vector": old},
+            headers={"Idempotency-Key": "k-old"},
+        ).status_code
+        == 202
+    )
     with app.state.service.sessions.begin() as s:  # age the first record past the 24 h default
-        s.execute(update(IdempotencyRecord).values(created_at=datetime.now(UTC) - timedelta(hours=25)))
-    assert client.post("/v1/classes", json={"name": "fresh", "attribute_vector": fresh},
-                       headers={"Idempotency-Key": "k-fresh"}).status_code == 202
+        s.execute(
+            update(IdempotencyRecord).values(created_at=datetime.now(UTC) - timedelta(hours=25))
+        )
+    assert (
+        client.post(
+            "/v1/classes",
+            json={"name": "fresh", "attribute_vector": fresh},
+            headers={"Idempotency-Key": "k-fresh"},
+        ).status_code
+        == 202
+    )
     worker.run_once()
     with app.state.service.sessions() as s:
         assert set(s.scalars(select(IdempotencyRecord.key))) == {"k-fresh"}

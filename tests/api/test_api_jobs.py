@@ -11,7 +11,9 @@ PROBLEM = "application/problem+json"
 
 
 def register(client, dataset) -> int:
-    r = client.post("/v1/classes", json={"name": "cup", "attribute_vector": unused_vectors(dataset, 1)[0]})
+    r = client.post(
+        "/v1/classes", json={"name": "cup", "attribute_vector": unused_vectors(dataset, 1)[0]}
+    )
     assert r.status_code == 202
     return r.json()["job"]["id"]
 
@@ -55,11 +57,19 @@ def test_bad_waits_are_named_422(client, dataset):
         assert r.json()["errors"][0]["field"] == "wait"
 
 
-def test_many_waiting_robots_are_woken_together_and_leave_nothing_behind(client, app, worker, dataset):
+def test_many_waiting_robots_are_woken_together_and_leave_nothing_behind(
+    client, app, worker, dataset
+):
     job_id = register(client, dataset)
     answers: list[dict] = []
-    robots = [threading.Thread(target=lambda: answers.append(
-        client.get(f"/v1/jobs/{job_id}", params={"wait": 20}).json())) for _ in range(4)]
+    robots = [
+        threading.Thread(
+            target=lambda: answers.append(
+                client.get(f"/v1/jobs/{job_id}", params={"wait": 20}).json()
+            )
+        )
+        for _ in range(4)
+    ]
     for robot in robots:
         robot.start()
     deadline = time.monotonic() + 15
@@ -71,7 +81,6 @@ def test_many_waiting_robots_are_woken_together_and_leave_nothing_behind(client,
         robot.join()
     assert [a["status"] for a in answers] == ["succeeded"] * 4
     assert app.state.service.job_watch.waiting == 0
-
 
 
 def test_a_store_outage_while_robots_wait_is_logged_once_and_they_are_answered_after(
@@ -129,7 +138,7 @@ def test_a_shutdown_answers_waiting_robots_at_once_with_the_status_then(client, 
     assert app.state.service.job_watch.waiting == 1
     client.portal.call(app.state.service.job_watch.release_all)  # what the server's shutdown calls
     thread.join(15)
-    (seconds, job), = answers
+    ((seconds, job),) = answers
     assert job["status"] == "queued" and seconds < 15  # not the whole 20 s wait
     # a request that comes during the shutdown does not wait either
     assert client.get(f"/v1/jobs/{job_id}", params={"wait": 20}).json()["status"] == "queued"
@@ -149,7 +158,9 @@ def test_jobs_are_listed_a_page_at_a_time_and_filtered(client, worker, dataset, 
     first = client.get("/v1/jobs", params={"limit": 2}).json()
     rest = client.get("/v1/jobs", params={"after": first["next_after"]}).json()
     everything = first["jobs"] + rest["jobs"]
-    assert [j["id"] for j in everything] == sorted(j["id"] for j in everything) and len(everything) == 5
+    assert [j["id"] for j in everything] == sorted(j["id"] for j in everything) and len(
+        everything
+    ) == 5
     assert rest["next_after"] is None
 
     failed = client.get("/v1/jobs", params={"status": "failed"}).json()["jobs"]
@@ -157,7 +168,9 @@ def test_jobs_are_listed_a_page_at_a_time_and_filtered(client, worker, dataset, 
     assert "was withdrawn" in failed[0]["error"]
     of_a = client.get("/v1/jobs", params={"class_id": ids["a"][0]}).json()["jobs"]
     assert [j["id"] for j in of_a] == [ids["a"][1], sample_job]
-    samples = client.get("/v1/jobs", params={"kind": "add_sample", "status": "succeeded"}).json()["jobs"]
+    samples = client.get("/v1/jobs", params={"kind": "add_sample", "status": "succeeded"}).json()[
+        "jobs"
+    ]
     assert [j["id"] for j in samples] == [sample_job]
     for bad in ({"status": "done"}, {"kind": "delete"}, {"class_id": 0}):
         r = client.get("/v1/jobs", params=bad)

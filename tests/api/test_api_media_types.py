@@ -20,10 +20,16 @@ def _json_body(dataset) -> dict[str, str]:
     }
 
 
-@pytest.mark.parametrize("content_type", [
-    "text/plain", "application/x-www-form-urlencoded", "application/xml", "multipart/form-data",
-    "application/problem+json",
-])
+@pytest.mark.parametrize(
+    "content_type",
+    [
+        "text/plain",
+        "application/x-www-form-urlencoded",
+        "application/xml",
+        "multipart/form-data",
+        "application/problem+json",
+    ],
+)
 @pytest.mark.parametrize("path", ["/v1/recognize", "/v1/describe", "/v1/classes"])
 def test_a_json_body_under_another_media_type_is_415(client, dataset, path, content_type):
     body = _json_body(dataset)[path]
@@ -44,8 +50,9 @@ def test_a_body_without_a_content_type_is_415(client, dataset):
 
 def test_json_with_parameters_and_any_case_is_accepted(client, dataset):
     body = _json_body(dataset)["/v1/recognize"]
-    r = client.post("/v1/recognize", content=body,
-                    headers={"Content-Type": "Application/JSON; charset=utf-8"})
+    r = client.post(
+        "/v1/recognize", content=body, headers={"Content-Type": "Application/JSON; charset=utf-8"}
+    )
     assert r.status_code == 200, r.text
 
 
@@ -56,10 +63,15 @@ def test_the_write_routes_check_their_media_type(client, dataset, sample):
         ("POST", f"/v1/classes/{class_id}/samples", {"sample": sample}),
         ("PATCH", f"/v1/classes/{class_id}", {"attributes": created["class"]["attributes"]}),
     ):
-        r = client.request(method, path, content=json.dumps(body), headers={"Content-Type": "text/plain"})
+        r = client.request(
+            method, path, content=json.dumps(body), headers={"Content-Type": "text/plain"}
+        )
         assert "application/json" in problem(r, 415, "Content-Type")["detail"]
-    r = client.post(f"/v1/classes/{class_id}/samples", content=npy(np.asarray(sample)),
-                    headers={"Content-Type": "application/x-npy"})
+    r = client.post(
+        f"/v1/classes/{class_id}/samples",
+        content=npy(np.asarray(sample)),
+        headers={"Content-Type": "application/x-npy"},
+    )
     problem(r, 415, "Content-Type")
 
 
@@ -70,8 +82,9 @@ def test_a_batch_of_strings_is_one_short_problem(client, dataset):
     found = problem(r, 422)
     assert len(r.content) < 1000
     n = int(np.prod(dataset.input_shape)) * 3
-    assert found["errors"] == [{"field": "samples[0][0][0]",
-                                "reason": f"not a number (got 'a'); {n - 1} more like it"}]
+    assert found["errors"] == [
+        {"field": "samples[0][0][0]", "reason": f"not a number (got 'a'); {n - 1} more like it"}
+    ]
 
 
 def test_each_distinct_problem_is_named_once_without_internal_names(client, dataset):
@@ -92,7 +105,9 @@ def test_each_distinct_problem_is_named_once_without_internal_names(client, data
 
 def test_a_flat_sample_with_a_bad_value_is_named_at_its_place(client):
     r = client.post("/v1/recognize", json={"samples": [[1.0, "x", 3.0]]})
-    assert problem(r, 422)["errors"] == [{"field": "samples[0][1]", "reason": "not a number (got 'x')"}]
+    assert problem(r, 422)["errors"] == [
+        {"field": "samples[0][1]", "reason": "not a number (got 'x')"}
+    ]
 
 
 def test_the_errors_are_at_most_a_handful(client, dataset):
@@ -101,22 +116,30 @@ def test_the_errors_are_at_most_a_handful(client, dataset):
     assert len(problem(r, 422)["errors"]) == 5
 
 
-@pytest.mark.parametrize("bad, got", [
-    (lambda s: s[:3], "got one of shape [3, "),
-    (lambda s: s[0], "got one of shape ["),
-])
+@pytest.mark.parametrize(
+    "bad, got",
+    [
+        (lambda s: s[:3], "got one of shape [3, "),
+        (lambda s: s[0], "got one of shape ["),
+    ],
+)
 def test_a_single_sample_route_names_the_shape_of_one_sample(client, dataset, sample, bad, got):
     class_id = register(client, dataset, "cup")["class"]["id"]
     r = client.post(f"/v1/classes/{class_id}/samples", json={"sample": bad(sample)})
     found = problem(r, 422, "sample")
-    assert found["detail"].startswith(f"expected one sample of shape {list(dataset.input_shape)}, {got}")
+    assert found["detail"].startswith(
+        f"expected one sample of shape {list(dataset.input_shape)}, {got}"
+    )
     assert "(N" not in found["detail"]
 
 
 def test_a_batch_sent_as_one_sample_is_told_the_shape_of_one(client, dataset, sample):
     class_id = register(client, dataset, "mug")["class"]["id"]
-    found = problem(client.post(f"/v1/classes/{class_id}/samples", json={"sample": [sample, sample]}),
-                    422, "sample[0][0]")
+    found = problem(
+        client.post(f"/v1/classes/{class_id}/samples", json={"sample": [sample, sample]}),
+        422,
+        "sample[0][0]",
+    )
     assert found["detail"].endswith(f"; one sample has shape {list(dataset.input_shape)}")
     assert len(found["errors"]) == 1 and "more like it" in found["errors"][0]["reason"]
 
@@ -124,6 +147,9 @@ def test_a_batch_sent_as_one_sample_is_told_the_shape_of_one(client, dataset, sa
 def test_a_ragged_single_sample_names_the_shape_too(client, dataset, sample):
     class_id = register(client, dataset, "bowl")["class"]["id"]
     sample[2] = sample[2][:-1]
-    found = problem(client.post(f"/v1/classes/{class_id}/samples", json={"sample": sample}), 422, "sample")
-    assert found["detail"] == (f"expected one sample of shape {list(dataset.input_shape)}; its rows "
-                               "have different lengths")
+    found = problem(
+        client.post(f"/v1/classes/{class_id}/samples", json={"sample": sample}), 422, "sample"
+    )
+    assert found["detail"] == (
+        f"expected one sample of shape {list(dataset.input_shape)}; its rows have different lengths"
+    )

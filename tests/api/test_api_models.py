@@ -36,7 +36,10 @@ def test_each_version_lists_its_own_class_count(client, worker, dataset):
     summaries = client.get("/v1/models").json()["models"]
     assert [m["class_count"] for m in summaries] == [dataset.n_classes, dataset.n_classes + 1]
     v2 = client.get("/v1/models/2").json()
-    assert v2["class_count"] == len(v2["classes"]) and {"name": "cup", "kind": "novel"} in v2["classes"]
+    assert (
+        v2["class_count"] == len(v2["classes"])
+        and {"name": "cup", "kind": "novel"} in v2["classes"]
+    )
 
 
 def test_activate_unknown_version_is_404(client):
@@ -111,21 +114,33 @@ def test_a_downloaded_bundle_recognises_offline_as_the_service_does(client, work
     answers = offline.recognize_batch(x).records()
     assert [a["class_name"] for a in answers] == [o["class_name"] for o in online]
     assert [a["is_novel"] for a in answers] == [o["is_novel"] for o in online]
-    np.testing.assert_allclose([a["novelty_score"] for a in answers], [o["novelty_score"] for o in online],
-                               rtol=1e-5)
+    np.testing.assert_allclose(
+        [a["novelty_score"] for a in answers], [o["novelty_score"] for o in online], rtol=1e-5
+    )
     for a, o in zip(answers, online, strict=True):
         assert [s["class_name"] for s in a["top_k"]] == [s["class_name"] for s in o["top_k"]]
-        np.testing.assert_allclose([s["probability"] for s in a["top_k"]],
-                                   [s["probability"] for s in o["top_k"]], rtol=1e-5, atol=1e-7)
+        np.testing.assert_allclose(
+            [s["probability"] for s in a["top_k"]],
+            [s["probability"] for s in o["top_k"]],
+            rtol=1e-5,
+            atol=1e-7,
+        )
 
 
 def test_a_robot_holding_the_version_gets_304(client, worker, dataset):
     enroll_and_retrain(client, worker, dataset)
     v1, v2 = (client.get(f"/v1/models/{v}/bundle") for v in (1, 2))
     assert v1.headers["etag"] != v2.headers["etag"] and v1.content != v2.content
-    for held in (v2.headers["etag"], f'W/{v2.headers["etag"]}', f'{v1.headers["etag"]}, {v2.headers["etag"]}', "*"):
+    for held in (
+        v2.headers["etag"],
+        f"W/{v2.headers['etag']}",
+        f"{v1.headers['etag']}, {v2.headers['etag']}",
+        "*",
+    ):
         r = client.get("/v1/models/2/bundle", headers={"If-None-Match": held})
-        assert r.status_code == 304 and r.content == b"" and r.headers["etag"] == v2.headers["etag"], held
+        assert (
+            r.status_code == 304 and r.content == b"" and r.headers["etag"] == v2.headers["etag"]
+        ), held
     r = client.get("/v1/models/2/bundle", headers={"If-None-Match": v1.headers["etag"]})
     assert r.status_code == 200 and r.content == v2.content
 
@@ -162,5 +177,8 @@ def test_downloading_a_damaged_version_is_409(client, app, worker, dataset):
     with app.state.service.sessions.begin() as s:
         sha = s.get(ModelVersion, 2).bundle_sha256
         s.execute(update(Bundle).where(Bundle.sha256 == sha).values(data=b"garbage"))
-    assert "the store is damaged" in problem(client.get("/v1/models/2/bundle"), 409, "version")["detail"]
+    assert (
+        "the store is damaged"
+        in problem(client.get("/v1/models/2/bundle"), 409, "version")["detail"]
+    )
     assert client.get("/v1/models/1/bundle").status_code == 200

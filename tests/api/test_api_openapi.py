@@ -36,17 +36,20 @@ def test_every_error_response_references_the_shared_problems(client):
                 if int(status) < 400:
                     continue
                 errors += 1
-                (media, body), = response["content"].items()
+                ((media, body),) = response["content"].items()
                 assert media == "application/problem+json", (path, method, status)
                 expected = "ValidationProblem" if status == "422" else "Problem"
-                assert body["schema"] == {"$ref": f"#/components/schemas/{expected}"}, (path, method)
+                assert body["schema"] == {"$ref": f"#/components/schemas/{expected}"}, (
+                    path,
+                    method,
+                )
     assert errors > 50
     assert "HTTPValidationError" not in schemas  # FastAPI's default 422 is not what we send
 
 
 def test_the_api_key_is_a_header_scheme_on_every_v1_operation(client):
     doc = client.get("/openapi.json").json()
-    (name, scheme), = doc["components"]["securitySchemes"].items()
+    ((name, scheme),) = doc["components"]["securitySchemes"].items()
     assert scheme == {**scheme, "type": "apiKey", "in": "header", "name": "X-API-Key"}
     for path, ops in doc["paths"].items():
         for op in ops.values():
@@ -60,7 +63,9 @@ def test_the_sample_shape_is_where_a_client_looks(client, dataset):
     assert shape in schemas["RecognizeRequest"]["properties"]["samples"]["description"]
     assert shape in schemas["SampleCreate"]["properties"]["sample"]["description"]
     assert shape in doc["info"]["description"]
-    assert "shape of one sample" in schemas["ModelSummary"]["properties"]["input_shape"]["description"]
+    assert (
+        "shape of one sample" in schemas["ModelSummary"]["properties"]["input_shape"]["description"]
+    )
     assert client.get("/v1/models/active").json()["input_shape"] == list(dataset.input_shape)
     body = doc["paths"]["/v1/recognize"]["post"]["requestBody"]["content"]["application/json"]
     assert body["schema"] == {"$ref": "#/components/schemas/RecognizeRequest"}
@@ -74,9 +79,23 @@ def _generate(doc: dict, out: Path) -> str:
     # its post-generation hooks run ruff, which the test extra installs beside it
     env = {**os.environ, "PATH": f"{exe.parent}{os.pathsep}{os.environ.get('PATH', '')}"}
     run = subprocess.run(
-        [str(exe), "generate", "--path", "openapi.json", "--config", "config.yml",
-         "--output-path", "client", "--meta", "none"],
-        cwd=out, env=env, capture_output=True, text=True, timeout=300,
+        [
+            str(exe),
+            "generate",
+            "--path",
+            "openapi.json",
+            "--config",
+            "config.yml",
+            "--output-path",
+            "client",
+            "--meta",
+            "none",
+        ],
+        cwd=out,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
     )
     assert run.returncode == 0, run.stdout + run.stderr
     return run.stdout + run.stderr
@@ -101,29 +120,39 @@ def test_a_generated_client_omits_nothing_and_does_a_robots_first_calls(
 ):
     pkg, log = generated
     warnings = [w.split("\n\n")[:2] for w in log.split("WARNING parsing ")[1:]]
-    assert sorted(w[0] for w in warnings) == ["POST /v1/describe within describe.",
-                                              "POST /v1/recognize within recognize."], log
+    assert sorted(w[0] for w in warnings) == [
+        "POST /v1/describe within describe.",
+        "POST /v1/recognize within recognize.",
+    ], log
     assert all(w[1] == "Unsupported content type application/x-npy" for w in warnings), log
     assert "omitted" not in log and "duplicate" not in log, log
     api = importlib.import_module(f"{PACKAGE}.api")
     models = importlib.import_module(f"{PACKAGE}.models")
     operations = {p.stem for p in Path(api.__file__).parent.glob("*/*.py") if p.stem != "__init__"}
     doc = client.get("/openapi.json").json()
-    ids = {op["operationId"].replace("-", "_") for ops in doc["paths"].values() for op in ops.values()}
+    ids = {
+        op["operationId"].replace("-", "_") for ops in doc["paths"].values() for op in ops.values()
+    }
     assert operations == ids
 
     gen = pkg.Client(base_url="http://testserver")
     gen.set_httpx_client(client)  # the TestClient is an httpx.Client on the app
     from_module = importlib.import_module
 
-    vocabulary = from_module(f"{PACKAGE}.api.attributes.attributes_list_attributes").sync(client=gen)
+    vocabulary = from_module(f"{PACKAGE}.api.attributes.attributes_list_attributes").sync(
+        client=gen
+    )
     assert vocabulary.attributes == list(dataset.attribute_names)
 
     register = from_module(f"{PACKAGE}.api.classes.classes_register_class")
-    created = register.sync_detailed(client=gen, body=models.ClassCreate(
-        name="generated teapot", attributes=vocabulary.attributes[:2]))
+    created = register.sync_detailed(
+        client=gen,
+        body=models.ClassCreate(name="generated teapot", attributes=vocabulary.attributes[:2]),
+    )
     assert created.status_code == 202
-    assert created.parsed.class_.name == "generated teapot" and created.parsed.job.status == "queued"
+    assert (
+        created.parsed.class_.name == "generated teapot" and created.parsed.job.status == "queued"
+    )
 
     recognize = from_module(f"{PACKAGE}.api.recognize.recognize_recognize")
     answer = recognize.sync(client=gen, body=models.RecognizeRequest(samples=[sample]))
@@ -146,8 +175,9 @@ def test_a_generated_authenticated_client_sends_the_api_key(generated, tmp_path)
     pkg, _ = generated
     models = importlib.import_module(f"{PACKAGE}.models")
     listing = importlib.import_module(f"{PACKAGE}.api.classes.classes_list_classes")
-    app = create_app(quick_settings(tmp_path / "keyed", api_keys=["s3cret-admin-key"]),
-                     trainer=trained_base)
+    app = create_app(
+        quick_settings(tmp_path / "keyed", api_keys=["s3cret-admin-key"]), trainer=trained_base
+    )
     with TestClient(app) as keyed:
         anonymous = pkg.Client(base_url="http://testserver")
         anonymous.set_httpx_client(keyed)
@@ -156,7 +186,11 @@ def test_a_generated_authenticated_client_sends_the_api_key(generated, tmp_path)
         assert refused.parsed.errors[0].field == "X-API-Key"
         # the client builds its own httpx.Client, with the key header, on the app's transport
         authed = pkg.AuthenticatedClient(
-            base_url="http://testserver", token="s3cret-admin-key", auth_header_name="X-API-Key",
-            prefix="", httpx_args={"transport": keyed._transport})
+            base_url="http://testserver",
+            token="s3cret-admin-key",
+            auth_header_name="X-API-Key",
+            prefix="",
+            httpx_args={"transport": keyed._transport},
+        )
         listed = listing.sync_detailed(client=authed)
         assert listed.status_code == 200 and isinstance(listed.parsed, models.ClassList)

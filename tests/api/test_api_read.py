@@ -26,7 +26,11 @@ def test_classes_list_the_base_model(client, dataset):
     first = classes[0]
     assert first["kind"] == "known" and first["in_active_model"] is True
     assert first["n_samples"] == int((dataset.labels == 0).sum())
-    expected = [a for a, bit in zip(dataset.attribute_names, dataset.class_attributes[0], strict=True) if bit]
+    expected = [
+        a
+        for a, bit in zip(dataset.attribute_names, dataset.class_attributes[0], strict=True)
+        if bit
+    ]
     assert first["attributes"] == expected
     assert first["created_at"].endswith("Z") or "+00:00" in first["created_at"]
 
@@ -46,9 +50,14 @@ def test_unknown_class_id_is_a_named_404(client):
 
 
 def test_non_integer_ids_are_named_422(client):
-    for path, field in (("/v1/classes/abc", "class_id"), ("/v1/jobs/x", "job_id"),
-                        ("/v1/models/v1/activate", "version"), ("/v1/classes/0", "class_id"),
-                        ("/v1/jobs/99999999999999999999999", "job_id"), ("/v1/classes/-3", "class_id")):
+    for path, field in (
+        ("/v1/classes/abc", "class_id"),
+        ("/v1/jobs/x", "job_id"),
+        ("/v1/models/v1/activate", "version"),
+        ("/v1/classes/0", "class_id"),
+        ("/v1/jobs/99999999999999999999999", "job_id"),
+        ("/v1/classes/-3", "class_id"),
+    ):
         r = client.request("POST" if path.endswith("activate") else "GET", path)
         assert r.status_code == 422, path
         assert r.headers["content-type"] == PROBLEM
@@ -65,7 +74,9 @@ def test_models_and_active_model(client, dataset):
     models = client.get("/v1/models").json()["models"]
     assert len(models) == 1
     summary = models[0]
-    assert summary["version"] == 1 and summary["active"] is True and summary["reason"] == "bootstrap"
+    assert (
+        summary["version"] == 1 and summary["active"] is True and summary["reason"] == "bootstrap"
+    )
     assert summary["input_shape"] == list(dataset.input_shape)
     assert summary["class_count"] == dataset.n_classes and "classes" not in summary
     assert len(summary["sha256"]) == 64 and isinstance(summary["metrics"], dict)
@@ -78,7 +89,9 @@ def test_models_and_active_model(client, dataset):
 def test_unknown_model_version_is_a_named_404(client):
     r = client.get("/v1/models/77")
     assert r.status_code == 404 and r.headers["content-type"] == PROBLEM
-    assert r.json()["errors"] == [{"field": "version", "reason": "no model version with version 77"}]
+    assert r.json()["errors"] == [
+        {"field": "version", "reason": "no model version with version 77"}
+    ]
 
 
 def test_health_and_readiness(client):
@@ -91,7 +104,9 @@ def test_metrics_are_prometheus_text(client, app, sample):
     r = client.get("/metrics")
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/plain")
     text = r.text
-    assert 'tactile_http_requests_total{method="POST",route="/v1/recognize",status="200"} 1.0' in text
+    assert (
+        'tactile_http_requests_total{method="POST",route="/v1/recognize",status="200"} 1.0' in text
+    )
     assert "tactile_http_request_duration_seconds_bucket" in text
     assert "tactile_recognitions_total" in text
     assert "tactile_active_model_version 1.0" in text
@@ -124,7 +139,10 @@ def test_operation_ids_name_the_operation_for_client_generators(client):
     ids = [op["operationId"] for item in spec["paths"].values() for op in item.values()]
     assert len(ids) == len(set(ids))
     assert spec["paths"]["/v1/classes"]["post"]["operationId"] == "classes-register_class"
-    assert spec["paths"]["/v1/classes/{class_id}/samples"]["post"]["operationId"] == "samples-add_sample"
+    assert (
+        spec["paths"]["/v1/classes/{class_id}/samples"]["post"]["operationId"]
+        == "samples-add_sample"
+    )
     assert spec["paths"]["/v1/recognize"]["post"]["operationId"] == "recognize-recognize"
     assert not [i for i in ids if "_v1_" in i]  # no path-and-method names left
 
@@ -142,7 +160,9 @@ def test_readiness_fails_without_a_store_or_a_model(client, app, monkeypatch):
     from app.store.db import make_sessionmaker
 
     working = app.state.service.sessions
-    app.state.service.sessions = make_sessionmaker(create_engine("sqlite:////nonexistent-dir/tactile.db"))
+    app.state.service.sessions = make_sessionmaker(
+        create_engine("sqlite:////nonexistent-dir/tactile.db")
+    )
     try:
         r = client.get("/readyz")
         assert r.status_code == 503 and r.json()["errors"][0]["field"] == "database"
@@ -166,7 +186,9 @@ def test_every_request_gives_its_database_connection_back(client, app):
     for _ in range(5):
         assert client.get("/v1/classes").status_code == 200
         assert client.get("/v1/jobs/999999").status_code == 404
-        assert client.post("/v1/classes", json={"name": "", "attributes": ["nope"]}).status_code == 422
+        assert (
+            client.post("/v1/classes", json={"name": "", "attributes": ["nope"]}).status_code == 422
+        )
     assert pool.checkedout() == 0
 
 
@@ -185,19 +207,29 @@ def test_classes_come_a_page_at_a_time(client, dataset):
     assert len(pages) == -(-dataset.n_classes // 7)
     assert [c for page in pages for c in page] == everything["classes"]
     last = everything["classes"][-1]["id"]
-    assert client.get("/v1/classes", params={"after": last}).json() == {"classes": [], "next_after": None}
+    assert client.get("/v1/classes", params={"after": last}).json() == {
+        "classes": [],
+        "next_after": None,
+    }
 
 
 def test_models_come_a_page_at_a_time(client):
     body = client.get("/v1/models", params={"limit": 1}).json()
     assert [m["version"] for m in body["models"]] == [1] and body["next_after"] is None
-    assert client.get("/v1/models", params={"after": 1}).json() == {"models": [], "next_after": None}
+    assert client.get("/v1/models", params={"after": 1}).json() == {
+        "models": [],
+        "next_after": None,
+    }
 
 
 def test_bad_page_parameters_are_named_422(client):
     for path in ("/v1/classes", "/v1/models"):
-        for params, field in (({"limit": 0}, "limit"), ({"limit": 1001}, "limit"),
-                              ({"after": -1}, "after"), ({"after": "x"}, "after")):
+        for params, field in (
+            ({"limit": 0}, "limit"),
+            ({"limit": 1001}, "limit"),
+            ({"after": -1}, "after"),
+            ({"after": "x"}, "after"),
+        ):
             r = client.get(path, params=params)
             assert r.status_code == 422 and r.headers["content-type"] == PROBLEM, (path, params)
             assert r.json()["errors"][0]["field"] == field
@@ -216,10 +248,14 @@ def test_a_dataset_class_lists_its_training_trials_a_page_at_a_time(client, data
 
 
 def test_an_enrolled_class_lists_its_live_samples_and_who_added_them(client, dataset, sample):
-    r = client.post("/v1/classes", json={"name": "mug", "attribute_vector": unused_vectors(dataset, 1)[0]})
+    r = client.post(
+        "/v1/classes", json={"name": "mug", "attribute_vector": unused_vectors(dataset, 1)[0]}
+    )
     cid = r.json()["class"]["id"]
-    ids = [client.post(f"/v1/classes/{cid}/samples", json={"sample": sample}).json()["sample_id"]
-           for _ in range(3)]
+    ids = [
+        client.post(f"/v1/classes/{cid}/samples", json={"sample": sample}).json()["sample_id"]
+        for _ in range(3)
+    ]
     assert client.delete(f"/v1/classes/{cid}/samples/{ids[1]}").status_code == 202
     samples = client.get(f"/v1/classes/{cid}/samples").json()["samples"]
     assert [s["id"] for s in samples] == [ids[0], ids[2]]  # the withdrawn one is gone
@@ -230,35 +266,49 @@ def test_an_enrolled_class_lists_its_live_samples_and_who_added_them(client, dat
 
 
 def test_one_sample_comes_back_with_its_data_as_json_or_npy(client, dataset, sample):
-    cid = client.post("/v1/classes", json={"name": "mug", "attribute_vector": unused_vectors(dataset, 1)[0]}
-                      ).json()["class"]["id"]
+    cid = client.post(
+        "/v1/classes", json={"name": "mug", "attribute_vector": unused_vectors(dataset, 1)[0]}
+    ).json()["class"]["id"]
     sid = client.post(f"/v1/classes/{cid}/samples", json={"sample": sample}).json()["sample_id"]
     got = client.get(f"/v1/classes/{cid}/samples/{sid}").json()
     assert {k: got[k] for k in ("id", "origin", "trial", "enrolled_by")} == {
-        "id": sid, "origin": "enrolled", "trial": None, "enrolled_by": "addr:testclient"}
+        "id": sid,
+        "origin": "enrolled",
+        "trial": None,
+        "enrolled_by": "addr:testclient",
+    }
     assert got["shape"] == list(dataset.samples.shape[1:])
-    np.testing.assert_array_equal(np.float32(got["sample"]), np.float32(sample))  # exactly what was sent
+    np.testing.assert_array_equal(
+        np.float32(got["sample"]), np.float32(sample)
+    )  # exactly what was sent
 
     r = client.get(f"/v1/classes/{cid}/samples/{sid}", headers={"Accept": "application/x-npy"})
     assert r.status_code == 200 and r.headers["content-type"] == "application/x-npy"
     x = np.load(io.BytesIO(r.content), allow_pickle=False)
     np.testing.assert_array_equal(x, np.float32(sample))
-    again = client.post("/v1/recognize", content=r.content, headers={"Content-Type": "application/x-npy"})
+    again = client.post(
+        "/v1/recognize", content=r.content, headers={"Content-Type": "application/x-npy"}
+    )
     assert again.status_code == 200 and len(again.json()["results"]) == 1  # sent back as it came
 
     first = client.get("/v1/classes/1/samples", params={"limit": 1}).json()["samples"][0]
     trial = client.get(f"/v1/classes/1/samples/{first['id']}").json()
     assert trial["origin"] == "dataset" and trial["trial"] == first["trial"]
-    np.testing.assert_array_equal(np.float32(trial["sample"]), dataset.samples[dataset.trials == trial["trial"]][0])
+    np.testing.assert_array_equal(
+        np.float32(trial["sample"]), dataset.samples[dataset.trials == trial["trial"]][0]
+    )
 
 
 def test_a_sample_that_is_not_there_is_a_named_404(client, dataset, sample):
-    cid = client.post("/v1/classes", json={"name": "mug", "attribute_vector": unused_vectors(dataset, 1)[0]}
-                      ).json()["class"]["id"]
+    cid = client.post(
+        "/v1/classes", json={"name": "mug", "attribute_vector": unused_vectors(dataset, 1)[0]}
+    ).json()["class"]["id"]
     sid = client.post(f"/v1/classes/{cid}/samples", json={"sample": sample}).json()["sample_id"]
-    for path, field in ((f"/v1/classes/424242/samples/{sid}", "class_id"),
-                        (f"/v1/classes/1/samples/{sid}", "sample_id"),  # another class's
-                        (f"/v1/classes/{cid}/samples/424242", "sample_id")):
+    for path, field in (
+        (f"/v1/classes/424242/samples/{sid}", "class_id"),
+        (f"/v1/classes/1/samples/{sid}", "sample_id"),  # another class's
+        (f"/v1/classes/{cid}/samples/424242", "sample_id"),
+    ):
         r = client.get(path)
         assert r.status_code == 404 and r.headers["content-type"] == PROBLEM, path
         assert r.json()["errors"][0]["field"] == field, path

@@ -46,7 +46,9 @@ def test_npy_batch_matches_json(client, dataset):
     x = dataset.samples[:4]
     by_json = client.post("/v1/recognize", json={"samples": x.tolist()}).json()
     by_npy = client.post("/v1/recognize", content=npy(x), headers=NPY).json()
-    assert [r["class_name"] for r in by_npy["results"]] == [r["class_name"] for r in by_json["results"]]
+    assert [r["class_name"] for r in by_npy["results"]] == [
+        r["class_name"] for r in by_json["results"]
+    ]
 
 
 def test_npy_single_sample_without_batch_axis(client, dataset):
@@ -55,23 +57,37 @@ def test_npy_single_sample_without_batch_axis(client, dataset):
 
 
 def test_npy_float64_and_int_are_accepted(client, dataset):
-    r = client.post("/v1/recognize", content=npy(dataset.samples[:2].astype(np.float64)), headers=NPY)
+    r = client.post(
+        "/v1/recognize", content=npy(dataset.samples[:2].astype(np.float64)), headers=NPY
+    )
     assert r.status_code == 200
-    r = client.post("/v1/recognize", content=npy(np.ones((1, *dataset.input_shape), np.int32)), headers=NPY)
+    r = client.post(
+        "/v1/recognize", content=npy(np.ones((1, *dataset.input_shape), np.int32)), headers=NPY
+    )
     assert r.status_code == 200
 
 
 def test_wrong_sample_shape(client, dataset):
     c, t = dataset.input_shape
-    body = problem(client.post("/v1/recognize", json={"samples": [np.zeros((c, t + 1)).tolist()]}), 422, "samples")
+    body = problem(
+        client.post("/v1/recognize", json={"samples": [np.zeros((c, t + 1)).tolist()]}),
+        422,
+        "samples",
+    )
     assert str(t + 1) in body["detail"]
-    problem(client.post("/v1/recognize", content=npy(np.zeros((2, c + 1, t), np.float32)), headers=NPY), 422, "samples")
+    problem(
+        client.post("/v1/recognize", content=npy(np.zeros((2, c + 1, t), np.float32)), headers=NPY),
+        422,
+        "samples",
+    )
 
 
 def test_ragged_sample(client, sample):
     shape = list(np.shape(sample))
     sample[1] = sample[1][:-1]
-    body = problem(client.post("/v1/recognize", json={"samples": [sample, sample]}), 422, "samples[0]")
+    body = problem(
+        client.post("/v1/recognize", json={"samples": [sample, sample]}), 422, "samples[0]"
+    )
     assert "rows have different lengths" in body["detail"] and str(shape) in body["detail"]
 
 
@@ -140,7 +156,11 @@ def test_wrong_json_shapes_name_the_field(client, sample):
 
 def test_bad_npy_bodies(client, dataset):
     problem(client.post("/v1/recognize", content=b"not an npy file", headers=NPY), 422, "body")
-    problem(client.post("/v1/recognize", content=npy(dataset.samples[:1])[:-10], headers=NPY), 422, "body")
+    problem(
+        client.post("/v1/recognize", content=npy(dataset.samples[:1])[:-10], headers=NPY),
+        422,
+        "body",
+    )
     strings = npy(np.array([["a"] * dataset.input_shape[1]] * dataset.input_shape[0]))
     problem(client.post("/v1/recognize", content=strings, headers=NPY), 422, "body")
     obj = npy(np.array([{"a": 1}], dtype=object))  # pickled: never loaded

@@ -63,7 +63,10 @@ def test_scopes_read_enroll_admin(client, app, vectors, sample):
     r = client.post("/v1/classes", json={"name": "e", "attribute_vector": vectors[1]}, headers=h)
     assert r.status_code == 202
     cid = r.json()["class"]["id"]
-    assert client.post(f"/v1/classes/{cid}/samples", json={"sample": sample}, headers=h).status_code == 202
+    assert (
+        client.post(f"/v1/classes/{cid}/samples", json={"sample": sample}, headers=h).status_code
+        == 202
+    )
     assert client.get("/v1/classes", headers=h).status_code == 200
     problem(client.post("/v1/models/1/activate", headers=h), 403, "X-API-Key")
 
@@ -80,9 +83,16 @@ def test_every_v1_operation_needs_a_key_once_one_exists(client, app):
     read = make_key(app, "read")
     paths = client.get("/openapi.json").json()["paths"]
     operations = [
-        (method.upper(), path.replace("{class_id}", "1").replace("{job_id}", "1")
-         .replace("{version}", "1").replace("{sample_id}", "1"))
-        for path, item in paths.items() if path.startswith("/v1") for method in item
+        (
+            method.upper(),
+            path.replace("{class_id}", "1")
+            .replace("{job_id}", "1")
+            .replace("{version}", "1")
+            .replace("{sample_id}", "1"),
+        )
+        for path, item in paths.items()
+        if path.startswith("/v1")
+        for method in item
     ]
     assert len(operations) == 20
     for path, item in paths.items():
@@ -92,7 +102,10 @@ def test_every_v1_operation_needs_a_key_once_one_exists(client, app):
     for method, path in operations:
         problem(client.request(method, path), 401, "X-API-Key")
         r = client.request(method, path, headers={"X-API-Key": read})
-        writes = method in ("POST", "PATCH", "DELETE") and path not in ("/v1/recognize", "/v1/describe")
+        writes = method in ("POST", "PATCH", "DELETE") and path not in (
+            "/v1/recognize",
+            "/v1/describe",
+        )
         assert (r.status_code == 403) == writes, (method, path, r.status_code)
 
 
@@ -116,7 +129,9 @@ def test_keys_are_stored_hashed_only(client, app):
         assert row.scope == "enroll" and row.name == "robot-7"
 
 
-def test_cli_creates_a_key_printed_once_on_the_last_line(client, app, settings, monkeypatch, capsys):
+def test_cli_creates_a_key_printed_once_on_the_last_line(
+    client, app, settings, monkeypatch, capsys
+):
     monkeypatch.setenv("TACTILE_DATABASE_URL", settings.sqlalchemy_url)
     assert cli(["apikey", "create", "--scope", "read", "--name", "cli"]) == 0
     out = capsys.readouterr().out.strip().splitlines()
@@ -164,9 +179,13 @@ def test_token_bucket_refills_at_the_rate():
 
 
 def test_cors_is_closed_by_default(client):
-    preflight = client.options("/v1/classes", headers={
-        "Origin": "https://evil.example", "Access-Control-Request-Method": "POST",
-    })
+    preflight = client.options(
+        "/v1/classes",
+        headers={
+            "Origin": "https://evil.example",
+            "Access-Control-Request-Method": "POST",
+        },
+    )
     assert "access-control-allow-origin" not in preflight.headers
     r = client.get("/v1/classes", headers={"Origin": "https://evil.example"})
     assert "access-control-allow-origin" not in r.headers
@@ -184,10 +203,19 @@ def test_cors_opens_only_to_configured_origins(settings, base_model):
         assert ok.headers["access-control-allow-origin"] == "https://ops.example"
         other = c.get("/v1/attributes", headers={"Origin": "https://evil.example"})
         assert "access-control-allow-origin" not in other.headers
-        for method in ("POST", "PATCH", "DELETE"):  # an operators' page may enrol, correct, withdraw
-            preflight = c.options("/v1/classes/1", headers={
-                "Origin": "https://ops.example", "Access-Control-Request-Method": method,
-                "Access-Control-Request-Headers": "X-API-Key, Idempotency-Key"})
+        for method in (
+            "POST",
+            "PATCH",
+            "DELETE",
+        ):  # an operators' page may enrol, correct, withdraw
+            preflight = c.options(
+                "/v1/classes/1",
+                headers={
+                    "Origin": "https://ops.example",
+                    "Access-Control-Request-Method": method,
+                    "Access-Control-Request-Headers": "X-API-Key, Idempotency-Key",
+                },
+            )
             assert preflight.status_code == 200, (method, preflight.text)
             assert method in preflight.headers["access-control-allow-methods"]
 
@@ -195,10 +223,13 @@ def test_cors_opens_only_to_configured_origins(settings, base_model):
 # ------------------------------------------------------- nothing internal leaks
 
 
-@pytest.mark.parametrize("error", [
-    OperationalError("SELECT secret FROM classes WHERE id = 1", {}, Exception("timeout")),
-    RuntimeError('Traceback (most recent call last): File "repo.py" SELECT * FROM classes'),
-])
+@pytest.mark.parametrize(
+    "error",
+    [
+        OperationalError("SELECT secret FROM classes WHERE id = 1", {}, Exception("timeout")),
+        RuntimeError('Traceback (most recent call last): File "repo.py" SELECT * FROM classes'),
+    ],
+)
 def test_no_stack_trace_or_sql_in_any_response(app, monkeypatch, error):
     def broken(*_args):
         raise error
@@ -221,14 +252,23 @@ def test_every_job_records_who_queued_it(client, app, vectors, sample):
     with app.state.service.sessions() as s:
         key_id = s.scalar(select(ApiKey.id).where(ApiKey.name == "robot-7"))
     h = {"X-API-Key": robot}
-    r = client.post("/v1/classes", json={"name": "by-key", "attribute_vector": vectors[1]}, headers=h)
+    r = client.post(
+        "/v1/classes", json={"name": "by-key", "attribute_vector": vectors[1]}, headers=h
+    )
     cid = r.json()["class"]["id"]
     jobs = [r.json()["job"]]
     r = client.post(f"/v1/classes/{cid}/samples", json={"sample": sample}, headers=h)
     jobs.append(r.json()["job"])
-    jobs.append(client.delete(f"/v1/classes/{cid}/samples/{r.json()['sample_id']}", headers=h).json()["job"])
+    jobs.append(
+        client.delete(f"/v1/classes/{cid}/samples/{r.json()['sample_id']}", headers=h).json()["job"]
+    )
     jobs.append(client.delete(f"/v1/classes/{cid}", headers=h).json()["job"])
-    assert [j["kind"] for j in jobs] == ["register_class", "add_sample", "withdraw_sample", "withdraw_class"]
+    assert [j["kind"] for j in jobs] == [
+        "register_class",
+        "add_sample",
+        "withdraw_sample",
+        "withdraw_class",
+    ]
     for j in jobs:
         stored = client.get(f"/v1/jobs/{j['id']}", headers=h).json()
         assert j["requested_by"] == stored["requested_by"] == f"key:{key_id}"

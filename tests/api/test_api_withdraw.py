@@ -26,7 +26,9 @@ def test_withdrawing_a_sample_is_committed_before_the_202(client, app, dataset):
     assert job["class_id"] == cid and job["sample_id"] == sid
     assert r.headers["location"] == f"/v1/jobs/{job['id']}"
     assert client.get(f"/v1/classes/{cid}").json()["n_samples"] == 0
-    with app.state.service.sessions() as s:  # kept, marked: jobs and model versions still refer to it
+    with (
+        app.state.service.sessions() as s
+    ):  # kept, marked: jobs and model versions still refer to it
         row = s.get(Sample, sid)
         assert row is not None and row.withdrawn_at is not None
         assert s.get(Job, job["id"]).status == "queued"
@@ -41,10 +43,15 @@ def test_withdrawing_a_class_takes_its_samples_and_frees_its_name(client, app, d
     assert body["class_id"] == cid and body["sample_id"] is None
     assert body["job"]["kind"] == "withdraw_class"
     problem(client.get(f"/v1/classes/{cid}"), 404, "class_id")
-    assert cid not in [c["id"] for c in client.get("/v1/classes", params={"limit": 1000}).json()["classes"]]
+    assert cid not in [
+        c["id"] for c in client.get("/v1/classes", params={"limit": 1000}).json()["classes"]
+    ]
     problem(client.delete(f"/v1/classes/{cid}"), 404, "class_id")
-    problem(client.post(f"/v1/classes/{cid}/samples", json={"sample": dataset.samples[0].tolist()}),
-            404, "class_id")
+    problem(
+        client.post(f"/v1/classes/{cid}/samples", json={"sample": dataset.samples[0].tolist()}),
+        404,
+        "class_id",
+    )
     with app.state.service.sessions() as s:
         assert s.get(ObjectClass, cid).withdrawn_at is not None
         assert s.get(Sample, sid).withdrawn_at is not None
@@ -61,8 +68,11 @@ def test_withdrawing_a_class_takes_its_samples_and_frees_its_name(client, app, d
 def test_a_withdrawn_class_no_longer_holds_its_attribute_vector(client, dataset):
     cid, _ = enrol(client, dataset)
     vector = unused_vectors(dataset, 1)[0]
-    problem(client.post("/v1/classes", json={"name": "cup", "attribute_vector": vector}),
-            409, "attribute_vector")
+    problem(
+        client.post("/v1/classes", json={"name": "cup", "attribute_vector": vector}),
+        409,
+        "attribute_vector",
+    )
     assert client.delete(f"/v1/classes/{cid}").status_code == 202
     r = client.post("/v1/classes", json={"name": "cup", "attribute_vector": vector})
     assert r.status_code == 202 and r.json()["class"]["id"] != cid
@@ -112,4 +122,3 @@ def test_withdrawals_are_counted_in_the_metrics(client, dataset):
     text = client.get("/metrics").text
     assert 'tactile_withdrawals_total{kind="sample"} 1.0' in text
     assert 'tactile_withdrawals_total{kind="class"} 1.0' in text
-

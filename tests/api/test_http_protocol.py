@@ -105,8 +105,9 @@ def server():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    config = uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning",
-                            http=CoalescingHttpToolsProtocol)
+    config = uvicorn.Config(
+        app, host="127.0.0.1", port=port, log_level="warning", http=CoalescingHttpToolsProtocol
+    )
     srv = uvicorn.Server(config)
     thread = threading.Thread(target=srv.run, daemon=True)
     thread.start()

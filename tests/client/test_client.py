@@ -17,13 +17,19 @@ from tests.service_fixtures import list_all, unused_vectors
 
 @pytest.fixture
 def robot(client, tmp_path):
-    return TactileClient(http=client, model_file=tmp_path / "robot" / "model.bundle", retries=0, timeout=2)
+    return TactileClient(
+        http=client, model_file=tmp_path / "robot" / "model.bundle", retries=0, timeout=2
+    )
 
 
 def unreachable(tmp_path, **kwargs) -> TactileClient:
     """A client of a port nobody listens on: every request fails to connect."""
-    return TactileClient(f"http://127.0.0.1:{free_port()}", model_file=tmp_path / "robot" / "model.bundle",
-                         timeout=2, **kwargs)
+    return TactileClient(
+        f"http://127.0.0.1:{free_port()}",
+        model_file=tmp_path / "robot" / "model.bundle",
+        timeout=2,
+        **kwargs,
+    )
 
 
 def test_the_model_file_follows_the_active_version(robot, client, worker, dataset):
@@ -52,15 +58,23 @@ def test_offline_answers_are_the_services_answers(robot, client, worker, dataset
     assert online["source"] == "service" and offline["source"] == "offline"
     assert offline["model_version"] == online["model_version"] == 2
     for a, b in zip(offline["results"], online["results"], strict=True):
-        assert (a["class_id"], a["class_name"], a["is_novel"]) == (b["class_id"], b["class_name"], b["is_novel"])
+        assert (a["class_id"], a["class_name"], a["is_novel"]) == (
+            b["class_id"],
+            b["class_name"],
+            b["is_novel"],
+        )
         np.testing.assert_allclose(a["novelty_score"], b["novelty_score"], rtol=1e-5)
     assert all(s["class_id"] is not None for r in offline["results"] for s in r["top_k"])
-    assert robot._meta()["class_ids"]["cup"] == job["class_id"]  # the store's id of the enrolled class
+    assert (
+        robot._meta()["class_ids"]["cup"] == job["class_id"]
+    )  # the store's id of the enrolled class
 
 
 def test_without_a_model_file_an_outage_is_a_clear_error(tmp_path, sample):
-    with unreachable(tmp_path, retries=0) as robot, pytest.raises(
-            ServiceUnreachable, match="no model file to recognise offline"):
+    with (
+        unreachable(tmp_path, retries=0) as robot,
+        pytest.raises(ServiceUnreachable, match="no model file to recognise offline"),
+    ):
         robot.recognize(sample)
     assert robot.http.is_closed
 
@@ -100,7 +114,9 @@ class LoseFirstAnswer(httpx.BaseTransport):
 
 
 def test_a_retry_after_a_lost_answer_enrols_once(client, worker, dataset, sample):
-    flaky = httpx.Client(transport=LoseFirstAnswer(client._transport), base_url=str(client.base_url))
+    flaky = httpx.Client(
+        transport=LoseFirstAnswer(client._transport), base_url=str(client.base_url)
+    )
     robot = TactileClient(http=flaky, retries=2)
     job = robot.register_class("teapot", attribute_vector=unused_vectors(dataset, 1)[0])
     assert robot.http._transport.lost == 1
@@ -111,7 +127,9 @@ def test_a_retry_after_a_lost_answer_enrols_once(client, worker, dataset, sample
     added = robot.add_sample(job["class_id"], sample)
     assert client.get(f"/v1/classes/{job['class_id']}").json()["n_samples"] == 1
     assert added["job"]["sample_id"] == added["sample_id"] and added["recognized_as"]["class_name"]
-    np.testing.assert_array_equal(robot.sample(job["class_id"], added["sample_id"]), np.float32(sample))
+    np.testing.assert_array_equal(
+        robot.sample(job["class_id"], added["sample_id"]), np.float32(sample)
+    )
     worker.run_once()
     done = robot.add_sample(job["class_id"], sample, wait=0.5)  # nobody runs this job: still queued
     assert done["job"]["status"] == "queued" and done["job"]["sample_id"] == done["sample_id"]
@@ -146,5 +164,7 @@ def test_a_touch_is_described_for_the_operator(best_service, best_base):
     _, dataset = best_base
     robot = TactileClient(http=client, retries=0)
     answer = robot.describe(dataset.samples[:2])
-    assert answer == client.post("/v1/describe", json={"samples": dataset.samples[:2].tolist()}).json()
+    assert (
+        answer == client.post("/v1/describe", json={"samples": dataset.samples[:2].tolist()}).json()
+    )
     assert len(answer["results"]) == 2 and answer["results"][0]["suggested"]

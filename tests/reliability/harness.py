@@ -106,7 +106,10 @@ class Cluster:
             log = open(self.data_dir / f"{p.name}-{p.starts}.log", "wb")  # noqa: SIM115
             p.starts += 1
             p.popen = subprocess.Popen(
-                [*tactile_zsl(), *p.args], env=self.env, cwd=self.data_dir, stdout=log,
+                [*tactile_zsl(), *p.args],
+                env=self.env,
+                cwd=self.data_dir,
+                stdout=log,
                 stderr=subprocess.STDOUT,
             )
 
@@ -146,7 +149,8 @@ class Cluster:
                     pass
             for p in self.procs:
                 assert p.popen is None or p.popen.poll() is None, (
-                    f"{p.name} exited with {p.popen.returncode}:\n{self.logs()}")
+                    f"{p.name} exited with {p.popen.returncode}:\n{self.logs()}"
+                )
             time.sleep(0.3)
         assert not pending, f"not ready after {timeout}s: {pending}\n{self.logs()}"
 

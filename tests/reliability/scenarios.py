@@ -58,8 +58,13 @@ class Enroller:
         key = uuid.uuid4().hex
         for _attempt in range(200):  # a robot keeps retrying until some API answers
             try:
-                r = httpx.request(method, next(self.urls) + path, json=body, timeout=10,
-                                  headers={"Idempotency-Key": key})
+                r = httpx.request(
+                    method,
+                    next(self.urls) + path,
+                    json=body,
+                    timeout=10,
+                    headers={"Idempotency-Key": key},
+                )
             except httpx.TransportError:
                 self.retries += 1
                 time.sleep(0.1)
@@ -84,8 +89,11 @@ class Enroller:
             elif r is not None:
                 self.bad += 1
             return
-        if self.classes and self.vectors_used < len(self.vectors) and (
-                self.rng.random() < 0.05 or not self.described):
+        if (
+            self.classes
+            and self.vectors_used < len(self.vectors)
+            and (self.rng.random() < 0.05 or not self.described)
+        ):
             cid = self.rng.choice(sorted(self.classes))  # described wrongly: corrected
             vector = self._next_vector()
             r = self.send("PATCH", f"/v1/classes/{cid}", {"attribute_vector": vector})
@@ -97,7 +105,9 @@ class Enroller:
         open_classes = [c for c, n in self.per_class.items() if n < 3]
         if not open_classes or (self.vectors_used < len(self.vectors) and self.rng.random() < 0.5):
             name = f"crash-{len(self.classes)}-{uuid.uuid4().hex[:6]}"
-            r = self.send("POST", "/v1/classes", {"name": name, "attribute_vector": self._next_vector()})
+            r = self.send(
+                "POST", "/v1/classes", {"name": name, "attribute_vector": self._next_vector()}
+            )
             if r is not None and r.status_code == 202:
                 cid = r.json()["class"]["id"]
                 self.classes[cid] = name
@@ -125,8 +135,14 @@ class Enroller:
             time.sleep(0.02)
 
 
-def verify(cluster: Cluster, classes: dict[int, str], sample_ids: list[int], timeout: float,
-           withdrawn: list[int] = (), described: dict[int, list[int]] | None = None) -> dict:
+def verify(
+    cluster: Cluster,
+    classes: dict[int, str],
+    sample_ids: list[int],
+    timeout: float,
+    withdrawn: list[int] = (),
+    described: dict[int, list[int]] | None = None,
+) -> dict:
     """Every 202'd class and sample is in the store and in the active model, except the
     samples whose withdrawal got a 202, which are in neither; a class described anew has
     its last 202'd vector in both; jobs settled."""
@@ -138,9 +154,13 @@ def verify(cluster: Cluster, classes: dict[int, str], sample_ids: list[int], tim
         stored = {c["id"]: c for c in list_all(client, "/v1/classes", "classes")}
         vocabulary = client.get("/v1/attributes").json()["attributes"]
         served = bundle.from_bytes(client.get("/v1/models/active/bundle").content).registry
-    served_vectors = dict(zip(served.known_names + served.novel_names,
-                              [v.tolist() for v in (*served.known_attributes, *served.novel_attributes)],
-                              strict=True))
+    served_vectors = dict(
+        zip(
+            served.known_names + served.novel_names,
+            [v.tolist() for v in (*served.known_attributes, *served.novel_attributes)],
+            strict=True,
+        )
+    )
     described = described or {}
     from app.store import repo
     from app.store.db import make_engine, make_sessionmaker
@@ -154,13 +174,16 @@ def verify(cluster: Cluster, classes: dict[int, str], sample_ids: list[int], tim
 
         live = select(Sample.id).where(Sample.id.in_(sample_ids), Sample.withdrawn_at.is_(None))
         present = set(s.scalars(live))
-        failed = s.execute(select(Job.id, Job.kind, Job.sample_id, Job.error)
-                           .where(Job.status == "failed")).all()
+        failed = s.execute(
+            select(Job.id, Job.kind, Job.sample_id, Job.error).where(Job.status == "failed")
+        ).all()
     engine.dispose()
     return {
         "jobs": counts,
         "classes_202": len(classes),
-        "classes_missing": sorted(c for c in classes if stored.get(c, {}).get("name") != classes[c]),
+        "classes_missing": sorted(
+            c for c in classes if stored.get(c, {}).get("name") != classes[c]
+        ),
         "classes_not_in_model": sorted(c for c, n in classes.items() if n not in model_names),
         "samples_202": len(sample_ids),
         "samples_missing": sorted(set(sample_ids) - set(withdrawn) - present),
@@ -170,22 +193,34 @@ def verify(cluster: Cluster, classes: dict[int, str], sample_ids: list[int], tim
         "withdrawn_in_model": sorted(set(withdrawn) & in_model),
         "described_202": len(described),
         "descriptions_not_stored": sorted(
-            c for c, v in described.items()
-            if stored.get(c, {}).get("attributes") != [a for a, bit in zip(vocabulary, v, strict=True) if bit]),
+            c
+            for c, v in described.items()
+            if stored.get(c, {}).get("attributes")
+            != [a for a, bit in zip(vocabulary, v, strict=True) if bit]
+        ),
         "descriptions_not_served": sorted(
-            c for c, v in described.items() if served_vectors.get(classes[c]) != [float(b) for b in v]),
+            c
+            for c, v in described.items()
+            if served_vectors.get(classes[c]) != [float(b) for b in v]
+        ),
         "active_version": active["version"],
         # the one failure that is right: a sample withdrawn before a model took it in
         "unexpected_failures": [
-            (job_id, kind, error) for job_id, kind, sid, error in failed
+            (job_id, kind, error)
+            for job_id, kind, sid, error in failed
             if not (kind == "add_sample" and sid in withdrawn and "was withdrawn" in (error or ""))
         ],
         "integrity_problems": check_store(cluster.sqlalchemy_url),
     }
 
 
-def crash(cluster: Cluster, kills: int, seed: int = 0, gap: tuple[float, float] = (0.5, 2.5),
-          settle_timeout: float = 300) -> dict:
+def crash(
+    cluster: Cluster,
+    kills: int,
+    seed: int = 0,
+    gap: tuple[float, float] = (0.5, 2.5),
+    settle_timeout: float = 300,
+) -> dict:
     """Fire enrollments and SIGKILL a random API or worker process ``kills`` times,
     restarting it at once; then check nothing that got a 202 was lost."""
     rng = random.Random(seed)
@@ -207,11 +242,17 @@ def crash(cluster: Cluster, kills: int, seed: int = 0, gap: tuple[float, float] 
         fleet.stop.set()
         thread.join(120)
     cluster.wait_ready()
-    report = verify(cluster, fleet.classes, fleet.sample_ids, settle_timeout, fleet.withdrawn,
-                    fleet.described)
-    report.update(kills=killed, seconds=round(time.monotonic() - started, 1),
-                  retries=fleet.retries, replays=fleet.replays, statuses=fleet.statuses,
-                  non_202=fleet.bad)
+    report = verify(
+        cluster, fleet.classes, fleet.sample_ids, settle_timeout, fleet.withdrawn, fleet.described
+    )
+    report.update(
+        kills=killed,
+        seconds=round(time.monotonic() - started, 1),
+        retries=fleet.retries,
+        replays=fleet.replays,
+        statuses=fleet.statuses,
+        non_202=fleet.bad,
+    )
     return report
 
 
@@ -234,14 +275,19 @@ def concurrency(cluster: Cluster, clients: int = 100, settle_timeout: float = 30
         with httpx.Client(base_url=base, timeout=120) as c:
             barrier.wait()
             try:
-                r = c.post("/v1/classes", json={"name": name, "attribute_vector": vectors[i]},
-                           headers={"Idempotency-Key": f"class-{i}"})
+                r = c.post(
+                    "/v1/classes",
+                    json={"name": name, "attribute_vector": vectors[i]},
+                    headers={"Idempotency-Key": f"class-{i}"},
+                )
                 code = str(r.status_code)
                 if r.status_code == 202:
                     cid = r.json()["class"]["id"]
-                    s = c.post(f"/v1/classes/{cid}/samples",
-                               json={"sample": samples[i % len(samples)].tolist()},
-                               headers={"Idempotency-Key": f"sample-{i}"})
+                    s = c.post(
+                        f"/v1/classes/{cid}/samples",
+                        json={"sample": samples[i % len(samples)].tolist()},
+                        headers={"Idempotency-Key": f"sample-{i}"},
+                    )
                     with lock:
                         classes[cid] = name
                         statuses[str(s.status_code)] = statuses.get(str(s.status_code), 0) + 1
@@ -296,7 +342,10 @@ def hot_swap(cluster: Cluster, versions: int = 20, load_threads: int = 4) -> dic
         for i in range(versions):  # one enrollment at a time: one new version each
             r = c.post("/v1/classes", json={"name": f"swap-{i}", "attribute_vector": vectors[i]})
             job_id = r.json()["job"]["id"]
-            while c.get(f"/v1/jobs/{job_id}", params={"wait": 10}).json()["status"] not in ("succeeded", "failed"):
+            while c.get(f"/v1/jobs/{job_id}", params={"wait": 10}).json()["status"] not in (
+                "succeeded",
+                "failed",
+            ):
                 pass
     time.sleep(1.0)  # every process has polled the last one
     stop.set()
@@ -306,8 +355,11 @@ def hot_swap(cluster: Cluster, versions: int = 20, load_threads: int = 4) -> dic
     with httpx.Client(base_url=urls[0], timeout=30) as client:
         stored = list_all(client, "/v1/models", "models")
     return {
-        "versions_activated": last - first, "recognitions_ok": ok[0], "failed": len(failed),
-        "failures": failed[:5], "versions_served": len(seen),
+        "versions_activated": last - first,
+        "recognitions_ok": ok[0],
+        "failed": len(failed),
+        "failures": failed[:5],
+        "versions_served": len(seen),
         "versions_stored": len(stored),
         "integrity_problems": check_store(cluster.sqlalchemy_url),
         "seconds": round(time.monotonic() - started, 1),

@@ -13,7 +13,9 @@ from tests.service_fixtures import fresh_postgres_database, postgres_url
 pytestmark = pytest.mark.slow
 
 PG_URL = postgres_url()
-needs_pg = pytest.mark.skipif(not PG_URL, reason="no PostgreSQL reachable (TACTILE_TEST_POSTGRES_URL or the local server)")
+needs_pg = pytest.mark.skipif(
+    not PG_URL, reason="no PostgreSQL reachable (TACTILE_TEST_POSTGRES_URL or the local server)"
+)
 
 CI_KILLS = 6
 CI_VERSIONS = 10  # bench/reliability.py hotswap runs 20
@@ -23,15 +25,24 @@ def assert_nothing_lost(report: dict) -> None:
     assert report["integrity_problems"] == [], report
     assert report["classes_missing"] == [] and report["samples_missing"] == [], report
     assert report["classes_not_in_model"] == [] and report["samples_not_in_model"] == [], report
-    assert report.get("withdrawn_in_model", []) == report.get("withdrawn_still_live", []) == [], report
-    assert report.get("descriptions_not_stored", []) == report.get("descriptions_not_served", []) == [], report
+    assert report.get("withdrawn_in_model", []) == report.get("withdrawn_still_live", []) == [], (
+        report
+    )
+    assert (
+        report.get("descriptions_not_stored", []) == report.get("descriptions_not_served", []) == []
+    ), report
     assert set(report["jobs"]) <= {"succeeded", "failed"}, report  # none left queued
     assert report["unexpected_failures"] == [], report
 
 
 def run_crash(tmp_path, database_url: str = "") -> None:
-    cluster = Cluster(tmp_path / "crash", database_url, n_api=2, n_workers=1,
-                      extra_env={"TACTILE_PROMOTION_THRESHOLD": "1000"})
+    cluster = Cluster(
+        tmp_path / "crash",
+        database_url,
+        n_api=2,
+        n_workers=1,
+        extra_env={"TACTILE_PROMOTION_THRESHOLD": "1000"},
+    )
     try:
         report = scenarios.crash(cluster, kills=CI_KILLS, seed=1, gap=(1.0, 3.0))
     except BaseException:
@@ -83,4 +94,6 @@ def test_hot_swap_drops_no_recognition(tmp_path):
     assert report["versions_activated"] == CI_VERSIONS
     assert report["failed"] == 0 and report["recognitions_ok"] > 0, report
     # pruned while served: the harness keeps 3 versions, plus the bootstrap one
-    assert report["versions_stored"] <= KEEP_VERSIONS + 1 and report["integrity_problems"] == [], report
+    assert report["versions_stored"] <= KEEP_VERSIONS + 1 and report["integrity_problems"] == [], (
+        report
+    )

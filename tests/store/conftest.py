@@ -32,10 +32,14 @@ def six_versions(store, base_model):
         for n in range(1, 6):
             newer = model.add_novel_classes([f"c{i}" for i in range(n)], vectors[:n])
             row = repo.add_version(
-                s, method=newer.method, reason="update", base_version=n,
+                s,
+                method=newer.method,
+                reason="update",
+                base_version=n,
                 bundle_sha256=bundles.store_model(s, bundle.split(newer, SMALL_PARTS)),
-                input_shape=list(newer.input_shape), metrics={}, classes=model_classes(newer),
+                input_shape=list(newer.input_shape),
+                metrics={},
+                classes=model_classes(newer),
             )
             repo.activate(s, row.version)
     return sessions
-

@@ -26,20 +26,25 @@ sqlite_only = pytest.mark.parametrize("settings", ["sqlite"], indirect=True)
 
 def enrol(client, worker, dataset, name: str, index: int, sample) -> None:
     vector = unused_vectors(dataset, index + 1)[index]
-    cid = client.post("/v1/classes", json={"name": name, "attribute_vector": vector}).json()["class"]["id"]
+    cid = client.post("/v1/classes", json={"name": name, "attribute_vector": vector}).json()[
+        "class"
+    ]["id"]
     assert client.post(f"/v1/classes/{cid}/samples", json={"sample": sample}).status_code == 202
     assert worker.run_once() == 2
 
 
 def snapshot(client) -> dict:
-    return {"classes": list_all(client, "/v1/classes", "classes"),
-            "models": list_all(client, "/v1/models", "models"),
-            "active": client.get("/v1/models/active").json()}
+    return {
+        "classes": list_all(client, "/v1/classes", "classes"),
+        "models": list_all(client, "/v1/models", "models"),
+        "active": client.get("/v1/models/active").json(),
+    }
 
 
 @sqlite_only
-def test_a_backup_taken_while_serving_restores_what_it_had(client, worker, dataset, sample, base_model,
-                                                           settings, tmp_path):
+def test_a_backup_taken_while_serving_restores_what_it_had(
+    client, worker, dataset, sample, base_model, settings, tmp_path
+):
     enrol(client, worker, dataset, "cup", 0, sample)
     before = snapshot(client)
     summary = backup(settings.sqlalchemy_url, tmp_path / "tactile-backup.db")
@@ -47,7 +52,8 @@ def test_a_backup_taken_while_serving_restores_what_it_had(client, worker, datas
     assert summary.classes == dataset.n_classes + 1 and summary.versions == 2
     # one self-contained file: no -wal, -shm or .partial beside it
     assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("tactile-backup")) == [
-        "tactile-backup.db"]
+        "tactile-backup.db"
+    ]
     enrol(client, worker, dataset, "mug", 1, sample)  # after the backup: not in it
 
     restored = quick_settings(tmp_path / "restored")
@@ -60,11 +66,14 @@ def test_a_backup_taken_while_serving_restores_what_it_had(client, worker, datas
 
 
 @sqlite_only
-def test_a_summary_counts_withdrawn_classes_and_samples_apart(client, worker, dataset, sample, settings,
-                                                            tmp_path):
+def test_a_summary_counts_withdrawn_classes_and_samples_apart(
+    client, worker, dataset, sample, settings, tmp_path
+):
     enrol(client, worker, dataset, "cup", 0, sample)
     enrol(client, worker, dataset, "mug", 1, sample)
-    cup, mug = (c["id"] for c in list_all(client, "/v1/classes", "classes") if c["name"] in ("cup", "mug"))
+    cup, mug = (
+        c["id"] for c in list_all(client, "/v1/classes", "classes") if c["name"] in ("cup", "mug")
+    )
     mug_sample = client.get(f"/v1/classes/{mug}/samples").json()["samples"][0]["id"]
     assert client.post(f"/v1/classes/{mug}/samples", json={"sample": sample}).status_code == 202
     assert client.delete(f"/v1/classes/{cup}").status_code == 202  # and its one sample
@@ -72,11 +81,16 @@ def test_a_summary_counts_withdrawn_classes_and_samples_apart(client, worker, da
     summary = backup(settings.sqlalchemy_url, tmp_path / "b.db")
     assert summary.classes == dataset.n_classes + 1 and summary.enrolled_samples == 1
     assert (summary.withdrawn_classes, summary.withdrawn_samples) == (1, 2)
-    assert f"{dataset.n_classes + 1} classes, 1 enrolled samples (withdrawn: 1 classes, 2 samples)" in str(summary)
+    assert (
+        f"{dataset.n_classes + 1} classes, 1 enrolled samples (withdrawn: 1 classes, 2 samples)"
+        in str(summary)
+    )
 
 
 @sqlite_only
-def test_a_backup_during_enrolments_is_consistent(client, worker, dataset, sample, settings, tmp_path):
+def test_a_backup_during_enrolments_is_consistent(
+    client, worker, dataset, sample, settings, tmp_path
+):
     stop = threading.Event()
 
     def enrol_until_stopped():
@@ -99,24 +113,31 @@ def test_a_backup_during_enrolments_is_consistent(client, worker, dataset, sampl
 
 
 @sqlite_only
-def test_a_restore_is_refused_while_the_service_has_the_store_open(client, worker, dataset, sample,
-                                                                    settings, tmp_path):
+def test_a_restore_is_refused_while_the_service_has_the_store_open(
+    client, worker, dataset, sample, settings, tmp_path
+):
     out = tmp_path / "b.db"
     backup(settings.sqlalchemy_url, out)
     enrol(client, worker, dataset, "cup", 0, sample)  # the live store moves on
     before = snapshot(client)
-    with pytest.raises(StoreBackupError, match="nothing was restored: .* in use by a running API process"):
+    with pytest.raises(
+        StoreBackupError, match="nothing was restored: .* in use by a running API process"
+    ):
         restore(out, settings.sqlalchemy_url, replace=True)
     assert snapshot(client) == before  # untouched: the cup is still there, and still served
 
 
-def test_replace_puts_the_backup_over_a_stopped_service_s_store(base_model, dataset, sample, tmp_path):
+def test_replace_puts_the_backup_over_a_stopped_service_s_store(
+    base_model, dataset, sample, tmp_path
+):
     settings = quick_settings(tmp_path / "data")
     with TestClient(create_app(settings, trainer=lambda: base_model)) as client:
         summary = backup(settings.sqlalchemy_url, tmp_path / "b.db")
         from worker import Worker
 
-        enrol(client, Worker(settings, client.app.state.service.sessions), dataset, "cup", 0, sample)
+        enrol(
+            client, Worker(settings, client.app.state.service.sessions), dataset, "cup", 0, sample
+        )
     assert restore(tmp_path / "b.db", settings.sqlalchemy_url, replace=True) == summary
     assert check_store(settings.sqlalchemy_url) == []
     with TestClient(create_app(settings, trainer=lambda: base_model)) as client:
@@ -127,13 +148,21 @@ def test_a_killed_process_does_not_hold_the_store(tmp_path):
     """The kernel drops the lock of a process that dies, even by SIGKILL."""
     url = f"sqlite:///{tmp_path / 'tactile.db'}"
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time; from app.store.in_use import opened_by_service\n"
-         f"with opened_by_service({url!r}):\n print('held', flush=True); time.sleep(600)"],
-        stdout=subprocess.PIPE, text=True)
+        [
+            sys.executable,
+            "-c",
+            "import sys, time; from app.store.in_use import opened_by_service\n"
+            f"with opened_by_service({url!r}):\n print('held', flush=True); time.sleep(600)",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert holder.stdout.readline().strip() == "held"
-        with pytest.raises(StoreInUseError, match="in use by a running API process or worker"), \
-                closed_to_service(url):
+        with (
+            pytest.raises(StoreInUseError, match="in use by a running API process or worker"),
+            closed_to_service(url),
+        ):
             pass
     finally:
         holder.kill()
@@ -196,9 +225,13 @@ def test_cli_check_names_the_problem_and_fails(store, settings, monkeypatch, cap
     assert "passes every check" in capsys.readouterr().out
     with sessions.begin() as s:
         head = repo.bundle_data(s, repo.active_version(s).bundle_sha256)
-        s.execute(delete(Bundle).where(Bundle.sha256 == next(iter(bundle.part_refs(head).values()))))
+        s.execute(
+            delete(Bundle).where(Bundle.sha256 == next(iter(bundle.part_refs(head).values())))
+        )
     assert cli(["store", "check"]) == 1
-    assert "problem: version 1 refers to bundle parts that are not stored" in capsys.readouterr().out
+    assert (
+        "problem: version 1 refers to bundle parts that are not stored" in capsys.readouterr().out
+    )
 
 
 @sqlite_only
@@ -210,4 +243,7 @@ def test_cli_backs_up_and_restores(client, settings, monkeypatch, capsys, tmp_pa
     assert "exists already" in capsys.readouterr().err
     monkeypatch.setenv("TACTILE_DATABASE_URL", f"sqlite:///{tmp_path / 'other.db'}")
     assert cli(["store", "restore", str(tmp_path / "b.db")]) == 0
-    assert "restored" in capsys.readouterr().out and check_store(f"sqlite:///{tmp_path / 'other.db'}") == []
+    assert (
+        "restored" in capsys.readouterr().out
+        and check_store(f"sqlite:///{tmp_path / 'other.db'}") == []
+    )

@@ -79,7 +79,9 @@ def test_the_cache_keeps_only_the_served_models_parts(two_versions, base_model):
     assert len(cache) == 0
 
 
-def test_exported_files_are_joined_once_per_version_and_the_oldest_leaves(two_versions, monkeypatch):
+def test_exported_files_are_joined_once_per_version_and_the_oldest_leaves(
+    two_versions, monkeypatch
+):
     sessions, v1, v2, _ = two_versions
     joined = []
     real_join = bundle.join
@@ -100,5 +102,9 @@ def test_the_reliability_check_finds_a_version_whose_parts_are_gone(store, setti
     assert check_store(settings.sqlalchemy_url) == []
     with sessions.begin() as s:
         head = repo.bundle_data(s, repo.active_version(s).bundle_sha256)
-        s.execute(delete(Bundle).where(Bundle.sha256 == next(iter(bundle.part_refs(head).values()))))
-    assert check_store(settings.sqlalchemy_url) == ["version 1 refers to bundle parts that are not stored"]
+        s.execute(
+            delete(Bundle).where(Bundle.sha256 == next(iter(bundle.part_refs(head).values())))
+        )
+    assert check_store(settings.sqlalchemy_url) == [
+        "version 1 refers to bundle parts that are not stored"
+    ]

@@ -35,7 +35,11 @@ def test_old_versions_go_with_the_bundle_rows_only_they_used(six_versions):
         assert stored == used_bundles(s)  # nothing unused left, nothing used gone
         assert pruned.bundles == before - len(stored) > 3  # three heads and their own parts
         assert pruned.bytes == size_before - s.scalar(select(func.sum(Bundle.size)))
-        for version, names in ((1, []), (5, ["c0", "c1", "c2", "c3"]), (6, [f"c{i}" for i in range(5)])):
+        for version, names in (
+            (1, []),
+            (5, ["c0", "c1", "c2", "c3"]),
+            (6, [f"c{i}" for i in range(5)]),
+        ):
             model = bundles.load_model(s, repo.get_version(s, version).bundle_sha256)
             assert model.registry.novel_names == names
 
@@ -48,7 +52,10 @@ def test_the_active_version_stays_after_a_rollback(six_versions):
         assert retention.prune(s, keep=2).versions == [2, 4]
     with sessions() as s:
         assert repo.active_version_number(s) == 3
-        assert bundles.load_model(s, repo.get_version(s, 3).bundle_sha256).registry.novel_names == ["c0", "c1"]
+        assert bundles.load_model(s, repo.get_version(s, 3).bundle_sha256).registry.novel_names == [
+            "c0",
+            "c1",
+        ]
 
 
 def test_nothing_goes_within_the_keep_or_the_slack(six_versions):
@@ -66,8 +73,11 @@ def test_a_kept_version_with_a_damaged_bundle_stops_pruning(six_versions):
     """Its parts are unknown, so which rows are unused is unknown: nothing is deleted."""
     sessions = six_versions
     with sessions.begin() as s:
-        s.execute(update(Bundle).where(Bundle.sha256 == repo.get_version(s, 5).bundle_sha256)
-                  .values(data=b"damaged"))
+        s.execute(
+            update(Bundle)
+            .where(Bundle.sha256 == repo.get_version(s, 5).bundle_sha256)
+            .values(data=b"damaged")
+        )
     with sessions() as s:
         rows = s.scalar(select(func.count()).select_from(Bundle))
     with pytest.raises(BundleError, match="damaged"):
@@ -99,11 +109,18 @@ def test_remembered_heads_give_the_same_result(six_versions, base_model):
         assert set(refs) == set(s.scalars(select(ModelVersion.bundle_sha256)))
         newer = model.add_novel_classes(["x"], np.asarray(unused_vectors(dataset, 1), np.float32))
         row = repo.add_version(
-            s, method=newer.method, reason="update", base_version=6,
+            s,
+            method=newer.method,
+            reason="update",
+            base_version=6,
             bundle_sha256=bundles.store_model(s, bundle.split(newer, SMALL_PARTS)),
-            input_shape=list(newer.input_shape), metrics={}, classes=model_classes(newer),
+            input_shape=list(newer.input_shape),
+            metrics={},
+            classes=model_classes(newer),
         )
         repo.activate(s, row.version)
         assert retention.prune(s, keep=2, part_refs=refs).versions == [3, 4, 5]
         assert set(s.scalars(select(Bundle.sha256))) == used_bundles(s)
-        assert set(refs) == set(s.scalars(select(ModelVersion.bundle_sha256)))  # forgets pruned heads
+        assert set(refs) == set(
+            s.scalars(select(ModelVersion.bundle_sha256))
+        )  # forgets pruned heads

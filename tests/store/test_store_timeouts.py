@@ -22,7 +22,9 @@ def test_sqlite_busy_timeout_follows_the_setting(tmp_path):
 
 
 @pytest.mark.postgres
-@pytest.mark.skipif(not PG_URL, reason="no PostgreSQL reachable (TACTILE_TEST_POSTGRES_URL or the local server)")
+@pytest.mark.skipif(
+    not PG_URL, reason="no PostgreSQL reachable (TACTILE_TEST_POSTGRES_URL or the local server)"
+)
 def test_postgres_statements_and_lock_waits_are_bounded():
     engine = make_engine(PG_URL, timeout=0.3)
     with engine.connect() as conn:

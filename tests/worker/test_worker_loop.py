@@ -299,7 +299,9 @@ def test_old_versions_are_pruned_and_the_kept_ones_still_roll_back(client, app, 
     from worker import Worker
 
     settings = app.state.service.settings.model_copy(update={"keep_versions": 2})
-    worker = Worker(settings, app.state.service.sessions, on_activate=app.state.service.holder.serve)
+    worker = Worker(
+        settings, app.state.service.sessions, on_activate=app.state.service.holder.serve
+    )
     for i, name in enumerate(["a", "b", "c", "d"]):
         register(client, dataset, name, i)
         assert worker.run_once() == 1

@@ -19,7 +19,9 @@ def served(app):
     return app.state.service.holder.current.recognizer
 
 
-def test_the_served_model_takes_the_new_attributes_and_keeps_the_samples(client, app, worker, dataset):
+def test_the_served_model_takes_the_new_attributes_and_keeps_the_samples(
+    client, app, worker, dataset
+):
     cid = register(client, dataset, "mug", 0)["class"]["id"]
     add_sample(client, cid, dataset.samples[0] + 0.01)
     worker.run_once()
@@ -45,7 +47,9 @@ def test_the_same_description_again_changes_no_model(client, app, worker, datase
     assert client.get("/v1/models/active").json()["version"] == 2
 
 
-def test_a_redescription_of_what_is_gone_or_never_enrolled_fails(client, worker, dataset, monkeypatch):
+def test_a_redescription_of_what_is_gone_or_never_enrolled_fails(
+    client, worker, dataset, monkeypatch
+):
     mug = register(client, dataset, "mug", 0)["class"]["id"]
     update = redescribe(client, mug, unused_vectors(dataset, 3)[2])
     assert client.delete(f"/v1/classes/{mug}").status_code == 202
@@ -55,8 +59,11 @@ def test_a_redescription_of_what_is_gone_or_never_enrolled_fails(client, worker,
 
     cup = register(client, dataset, "cup", 1)
     with monkeypatch.context() as m:  # its registration fails
-        m.setattr(TactileRecognizer, "add_novel_classes",
-                  lambda *a, **k: (_ for _ in ()).throw(RuntimeError("out of memory")))
+        m.setattr(
+            TactileRecognizer,
+            "add_novel_classes",
+            lambda *a, **k: (_ for _ in ()).throw(RuntimeError("out of memory")),
+        )
         worker.run_once()
     assert job(client, cup["job"]["id"])["status"] == "failed"
     update = redescribe(client, cup["class"]["id"], unused_vectors(dataset, 4)[3])

@@ -104,7 +104,10 @@ def test_a_sample_withdrawn_before_training_fails_its_own_job_only(client, app, 
     withdraw(client, f"/v1/classes/{cid}/samples/{wrong['sample_id']}")
     worker.run_once()
     failed = job(client, wrong["job"]["id"])
-    assert failed["status"] == "failed" and f"sample {wrong['sample_id']} was withdrawn" in failed["error"]
+    assert (
+        failed["status"] == "failed"
+        and f"sample {wrong['sample_id']} was withdrawn" in failed["error"]
+    )
     assert job(client, created["job"]["id"])["status"] == "succeeded"
     assert "mug" in served(app).registry.novel_names
     assert "mug" not in served(app).registry.novel_samples
@@ -130,14 +133,18 @@ def test_a_promoted_class_below_the_threshold_again_is_novel_again(client, app, 
     assert client.get("/v1/models/active").json()["reason"] == "withdrawal"
 
 
-def test_best_withdraws_from_its_novel_part_without_fitting_again(best_service, best_base, monkeypatch):
+def test_best_withdraws_from_its_novel_part_without_fitting_again(
+    best_service, best_base, monkeypatch
+):
     client, app, worker = best_service
     base, dataset = best_base
     mug = register(client, dataset, "mug", 0)["class"]["id"]
     cup = register(client, dataset, "cup", 1)["class"]["id"]
     bowl = register(client, dataset, "bowl", 2)["class"]["id"]
-    shots = {name: [add_sample(client, cid, dataset.samples[k] + 0.01)["sample_id"] for k in (3, 4)]
-             for name, cid in (("mug", mug), ("cup", cup))}
+    shots = {
+        name: [add_sample(client, cid, dataset.samples[k] + 0.01)["sample_id"] for k in (3, 4)]
+        for name, cid in (("mug", mug), ("cup", cup))
+    }
     worker.run_once()
 
     def no_fit(*args, **kwargs):
@@ -151,8 +158,10 @@ def test_best_withdraws_from_its_novel_part_without_fitting_again(best_service, 
     assert active["reason"] == "withdrawal" and active["class_count"] == dataset.n_classes + 2
 
     # the same model as one built from scratch on what is left
-    reference = base.add_novel_classes(["mug", "cup"], np.stack([
-        unused_vectors(dataset, 2)[0], unused_vectors(dataset, 2)[1]]).astype(np.float32))
+    reference = base.add_novel_classes(
+        ["mug", "cup"],
+        np.stack([unused_vectors(dataset, 2)[0], unused_vectors(dataset, 2)[1]]).astype(np.float32),
+    )
     reference = reference.add_one_shot("mug", dataset.samples[4:5] + 0.01)
     reference = reference.add_one_shot("cup", dataset.samples[3:5] + 0.01)
     served = app.state.service.holder.current.recognizer

@@ -6,7 +6,9 @@ from app.api.schemas import AttributeList
 from app.store import repo
 
 router = APIRouter(
-    prefix="/v1/attributes", tags=["attributes"], dependencies=[ReadAccess],
+    prefix="/v1/attributes",
+    tags=["attributes"],
+    dependencies=[ReadAccess],
     responses=problems.responses(401, 403, 429),
 )
 

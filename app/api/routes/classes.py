@@ -43,9 +43,13 @@ def class_out(
 ) -> ClassOut:
     served = model is not None and cls.name in model.recognizer.registry.all_names
     return ClassOut(
-        id=cls.id, name=cls.name, kind=cls.kind,
+        id=cls.id,
+        name=cls.name,
+        kind=cls.kind,
         attributes=repo.attribute_labels(cls.attribute_key, vocabulary),
-        n_samples=n_samples, created_at=cls.created_at, in_active_model=served,
+        n_samples=n_samples,
+        created_at=cls.created_at,
+        in_active_model=served,
     )
 
 
@@ -53,15 +57,21 @@ def class_out(
 def list_classes(session: SessionDep, model: ModelDep, page: PageDep) -> ClassList:
     """Known and novel classes by id, a page at a time, and whether the model now
     serving covers each."""
-    rows, next_after = page.cut(repo.list_classes(session, page.after, page.limit + 1), lambda c: c.id)
+    rows, next_after = page.cut(
+        repo.list_classes(session, page.after, page.limit + 1), lambda c: c.id
+    )
     vocab = repo.attribute_names(session)
     counts = repo.sample_counts(session, [c.id for c in rows])
-    return ClassList(classes=[class_out(c, vocab, counts.get(c.id, 0), model) for c in rows],
-                     next_after=next_after)
+    return ClassList(
+        classes=[class_out(c, vocab, counts.get(c.id, 0), model) for c in rows],
+        next_after=next_after,
+    )
 
 
 @router.get(
-    "/{class_id}", response_model=ClassOut, dependencies=[ReadAccess],
+    "/{class_id}",
+    response_model=ClassOut,
+    dependencies=[ReadAccess],
     responses=problems.responses(404),
 )
 def get_class(class_id: RowId, session: SessionDep, model: ModelDep) -> ClassOut:
@@ -73,12 +83,20 @@ def get_class(class_id: RowId, session: SessionDep, model: ModelDep) -> ClassOut
 
 
 @router.post(
-    "", status_code=202, response_model=ClassCreated, dependencies=[EnrollAccess, JsonBody],
+    "",
+    status_code=202,
+    response_model=ClassCreated,
+    dependencies=[EnrollAccess, JsonBody],
     responses=problems.responses(409, 415),
 )
 def register_class(
-    body: ClassCreate, session: SessionDep, model: ModelDep, metrics: MetricsDep,
-    response: Response, idempotency: IdempotencyDep, principal: Enroller,
+    body: ClassCreate,
+    session: SessionDep,
+    model: ModelDep,
+    metrics: MetricsDep,
+    response: Response,
+    idempotency: IdempotencyDep,
+    principal: Enroller,
 ) -> ClassCreated:
     """Register a novel class by its attributes (zero-shot). The class and its job are
     committed before the 202; poll the job until the class is in the active model.
@@ -94,11 +112,16 @@ def register_class(
     if cls is None:
         _check_unique(session, body.name, key, field)
     # a concurrent registration of this name or vector (or a retry with this key) may win
-    with idempotency.writing(session, recheck=lambda: _check_unique(session, body.name, key, field)):
+    with idempotency.writing(
+        session, recheck=lambda: _check_unique(session, body.name, key, field)
+    ):
         if cls is None:
             withdrawn = repo.class_by_name(session, body.name, withdrawn=True)
-            cls = (repo.revive_class(session, withdrawn, key) if withdrawn is not None
-                   else repo.add_class(session, body.name, key))
+            cls = (
+                repo.revive_class(session, withdrawn, key)
+                if withdrawn is not None
+                else repo.add_class(session, body.name, key)
+            )
         job = repo.add_job(session, JobKind.REGISTER_CLASS, cls.id, requested_by=principal.id)
         out = _class_accepted(session, cls, job, model)
         idempotency.accept(session, out, job.id, response)
@@ -107,12 +130,21 @@ def register_class(
 
 
 @router.patch(
-    "/{class_id}", status_code=202, response_model=ClassCreated,
-    dependencies=[EnrollAccess, JsonBody], responses=problems.responses(404, 409, 415),
+    "/{class_id}",
+    status_code=202,
+    response_model=ClassCreated,
+    dependencies=[EnrollAccess, JsonBody],
+    responses=problems.responses(404, 409, 415),
 )
 def redescribe_class(
-    class_id: RowId, body: ClassDescription, session: SessionDep, model: ModelDep, metrics: MetricsDep,
-    response: Response, idempotency: IdempotencyDep, principal: Enroller,
+    class_id: RowId,
+    body: ClassDescription,
+    session: SessionDep,
+    model: ModelDep,
+    metrics: MetricsDep,
+    response: Response,
+    idempotency: IdempotencyDep,
+    principal: Enroller,
 ) -> ClassCreated:
     """Correct the attributes an enrolled class was described by (say, *hard* where the
     object is *soft*), keeping the samples robots enrolled for it. Committed before the
@@ -126,7 +158,9 @@ def redescribe_class(
     field = "attributes" if body.attributes is not None else "attribute_vector"
     _check_unique_vector(session, key, field, other_than=cls.id)
     # a concurrent registration of this vector (or a retry with this key) may win
-    with idempotency.writing(session, recheck=lambda: _check_unique_vector(session, key, field, cls.id)):
+    with idempotency.writing(
+        session, recheck=lambda: _check_unique_vector(session, key, field, cls.id)
+    ):
         repo.redescribe_class(session, cls, key)
         job = repo.add_job(session, JobKind.UPDATE_CLASS, cls.id, requested_by=principal.id)
         out = _class_accepted(session, cls, job, model)
@@ -135,10 +169,14 @@ def redescribe_class(
     return out
 
 
-def _class_accepted(session: Session, cls: ObjectClass, job: Job, model: LoadedModel) -> ClassCreated:
+def _class_accepted(
+    session: Session, cls: ObjectClass, job: Job, model: LoadedModel
+) -> ClassCreated:
     n = repo.sample_counts(session, [cls.id]).get(cls.id, 0)
-    return ClassCreated(class_=class_out(cls, repo.attribute_names(session), n, model),
-                        job=JobOut.model_validate(job))
+    return ClassCreated(
+        class_=class_out(cls, repo.attribute_names(session), n, model),
+        job=JobOut.model_validate(job),
+    )
 
 
 def _enrolled_class(session: Session, class_id: int, done: str) -> ObjectClass:
@@ -148,8 +186,10 @@ def _enrolled_class(session: Session, class_id: int, done: str) -> ObjectClass:
         raise not_found("class", "class_id", class_id)
     if cls.origin != Origin.ENROLLED:
         raise Problem(
-            409, f"class '{cls.name}' comes from the training dataset; only enrolled classes "
-            f"can be {done}", "class_id",
+            409,
+            f"class '{cls.name}' comes from the training dataset; only enrolled classes "
+            f"can be {done}",
+            "class_id",
         )
     return cls
 
@@ -176,7 +216,9 @@ def _check_unique(session: Session, name: str, key: str, field: str) -> None:
     _check_unique_vector(session, key, field)
 
 
-def _check_unique_vector(session: Session, key: str, field: str, other_than: int | None = None) -> None:
+def _check_unique_vector(
+    session: Session, key: str, field: str, other_than: int | None = None
+) -> None:
     other = repo.class_by_key(session, key, other_than)
     if other is not None:
         raise Problem(
@@ -188,12 +230,19 @@ def _check_unique_vector(session: Session, key: str, field: str, other_than: int
 
 
 @router.delete(
-    "/{class_id}", status_code=202, response_model=Withdrawal, dependencies=[EnrollAccess],
+    "/{class_id}",
+    status_code=202,
+    response_model=Withdrawal,
+    dependencies=[EnrollAccess],
     responses=problems.responses(404, 409),
 )
 def withdraw_class(
-    class_id: RowId, session: SessionDep, metrics: MetricsDep, response: Response,
-    idempotency: IdempotencyDep, principal: Enroller,
+    class_id: RowId,
+    session: SessionDep,
+    metrics: MetricsDep,
+    response: Response,
+    idempotency: IdempotencyDep,
+    principal: Enroller,
 ) -> Withdrawal:
     """Withdraw a wrongly enrolled class with its samples. It leaves the store's live data
     at once and the served model when the job succeeds (the novel classes rebuilt, or a
@@ -204,4 +253,3 @@ def withdraw_class(
     cls = _enrolled_class(session, class_id, "withdrawn")
     repo.withdraw_class(session, cls)
     return queue_withdrawal(session, idempotency, metrics, response, principal, cls.id, None)
-

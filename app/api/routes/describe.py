@@ -14,13 +14,21 @@ router = APIRouter(prefix="/v1", tags=["describe"], responses=problems.responses
 
 
 @router.post(
-    "/describe", response_model=DescribeResponse, openapi_extra=OPENAPI_EXTRA,
+    "/describe",
+    response_model=DescribeResponse,
+    openapi_extra=OPENAPI_EXTRA,
     responses=problems.responses(409, 413, 415, 422, 503),
 )
 async def describe(
-    request: Request, recognizing: RecognizingDep,
-    same_object: Annotated[bool, Query(description="The samples are touches of one object: describe "
-                                                   "it from all of them together too (`object`).")] = False,
+    request: Request,
+    recognizing: RecognizingDep,
+    same_object: Annotated[
+        bool,
+        Query(
+            description="The samples are touches of one object: describe "
+            "it from all of them together too (`object`)."
+        ),
+    ] = False,
 ) -> DescribeResponse:
     """What each touch feels like: the probability of every attribute, from the served
     model's attribute classifiers. For an object the robot found novel that nobody has
@@ -35,8 +43,11 @@ async def describe(
     with blame("samples"):  # a method without attribute classifiers: 409, naming the model
         proba = await run_in_threadpool(rec.attribute_proba, samples)
     names = rec.registry.attribute_names
-    return DescribeResponse(model_version=model.version, results=[_description(p, names) for p in proba],
-                            object=_description(proba.mean(axis=0), names) if same_object else None)
+    return DescribeResponse(
+        model_version=model.version,
+        results=[_description(p, names) for p in proba],
+        object=_description(proba.mean(axis=0), names) if same_object else None,
+    )
 
 
 def suggestion(proba: np.ndarray) -> np.ndarray:
@@ -50,6 +61,8 @@ def suggestion(proba: np.ndarray) -> np.ndarray:
 
 def _description(proba: np.ndarray, names: list[str]) -> Description:
     return Description(
-        attributes=[AttributeScore(name=names[i], probability=float(proba[i])) for i in np.argsort(-proba)],
+        attributes=[
+            AttributeScore(name=names[i], probability=float(proba[i])) for i in np.argsort(-proba)
+        ],
         suggested=[n for n, keep in zip(names, suggestion(proba), strict=True) if keep],
     )

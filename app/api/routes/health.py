@@ -36,8 +36,11 @@ def readyz(session: SessionDep, holder: HolderDep) -> Health:
 
 
 @router.get(
-    "/metrics", response_class=Response,
-    responses={200: {"content": {CONTENT_TYPE_LATEST: {}}, "description": "Prometheus text format"}},
+    "/metrics",
+    response_class=Response,
+    responses={
+        200: {"content": {CONTENT_TYPE_LATEST: {}}, "description": "Prometheus text format"}
+    },
 )
 def metrics(request: Request, session: SessionDep, metrics: MetricsDep) -> Response:
     """Prometheus metrics: requests, latencies, recognitions, enrollments, jobs, model version

@@ -14,18 +14,24 @@ from app.store.enums import JobKind, JobStatus
 from app.store.models import Job
 
 router = APIRouter(
-    prefix="/v1/jobs", tags=["jobs"], dependencies=[ReadAccess],
+    prefix="/v1/jobs",
+    tags=["jobs"],
+    dependencies=[ReadAccess],
     responses=problems.responses(401, 403, 404, 422, 429),
 )
 
 MAX_WAIT_SECONDS = 20  # how long a request may hold its event (a shutdown answers it at once)
 
-WaitSeconds = Annotated[float, Query(
-    ge=0, le=MAX_WAIT_SECONDS,
-    description="Seconds to wait for the job to finish before answering (long polling): the "
-    "answer comes as soon as it has succeeded or failed, or after this long (or when the API "
-    "process shuts down) with its status then. One waiting request replaces many polls.",
-)]
+WaitSeconds = Annotated[
+    float,
+    Query(
+        ge=0,
+        le=MAX_WAIT_SECONDS,
+        description="Seconds to wait for the job to finish before answering (long polling): the "
+        "answer comes as soon as it has succeeded or failed, or after this long (or when the API "
+        "process shuts down) with its status then. One waiting request replaces many polls.",
+    ),
+]
 
 
 def _read_job(session: Session, job_id: int) -> Job | None:
@@ -36,21 +42,30 @@ def _read_job(session: Session, job_id: int) -> Job | None:
 
 @router.get("", response_model=JobList)
 def list_jobs(
-    session: SessionDep, page: PageDep,
+    session: SessionDep,
+    page: PageDep,
     status: Annotated[JobStatus | None, Query(description="Only jobs in this status.")] = None,
     kind: Annotated[JobKind | None, Query(description="Only jobs of this kind.")] = None,
-    class_id: Annotated[int | None, Query(ge=1, le=MAX_ROW_ID, description="Only jobs of this class.")] = None,
+    class_id: Annotated[
+        int | None, Query(ge=1, le=MAX_ROW_ID, description="Only jobs of this class.")
+    ] = None,
 ) -> JobList:
     """Jobs by id, a page at a time, e.g. ``?status=failed`` for the enrolments that did not
     make it and why, or ``?class_id=`` for one class's history."""
-    rows = repo.list_jobs(session, page.after, page.limit + 1, status=status, kind=kind, class_id=class_id)
+    rows = repo.list_jobs(
+        session, page.after, page.limit + 1, status=status, kind=kind, class_id=class_id
+    )
     rows, next_after = page.cut(rows, lambda j: j.id)
     return JobList(jobs=[JobOut.model_validate(j) for j in rows], next_after=next_after)
 
 
 @router.get("/{job_id}", response_model=JobOut)
 async def get_job(
-    job_id: RowId, session: SessionDep, holder: HolderDep, watch: JobWatchDep, wait: WaitSeconds = 0,
+    job_id: RowId,
+    session: SessionDep,
+    holder: HolderDep,
+    watch: JobWatchDep,
+    wait: WaitSeconds = 0,
 ) -> JobOut:
     """An enrollment's progress: queued, running, succeeded (with the model version
     that includes it) or failed (with the error)."""

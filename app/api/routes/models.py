@@ -12,20 +12,25 @@ from app.store import bundles, repo
 from app.store.bundles import ExportCache
 from app.store.models import ModelVersion
 
-router = APIRouter(prefix="/v1/models", tags=["models"], responses=problems.responses(401, 403, 422, 429))
+router = APIRouter(
+    prefix="/v1/models", tags=["models"], responses=problems.responses(401, 403, 422, 429)
+)
 
 
 @router.get("", response_model=ModelList, dependencies=[ReadAccess])
 def list_models(session: SessionDep, page: PageDep) -> ModelList:
     """The model versions the store keeps (``TACTILE_KEEP_VERSIONS``), oldest first, a
     page at a time, each without its class list (``GET /v1/models/{version}`` has it)."""
-    rows, next_after = page.cut(repo.list_versions(session, page.after, page.limit + 1, summary=True),
-                                lambda v: v.version)
+    rows, next_after = page.cut(
+        repo.list_versions(session, page.after, page.limit + 1, summary=True), lambda v: v.version
+    )
     return ModelList(models=[ModelSummary.model_validate(v) for v in rows], next_after=next_after)
 
 
 @router.get(
-    "/active", response_model=ModelOut, dependencies=[ReadAccess],
+    "/active",
+    response_model=ModelOut,
+    dependencies=[ReadAccess],
     responses=problems.responses(404),
 )
 def active_model(session: SessionDep) -> ModelOut:
@@ -36,7 +41,9 @@ def active_model(session: SessionDep) -> ModelOut:
 
 
 @router.get(
-    "/{version}", response_model=ModelOut, dependencies=[ReadAccess],
+    "/{version}",
+    response_model=ModelOut,
+    dependencies=[ReadAccess],
     responses=problems.responses(404),
 )
 def get_model(version: RowId, session: SessionDep) -> ModelOut:
@@ -49,19 +56,25 @@ def get_model(version: RowId, session: SessionDep) -> ModelOut:
 
 BUNDLE_MEDIA_TYPE = "application/zip"
 BUNDLE_RESPONSES = {
-    200: {"description": "The model bundle (`tactile-zsl recognize --model FILE` reads it); "
-                         "`X-Model-Version` names its version",
-          "content": {BUNDLE_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}}}},
+    200: {
+        "description": "The model bundle (`tactile-zsl recognize --model FILE` reads it); "
+        "`X-Model-Version` names its version",
+        "content": {BUNDLE_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}}},
+    },
     304: {"description": "The client's copy, named by `If-None-Match`, is this version already"},
     **problems.responses(404, 409),
 }
 IfNoneMatch = Annotated[str | None, Header(description="the ETag of a bundle the client holds")]
 
 
-@router.get("/active/bundle", dependencies=[ReadAccess], response_class=Response,
-            responses=BUNDLE_RESPONSES)
-def download_active_model(session: SessionDep, exports: ExportsDep, if_none_match: IfNoneMatch = None,
-                          ) -> Response:
+@router.get(
+    "/active/bundle", dependencies=[ReadAccess], response_class=Response, responses=BUNDLE_RESPONSES
+)
+def download_active_model(
+    session: SessionDep,
+    exports: ExportsDep,
+    if_none_match: IfNoneMatch = None,
+) -> Response:
     """The active version as a single bundle file, as `GET /v1/models/{version}/bundle`
     gives it: one request for a robot to stay current (304 while its copy is the active one)."""
     row = repo.active_version(session)
@@ -70,10 +83,15 @@ def download_active_model(session: SessionDep, exports: ExportsDep, if_none_matc
     return _bundle_response(session, exports, row, if_none_match)
 
 
-@router.get("/{version}/bundle", dependencies=[ReadAccess], response_class=Response,
-            responses=BUNDLE_RESPONSES)
-def download_model(version: RowId, session: SessionDep, exports: ExportsDep,
-                   if_none_match: IfNoneMatch = None) -> Response:
+@router.get(
+    "/{version}/bundle",
+    dependencies=[ReadAccess],
+    response_class=Response,
+    responses=BUNDLE_RESPONSES,
+)
+def download_model(
+    version: RowId, session: SessionDep, exports: ExportsDep, if_none_match: IfNoneMatch = None
+) -> Response:
     """One stored model version as a single self-contained bundle file, to recognise on a
     robot without the network (`tactile-zsl recognize --model FILE SAMPLES`) with exactly
     the answers this service gives. The `ETag` names the version's content: send it back
@@ -84,8 +102,9 @@ def download_model(version: RowId, session: SessionDep, exports: ExportsDep,
     return _bundle_response(session, exports, row, if_none_match)
 
 
-def _bundle_response(session: Session, exports: ExportCache, row: ModelVersion,
-                     if_none_match: str | None) -> Response:
+def _bundle_response(
+    session: Session, exports: ExportCache, row: ModelVersion, if_none_match: str | None
+) -> Response:
     headers = {"ETag": f'"{row.bundle_sha256}"', "X-Model-Version": str(row.version)}
     if if_none_match is not None and _matches(if_none_match, headers["ETag"]):
         return Response(status_code=304, headers=headers)
@@ -93,8 +112,14 @@ def _bundle_response(session: Session, exports: ExportCache, row: ModelVersion,
         data = exports.export(session, row.bundle_sha256)
     except BundleError as exc:
         raise Problem(409, f"version {row.version} cannot be exported: {exc}", "version") from None
-    return Response(data, media_type=BUNDLE_MEDIA_TYPE, headers={
-        **headers, "Content-Disposition": f'attachment; filename="tactile-model-v{row.version}.bundle"'})
+    return Response(
+        data,
+        media_type=BUNDLE_MEDIA_TYPE,
+        headers={
+            **headers,
+            "Content-Disposition": f'attachment; filename="tactile-model-v{row.version}.bundle"',
+        },
+    )
 
 
 def _matches(if_none_match: str, etag: str) -> bool:
@@ -104,7 +129,9 @@ def _matches(if_none_match: str, etag: str) -> bool:
 
 
 @router.post(
-    "/{version}/activate", response_model=ModelOut, dependencies=[AdminAccess],
+    "/{version}/activate",
+    response_model=ModelOut,
+    dependencies=[AdminAccess],
     responses=problems.responses(404, 409),
 )
 def activate_model(version: RowId, session: SessionDep, holder: HolderDep) -> ModelOut:

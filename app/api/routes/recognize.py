@@ -29,17 +29,20 @@ OPENAPI_EXTRA = {
             JSON: {"schema": {"$ref": "#/components/schemas/RecognizeRequest"}},
             NPY: {
                 "schema": {
-                    "type": "string", "format": "binary",
+                    "type": "string",
+                    "format": "binary",
                     "description": "A float array (N, *input_shape) saved with numpy.save.",
                 },
             },
         },
-    }
+    },
 }
 
 
 @router.post(
-    "/recognize", response_model=RecognizeResponse, openapi_extra=OPENAPI_EXTRA,
+    "/recognize",
+    response_model=RecognizeResponse,
+    openapi_extra=OPENAPI_EXTRA,
     responses=problems.responses(413, 415, 422, 503),
 )
 async def recognize(request: Request, recognizing: RecognizingDep) -> Response:
@@ -52,11 +55,16 @@ async def recognize(request: Request, recognizing: RecognizingDep) -> Response:
     samples, n = await read_samples(request, model.recognizer.input_shape, service.batch_limit)
     with blame("samples"):
         results = await service.recognize(model, samples, n)
-    return Response(_to_json(model.version, results, model.class_ids), media_type="application/json")
+    return Response(
+        _to_json(model.version, results, model.class_ids), media_type="application/json"
+    )
 
 
-async def read_samples(request: Request, input_shape: tuple[int, ...], batch_limit: int,
-                       ) -> tuple[np.ndarray | list, int]:
+async def read_samples(
+    request: Request,
+    input_shape: tuple[int, ...],
+    batch_limit: int,
+) -> tuple[np.ndarray | list, int]:
     """The body's samples (JSON, or .npy by its Content-Type) and how many there are, at
     most ``batch_limit``; the model validates them."""
     content_type = media_type(request, (JSON, NPY))
@@ -65,8 +73,11 @@ async def read_samples(request: Request, input_shape: tuple[int, ...], batch_lim
         samples = _from_npy(body)
         n = 1 if samples.ndim <= len(input_shape) else len(samples)  # one bare sample
     else:
-        samples = await run_in_threadpool(_from_json, body, input_shape) \
-            if len(body) > PARSE_INLINE_BYTES else _from_json(body, input_shape)
+        samples = (
+            await run_in_threadpool(_from_json, body, input_shape)
+            if len(body) > PARSE_INLINE_BYTES
+            else _from_json(body, input_shape)
+        )
         n = len(samples)
     if n > batch_limit:
         raise Problem(422, f"{n} samples is more than the batch limit of {batch_limit}", "samples")
@@ -113,11 +124,18 @@ def _one(sample: list, i: int, input_shape: tuple[int, ...]) -> np.ndarray:
         with np.errstate(over="ignore"):  # beyond float32 is inf: rejected by name later
             x = np.asarray(sample, dtype=np.float32)
     except ValueError:  # ragged nesting
-        raise Problem(422, f"samples[{i}]: its rows have different lengths; one sample has shape "
-                           f"{list(input_shape)}", f"samples[{i}]") from None
+        raise Problem(
+            422,
+            f"samples[{i}]: its rows have different lengths; one sample has shape "
+            f"{list(input_shape)}",
+            f"samples[{i}]",
+        ) from None
     if x.shape != input_shape:
-        raise Problem(422, f"samples[{i}]: shape {list(x.shape)}, where one sample has shape "
-                           f"{list(input_shape)}", f"samples[{i}]")
+        raise Problem(
+            422,
+            f"samples[{i}]: shape {list(x.shape)}, where one sample has shape {list(input_shape)}",
+            f"samples[{i}]",
+        )
     return x
 
 
@@ -127,10 +145,14 @@ def _from_npy(body: bytes) -> np.ndarray:
     stream = io.BytesIO(body)
     try:
         version = np.lib.format.read_magic(stream)
-        read_header = {(1, 0): np.lib.format.read_array_header_1_0,
-                       (2, 0): np.lib.format.read_array_header_2_0}.get(version)
+        read_header = {
+            (1, 0): np.lib.format.read_array_header_1_0,
+            (2, 0): np.lib.format.read_array_header_2_0,
+        }.get(version)
         if read_header is None:
-            raise ValueError(f".npy format version {version[0]}.{version[1]} is not supported (use 1.0 or 2.0)")
+            raise ValueError(
+                f".npy format version {version[0]}.{version[1]} is not supported (use 1.0 or 2.0)"
+            )
         shape, fortran_order, dtype = read_header(stream)
     except (ValueError, EOFError, OSError) as exc:
         raise Problem(422, f"not a readable .npy array: {exc}", "body") from None
@@ -139,7 +161,11 @@ def _from_npy(body: bytes) -> np.ndarray:
     count = int(np.prod(shape))
     offset = stream.tell()
     if len(body) - offset != count * dtype.itemsize:
-        raise Problem(422, f"not a readable .npy array: {len(body) - offset} bytes of data for an "
-                           f"array of shape {shape} and type {dtype}", "body")
+        raise Problem(
+            422,
+            f"not a readable .npy array: {len(body) - offset} bytes of data for an "
+            f"array of shape {shape} and type {dtype}",
+            "body",
+        )
     x = np.frombuffer(body, dtype, count, offset)  # a read-only view of the body
     return x.reshape(shape, order="F" if fortran_order else "C")

@@ -38,7 +38,9 @@ router = APIRouter(
 
 
 @router.get(
-    "/{class_id}/samples", response_model=SampleList, dependencies=[ReadAccess],
+    "/{class_id}/samples",
+    response_model=SampleList,
+    dependencies=[ReadAccess],
     responses=problems.responses(404),
 )
 def list_samples(class_id: RowId, session: SessionDep, page: PageDep) -> SampleList:
@@ -47,20 +49,30 @@ def list_samples(class_id: RowId, session: SessionDep, page: PageDep) -> SampleL
     to withdraw."""
     if repo.get_class(session, class_id) is None:
         raise not_found("class", "class_id", class_id)
-    rows, next_after = page.cut(repo.list_samples(session, class_id, page.after, page.limit + 1),
-                                lambda r: r.id)
+    rows, next_after = page.cut(
+        repo.list_samples(session, class_id, page.after, page.limit + 1), lambda r: r.id
+    )
     return SampleList(samples=[SampleOut(**r._mapping) for r in rows], next_after=next_after)
 
 
 @router.get(
-    "/{class_id}/samples/{sample_id}", response_model=SampleDetail, dependencies=[ReadAccess],
-    responses={200: {"content": {NPY: {"schema": {"type": "string", "format": "binary"}}},
-                     "description": f"The sample as JSON, or as `.npy` with `Accept: {NPY}`"},
-               **problems.responses(404)},
+    "/{class_id}/samples/{sample_id}",
+    response_model=SampleDetail,
+    dependencies=[ReadAccess],
+    responses={
+        200: {
+            "content": {NPY: {"schema": {"type": "string", "format": "binary"}}},
+            "description": f"The sample as JSON, or as `.npy` with `Accept: {NPY}`",
+        },
+        **problems.responses(404),
+    },
 )
-def get_sample(class_id: RowId, sample_id: RowId, session: SessionDep,
-               accept: Annotated[str, Header(description=f"`{NPY}` for a `.npy` body")] = "application/json",
-               ) -> SampleDetail | Response:
+def get_sample(
+    class_id: RowId,
+    sample_id: RowId,
+    session: SessionDep,
+    accept: Annotated[str, Header(description=f"`{NPY}` for a `.npy` body")] = "application/json",
+) -> SampleDetail | Response:
     """One live sample with its data, e.g. to look at an enrolment before withdrawing it,
     or to send it to `POST /v1/recognize` again. With `Accept: application/x-npy` the body
     is the sample saved with `numpy.save`, as `POST /v1/recognize` accepts it."""
@@ -79,12 +91,21 @@ def get_sample(class_id: RowId, sample_id: RowId, session: SessionDep,
 
 
 @router.post(
-    "/{class_id}/samples", status_code=202, response_model=SampleCreated,
-    dependencies=[EnrollAccess, JsonBody], responses=problems.responses(404, 409, 415),
+    "/{class_id}/samples",
+    status_code=202,
+    response_model=SampleCreated,
+    dependencies=[EnrollAccess, JsonBody],
+    responses=problems.responses(404, 409, 415),
 )
 def add_sample(
-    class_id: RowId, body: SampleCreate, session: SessionDep, model: ModelDep,
-    metrics: MetricsDep, response: Response, idempotency: IdempotencyDep, principal: Enroller,
+    class_id: RowId,
+    body: SampleCreate,
+    session: SessionDep,
+    model: ModelDep,
+    metrics: MetricsDep,
+    response: Response,
+    idempotency: IdempotencyDep,
+    principal: Enroller,
 ) -> SampleCreated:
     """Add one real sample of a novel class (one-shot learning). Stored and queued
     before the 202; the job says when a model including it is live. The answer says what
@@ -96,7 +117,8 @@ def add_sample(
         raise not_found("class", "class_id", class_id)
     if cls.kind != ClassKind.NOVEL:
         raise Problem(
-            409, f"class '{cls.name}' is a known class; samples can be added to novel classes only",
+            409,
+            f"class '{cls.name}' is a known class; samples can be added to novel classes only",
             "class_id",
         )
     rec = model.recognizer
@@ -107,8 +129,12 @@ def add_sample(
     with idempotency.writing(session):  # a concurrent retry with this key may win
         row = repo.add_sample(session, class_id, x[0])
         job = repo.add_job(session, JobKind.ADD_SAMPLE, class_id, row.id, requested_by=principal.id)
-        out = SampleCreated(sample_id=row.id, job=JobOut.model_validate(job),
-                            recognized_as=recognized_as, model_version=model.version)
+        out = SampleCreated(
+            sample_id=row.id,
+            job=JobOut.model_validate(job),
+            recognized_as=recognized_as,
+            model_version=model.version,
+        )
         idempotency.accept(session, out, job.id, response)
     metrics.enrollments.labels("sample").inc()
     return out
@@ -127,12 +153,20 @@ def one_sample(data: list, input_shape: tuple[int, ...]) -> np.ndarray:
 
 
 @router.delete(
-    "/{class_id}/samples/{sample_id}", status_code=202, response_model=Withdrawal,
-    dependencies=[EnrollAccess], responses=problems.responses(404, 409),
+    "/{class_id}/samples/{sample_id}",
+    status_code=202,
+    response_model=Withdrawal,
+    dependencies=[EnrollAccess],
+    responses=problems.responses(404, 409),
 )
 def withdraw_sample(
-    class_id: RowId, sample_id: RowId, session: SessionDep, metrics: MetricsDep,
-    response: Response, idempotency: IdempotencyDep, principal: Enroller,
+    class_id: RowId,
+    sample_id: RowId,
+    session: SessionDep,
+    metrics: MetricsDep,
+    response: Response,
+    idempotency: IdempotencyDep,
+    principal: Enroller,
 ) -> Withdrawal:
     """Withdraw a wrongly enrolled sample (say, one taken of the wrong object). It leaves
     the store's live data at once and the served model when the job succeeds (the novel
@@ -146,8 +180,10 @@ def withdraw_sample(
         raise not_found("sample", "sample_id", sample_id)
     if row.origin != Origin.ENROLLED:
         raise Problem(
-            409, f"sample {sample_id} comes from the training dataset; only enrolled samples "
-            "can be withdrawn", "sample_id",
+            409,
+            f"sample {sample_id} comes from the training dataset; only enrolled samples "
+            "can be withdrawn",
+            "sample_id",
         )
     repo.withdraw_sample(session, row)
     return queue_withdrawal(session, idempotency, metrics, response, principal, class_id, sample_id)
