@@ -42,8 +42,8 @@ class Settings(BaseSettings):
     opentelemetry: bool = Field(
         False,
         description="FastAPI's native OpenTelemetry traces, metrics and logs, sent to the "
-        "providers an OpenTelemetry SDK configures; off by default: /metrics serves Prometheus, and "
-        "even unconfigured the per-request check costs several microseconds.",
+        "providers an OpenTelemetry SDK configures; off by default: /metrics serves Prometheus, "
+        "and even unconfigured the per-request check costs several microseconds.",
     )
     # NoDecode: a plain comma-separated list in the environment, not JSON.
     api_keys: Annotated[list[str], NoDecode] = Field(
@@ -82,9 +82,9 @@ class Settings(BaseSettings):
     keep_versions: int = Field(
         100,
         ge=0,
-        description="Model versions kept for listing and rollback: the newest ones, plus the active and "
-        "the bootstrap version; the worker deletes older ones and the bundle data only they use. "
-        "0 keeps every version.",
+        description="Model versions kept for listing and rollback: the newest ones, plus the "
+        "active and the bootstrap version; the worker deletes older ones and the bundle data "
+        "only they use. 0 keeps every version.",
     )
     dataset: str = Field(
         "simulated", description="Bootstrap data: simulated, simulated:N or phac2:PATH."

@@ -3,18 +3,20 @@
     .venv/bin/python -m bench.load --seconds 15 --clients 32 [--postgres URL]
     .venv/bin/python -m bench.load --seconds 15 --clients 32 --embedded   # plain `serve`
 
-The service runs as deployed by default (the embedded simulated dataset, the default
-method, no rate limit). A lean asyncio HTTP/1.1 client measures requests/s and p50/p99
-latency of single-sample JSON recognition and of binary (.npy) batch recognition, then
-the enrollment-to-live times (POST /v1/classes, then POST /v1/classes/{id}/samples, until
-the job succeeded with it in the active model, and until *every* API process answers
-recognitions with that model version), idle and while the single-sample load runs. Each load phase also reports ``cpu_steal_pct``, the share of CPU
-time the hypervisor gave to other guests meanwhile (on a shared VM, a phase with high steal
-measured the neighbours, not the service), and ``cpu_us_per_request``, the CPU time each
-process (every API, the worker, this load generator) spent per answered request: where a
-2-core budget goes. After the phases, ``resident_mb`` gives each process's resident memory
-(a multi-process `serve` lists its own, then each API process's). ``--phases single,batch`` skips the enrollment phases; ``--phases enroll,reads``
-also measures the read endpoints that clients poll (jobs, active model, readiness).
+The service runs as deployed by default (the embedded simulated dataset, the default method,
+no rate limit). A lean asyncio HTTP/1.1 client measures requests/s and p50/p99 latency of
+single-sample JSON recognition and of binary (.npy) batch recognition, then the
+enrollment-to-live times (POST /v1/classes, then POST /v1/classes/{id}/samples, until the
+job succeeded with it in the active model, and until *every* API process answers
+recognitions with that model version), idle and while the single-sample load runs. Each load
+phase also reports ``cpu_steal_pct``, the share of CPU time the hypervisor gave to other
+guests meanwhile (on a shared VM, a phase with high steal measured the neighbours, not the
+service), and ``cpu_us_per_request``, the CPU time each process (every API, the worker, this
+load generator) spent per answered request: where a 2-core budget goes. After the phases,
+``resident_mb`` gives each process's resident memory (a multi-process `serve` lists its own,
+then each API process's). ``--phases single,batch`` skips the enrollment phases; ``--phases
+enroll,reads`` also measures the read endpoints that clients poll (jobs, active model,
+readiness).
 Only 127.0.0.1 is ever targeted.
 """
 

@@ -9,9 +9,10 @@ simulator) with ``--method``, in process (the API app under TestClient, as the t
 and given ``--novel`` registered classes, so the bundle carries a novel part. Printed, as
 medians over ``--repeats``: ``GET /v1/models/{version}/bundle`` (the first download, which
 joins the version's parts into one file, each later one, which an API process answers from
-its copy, and a 304 revalidation), ``bundle.load`` of the file and one recognition in process, and the wall
-time of a ``tactile-zsl recognize`` process for 1 and for 1,024 samples (start-up, imports,
-load and answer), and the round trip of one line through a running ``recognize --lines``.
+its copy, and a 304 revalidation), ``bundle.load`` of the file and one recognition in
+process, and the wall time of a ``tactile-zsl recognize`` process for 1 and for 1,024
+samples (start-up, imports, load and answer), and the round trip of one line through a
+running ``recognize --lines``.
 """
 
 from __future__ import annotations
@@ -146,7 +147,9 @@ def main() -> int:
                     "tactile-zsl recognize process, 1024 samples": round(cli_batch, 2),
                     "tactile-zsl recognize --lines, 1 sample per line": round(per_line, 4),
                 },
-                "machine": f"{cpu_model()}, {os.cpu_count()} CPUs, Python {platform.python_version()}",
+                "machine": (
+                    f"{cpu_model()}, {os.cpu_count()} CPUs, Python {platform.python_version()}"
+                ),
             },
             indent=2,
         )

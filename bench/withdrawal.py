@@ -158,7 +158,9 @@ def main() -> int:
                 "median_seconds_to_active": {
                     k: round(float(np.median(v)), 2) for k, v in times.items()
                 },
-                "machine": f"{cpu_model()}, {os.cpu_count()} CPUs, Python {platform.python_version()}",
+                "machine": (
+                    f"{cpu_model()}, {os.cpu_count()} CPUs, Python {platform.python_version()}"
+                ),
             },
             indent=2,
         )

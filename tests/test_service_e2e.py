@@ -196,7 +196,8 @@ def test_robot_session_survives_a_restart(tmp_path):
             assert r.json()["model_version"] == before["models"][-1]["version"]
             assert "base model stored" not in (service.data_dir / "serve-1.log").read_text()
 
-            # the sample was of the wrong object after all: withdrawn, the model retrained without it
+            # the sample was of the wrong object after all: withdrawn, the model retrained
+            # without it
             sample_id = job["sample_id"]
             r = client.delete(f"/v1/classes/{teapot}/samples/{sample_id}")
             assert r.status_code == 202, r.text

@@ -56,11 +56,11 @@ async def get_exports(request: Request) -> ExportCache:
 
 
 async def get_session(request: Request) -> AsyncIterator[Session]:
-    """The request's session, opened and closed on the event loop: a sync dependency
-    would cost two more worker-thread hops (0.2–0.5 ms of CPU each, bench/thread_hops.py)
-    around the route's own. Opening does no I/O (the route's first query checks out a connection in its thread);
-    closing gives the connection back with a rollback, instant on SQLite and a network
-    round trip elsewhere, which then goes to a worker thread."""
+    """The request's session, opened and closed on the event loop: a sync dependency would cost two
+    more worker-thread hops (0.2–0.5 ms of CPU each, bench/thread_hops.py) around the route's own.
+    Opening does no I/O (the route's first query checks out a connection in its thread); closing
+    gives the connection back with a rollback, instant on SQLite and a network round trip elsewhere,
+    which then goes to a worker thread."""
     session = service(request).sessions()
     try:
         yield session

@@ -312,19 +312,17 @@ COMPONENTS: dict[str, type[BaseModel]] = {
 }
 
 
+def _component(status: int) -> str:
+    return "ValidationProblem" if status == 422 else "Problem"
+
+
 def responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
     """OpenAPI entries for the problem responses a route can give, each a reference to
     one shared component (so client generators make one model, not one per response)."""
     return {
         s: {
             "description": HTTPStatus(s).phrase,
-            "content": {
-                MEDIA_TYPE: {
-                    "schema": {
-                        "$ref": f"#/components/schemas/{'ValidationProblem' if s == 422 else 'Problem'}"
-                    }
-                }
-            },
+            "content": {MEDIA_TYPE: {"schema": {"$ref": f"#/components/schemas/{_component(s)}"}}},
         }
         for s in statuses
     }

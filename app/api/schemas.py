@@ -217,8 +217,9 @@ class Description(BaseModel):
         description="Every attribute, the most probable first."
     )
     suggested: list[str] = Field(
-        description="The attributes more probable than not (at least the most probable one), in "
-        "`GET /v1/attributes` order: a starting point for `POST /v1/classes`, for a person to check."
+        description="The attributes more probable than not (at least the most probable one), "
+        "in `GET /v1/attributes` order: a starting point for `POST /v1/classes`, for a person "
+        "to check."
     )
 
 

@@ -13,7 +13,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="The store named by TACTILE_DATABASE_URL / TACTILE_DATA_DIR holds every class, "
         "sample and model version. 'check' runs the integrity checks (SQLite or PostgreSQL). "
         "'backup' copies a SQLite store while the service runs; 'restore' puts a backup back "
-        "(refused while an API process or worker has the store open). For PostgreSQL use pg_dump / pg_restore.",
+        "(refused while an API process or worker has the store open). For PostgreSQL use "
+        "pg_dump / pg_restore.",
     )
     p.add_argument("--data-dir", help="folder for the SQLite store (TACTILE_DATA_DIR)")
     actions = p.add_subparsers(dest="action", required=True, metavar="ACTION")

@@ -126,7 +126,8 @@ class Metrics:
     def observe_finished_jobs(
         self, jobs: Iterable[tuple[int, str, datetime, datetime | None, datetime]]
     ) -> None:
-        """(id, status, created_at, started_at, finished_at) of jobs finished since the last call."""
+        """(id, status, created_at, started_at, finished_at) of jobs finished since the last
+        call."""
         for job_id, status, created, started, finished in jobs:
             if job_id in self._seen:
                 continue

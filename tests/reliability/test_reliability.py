@@ -1,6 +1,6 @@
 """Real processes under faults and load, in CI sizes (the bench/ scripts run them big):
-SIGKILLs lose no 202'd enrollment, withdrawal nor new description, 100 concurrent robots on 2 APIs + 2 workers, and
-zero failed recognitions while 20 versions go live."""
+SIGKILLs lose no 202'd enrollment, withdrawal nor new description, 100 concurrent robots
+on 2 APIs + 2 workers, and zero failed recognitions while 20 versions go live."""
 
 from __future__ import annotations
 
