@@ -67,9 +67,20 @@ class ForestBaseline(TactileRecognizer):
         threshold, and of the validation folds that choose zero-shot settings.
     n_jobs : int or None, default -1
         Parallel jobs of scikit-learn's forests (-1: every core, None: one).
+    featurizer_params : dict or None, default None
+        Options of the ``TactileImageFeaturizer`` fitted when ``fit`` is given raw BioTac
+        trials (``app.framework.tactile_image.featurizer_from_params``); an option left out
+        (all of them with None) takes the featurizer's default, except ``n_offsets``, 1
+        here: each training finger once (as ``best``; sub-sampling augmentation made the
+        extra-trees forest worse across grip pressures on the BioTac pilot's validation
+        trials, docs/RESULTS.md). Unused for fixed-shape samples.
+
+    Fitted on classes without attributes (M = 0), a baseline recognises its known
+    classes and detects novelty; it has no zero-shot part (enrolment is refused).
     """
 
     method = "forest-baseline"
+    _featurizer_defaults = {"n_offsets": 1}  # see featurizer_params
 
     _parameter_constraints = {
         "n_estimators": at_least(1),
@@ -87,6 +98,7 @@ class ForestBaseline(TactileRecognizer):
         novelty_holdout_trials: int = 1,
         seed: int = 0,
         n_jobs: int | None = -1,
+        featurizer_params: dict[str, Any] | None = None,
     ) -> None:
         super().__init__()
         self.n_estimators = n_estimators
@@ -96,6 +108,7 @@ class ForestBaseline(TactileRecognizer):
         self.novelty_holdout_trials = novelty_holdout_trials
         self.seed = seed
         self.n_jobs = n_jobs
+        self.featurizer_params = featurizer_params
 
     # ------------------------------------------------------------------ parts
     def _forest(self) -> ExtraTreesClassifier:
@@ -153,7 +166,8 @@ class ForestBaseline(TactileRecognizer):
         self.forest_ = self._forest().fit(z, y)
         means = np.stack([z[y == c].mean(axis=0) for c in range(dataset.n_classes)])
         self.ncm_tau_ = float(np.median(np.linalg.norm(z - means[y], axis=1))) or 1.0
-        self._fit_zsl(z, dataset)
+        if dataset.n_attributes:  # without attributes there is no zero-shot part to fit
+            self._fit_zsl(z, dataset)
         self.novel_means_ = np.zeros((0, z.shape[1]), np.float32)
         self.novel_has_samples_ = np.zeros(0, bool)
         self.metrics = {

@@ -151,6 +151,8 @@ class DAPRecognizer(ForestBaseline):
     n_estimators, max_features, min_samples_leaf, novelty_val_fraction, novelty_holdout_trials, seed, n_jobs
         The known-class forest and the novelty tuning, with ``ForestBaseline``'s
         meanings and defaults.
+    featurizer_params
+        The raw-trial featurizer's options, as ``ForestBaseline`` takes them.
     """
 
     method = "dap"
@@ -179,6 +181,7 @@ class DAPRecognizer(ForestBaseline):
         novelty_holdout_trials: int = 1,
         seed: int = 0,
         n_jobs: int | None = -1,
+        featurizer_params: dict | None = None,
     ) -> None:
         super().__init__(
             n_estimators=n_estimators,
@@ -188,6 +191,7 @@ class DAPRecognizer(ForestBaseline):
             novelty_holdout_trials=novelty_holdout_trials,
             seed=seed,
             n_jobs=n_jobs,
+            featurizer_params=featurizer_params,
         )
         self.attribute_model = attribute_model
         self.C = C

@@ -1,4 +1,4 @@
-"""Extra-trees baseline (issue 5): a strong non-neural classifier for known classes and novelty.
+"""Extra-trees baseline: a strong non-neural classifier for known classes and novelty.
 
 Known classes: ``ExtraTreesClassifier`` on robust-scaled flat inputs; novelty score
 1 − max probability, threshold tuned by ``novelty_validation_split`` +
@@ -28,6 +28,8 @@ class ExtraTreesRecognizer(DAPRecognizer):
     n_estimators, max_features, min_samples_leaf, novelty_val_fraction, novelty_holdout_trials, seed, n_jobs
         The known-class forest and the novelty tuning, with ``ForestBaseline``'s
         meanings and defaults.
+    featurizer_params
+        The raw-trial featurizer's options, as ``ForestBaseline`` takes them.
     """
 
     method = "extratrees"
@@ -43,6 +45,7 @@ class ExtraTreesRecognizer(DAPRecognizer):
         novelty_holdout_trials: int = 1,
         seed: int = 0,
         n_jobs: int | None = -1,
+        featurizer_params: dict | None = None,
     ) -> None:
         # DAP's other parameters keep DAP's defaults; C and the validation folds serve
         # only logistic attribute classifiers
@@ -57,4 +60,5 @@ class ExtraTreesRecognizer(DAPRecognizer):
             novelty_holdout_trials=novelty_holdout_trials,
             seed=seed,
             n_jobs=n_jobs,
+            featurizer_params=featurizer_params,
         )

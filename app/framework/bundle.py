@@ -4,6 +4,13 @@ Layout: a zip archive with ``manifest.json`` (format version, method, input
 shape, attribute vocabulary, classes with their kind, novelty threshold and its
 tuning, training config, metrics) and ``arrays.npz`` (weights and other
 arrays). No pickle: loading a bundle never executes code from the file.
+
+A model fitted on raw BioTac trials also stores its fitted ``TactileImageFeaturizer``:
+the manifest's ``featurizer`` entry holds its JSON-able parameters (``get_state``'s
+metadata: kind, version, options, channel names) and ``arrays.npz`` its four arrays under
+``featurizer/`` (``pca_mean``, ``pca_components``, ``image_mean``, ``image_scale``). A
+bundle without the entry (every bundle of a model of fixed-shape samples, and all written
+before raw trials were supported) loads as a model of fixed-shape samples, as before.
 Written to a temporary file in the target folder, then renamed into place.
 
 A store that keeps many versions of one model writes them ``split``: the large
@@ -38,6 +45,7 @@ FORMAT_VERSION = 1
 _MANIFEST = "manifest.json"
 _ARRAYS = "arrays.npz"
 _REG = "registry/"  # prefix of the registry's arrays inside arrays.npz
+_FEATURIZER = "featurizer/"  # prefix of the raw-trial featurizer's arrays
 # an array is deflated when its first 64 kB shrink below 80 % at level 1
 _PROBE_BYTES = 64 * 1024
 _WORTH_IT = 0.8
@@ -52,7 +60,9 @@ def to_bytes(model: TactileRecognizer) -> bytes:
     return _zip(manifest, arrays)
 
 
-def split(model: TactileRecognizer, min_bytes: int = PART_MIN_BYTES) -> tuple[bytes, dict[str, bytes]]:
+def split(
+    model: TactileRecognizer, min_bytes: int = PART_MIN_BYTES
+) -> tuple[bytes, dict[str, bytes]]:
     """The bundle as a head and its parts: ``(head bytes, {sha256: part bytes})``.
 
     Every array of ``min_bytes`` or more becomes a part (its ``.npy`` bytes, zlib-deflated
@@ -107,7 +117,7 @@ def part_refs(data: bytes) -> dict[str, str]:
 def decode_part(blob: bytes) -> np.ndarray:
     """The array of a part written by ``split``; BundleError if it is not one."""
     try:
-        data = blob if blob[:len(_NPY_MAGIC)] == _NPY_MAGIC else zlib.decompress(blob)
+        data = blob if blob[: len(_NPY_MAGIC)] == _NPY_MAGIC else zlib.decompress(blob)
         return np.lib.format.read_array(io.BytesIO(data), allow_pickle=False)
     except (zlib.error, ValueError, OSError, EOFError) as exc:
         raise BundleError(f"not a readable bundle part: {exc}") from None
@@ -133,6 +143,11 @@ def _contents(model: TactileRecognizer) -> tuple[dict[str, Any], dict[str, np.nd
         "novel_sample_classes": list(reg.novel_samples),
     }
     all_arrays = dict(arrays)
+    if model.featurizer is not None:
+        featurizer_meta, featurizer_arrays = model.featurizer.get_state()
+        manifest["featurizer"] = featurizer_meta
+        for name, value in featurizer_arrays.items():
+            all_arrays[_FEATURIZER + name] = value
     all_arrays[_REG + "known_attributes"] = reg.known_attributes
     all_arrays[_REG + "novel_attributes"] = reg.novel_attributes
     for i, (_name, samples) in enumerate(reg.novel_samples.items()):
@@ -143,8 +158,11 @@ def _contents(model: TactileRecognizer) -> tuple[dict[str, Any], dict[str, np.nd
 def _zip(manifest: dict[str, Any], all_arrays: dict[str, np.ndarray]) -> bytes:
     out = io.BytesIO()
     with zipfile.ZipFile(out, "w") as zf:
-        zf.writestr(_entry(_MANIFEST), json.dumps(manifest, default=_json_default),
-                    compress_type=zipfile.ZIP_DEFLATED)
+        zf.writestr(
+            _entry(_MANIFEST),
+            json.dumps(manifest, default=_json_default),
+            compress_type=zipfile.ZIP_DEFLATED,
+        )
         zf.writestr(_entry(_ARRAYS), _npz(all_arrays))  # its members are compressed where it pays
     return out.getvalue()
 
@@ -167,8 +185,12 @@ def _npz(arrays: dict[str, np.ndarray]) -> bytes:
     with zipfile.ZipFile(out, "w") as zf:
         for name, array in arrays.items():
             data = _npy(array)
-            zf.writestr(_entry(name + ".npy"), data, compress_type=zipfile.ZIP_DEFLATED if _compressible(data)
-                        else zipfile.ZIP_STORED, compresslevel=1)
+            zf.writestr(
+                _entry(name + ".npy"),
+                data,
+                compress_type=zipfile.ZIP_DEFLATED if _compressible(data) else zipfile.ZIP_STORED,
+                compresslevel=1,
+            )
     return out.getvalue()
 
 
@@ -194,8 +216,10 @@ def from_bytes(data: bytes, part: Callable[[str], np.ndarray] | None = None) -> 
         arrays = _unnpz(npz_bytes)
         refs = manifest.get("parts") or {}
         if refs and part is None:
-            raise BundleError(f"this bundle keeps {len(refs)} arrays in parts of a model store; "
-                              "load it through the store")
+            raise BundleError(
+                f"this bundle keeps {len(refs)} arrays in parts of a model store; "
+                "load it through the store"
+            )
         arrays.update({name: part(sha) for name, sha in refs.items()})
         cls = method_class(manifest["method"])
         model = cls()
@@ -216,14 +240,44 @@ def from_bytes(data: bytes, part: Callable[[str], np.ndarray] | None = None) -> 
         tuning = manifest.get("novelty_tuning")
         model.novelty_tuning = NoveltyTuning.from_dict(tuning) if tuning else None
         model.metrics = manifest.get("metrics") or {}
+        model.featurizer_ = _featurizer(manifest, arrays, model.input_shape)
         model.set_state(manifest["method_state"], arrays)
     except BundleError:
         raise
     except UnknownMethodError as exc:
         raise BundleError(f"bundle names a method this build does not have: {exc}") from None
     except (KeyError, ValueError, TypeError, RuntimeError, OSError, EOFError) as exc:
-        raise BundleError(f"bundle is incomplete or inconsistent: {type(exc).__name__}: {exc}") from None
+        raise BundleError(
+            f"bundle is incomplete or inconsistent: {type(exc).__name__}: {exc}"
+        ) from None
     return model
+
+
+def _featurizer(
+    manifest: dict[str, Any], arrays: dict[str, np.ndarray], input_shape: tuple[int, ...]
+) -> Any:
+    """The fitted featurizer a bundle stores (its arrays popped from ``arrays``), or None."""
+    featurizer_arrays = {
+        name[len(_FEATURIZER) :]: arrays.pop(name)
+        for name in [n for n in arrays if n.startswith(_FEATURIZER)]
+    }
+    meta = manifest.get("featurizer")
+    if meta is None:
+        if featurizer_arrays:
+            raise BundleError("bundle holds featurizer arrays but no featurizer entry")
+        return None
+    from app.framework.tactile_image import TactileImageFeaturizer
+
+    try:
+        featurizer = TactileImageFeaturizer.from_state(meta, featurizer_arrays)
+    except (ValueError, TypeError, AttributeError) as exc:
+        raise BundleError(f"bundle's featurizer is unreadable: {exc}") from None
+    if tuple(featurizer.image_shape) != tuple(input_shape):
+        raise BundleError(
+            f"bundle's featurizer makes images of shape {list(featurizer.image_shape)} but the "
+            f"model takes {list(input_shape)}"
+        )
+    return featurizer
 
 
 def join(data: bytes, part: Callable[[str], np.ndarray]) -> bytes:
@@ -234,7 +288,9 @@ def join(data: bytes, part: Callable[[str], np.ndarray]) -> bytes:
     try:
         arrays = _unnpz(npz_bytes)
     except (ValueError, OSError, EOFError) as exc:
-        raise BundleError(f"bundle is incomplete or inconsistent: {type(exc).__name__}: {exc}") from None
+        raise BundleError(
+            f"bundle is incomplete or inconsistent: {type(exc).__name__}: {exc}"
+        ) from None
     refs = manifest.pop("parts", None) or {}
     arrays.update({name: part(sha) for name, sha in refs.items()})
     return _zip(manifest, arrays)

@@ -38,3 +38,42 @@ class BundleError(FrameworkError):
 
 class UnsupportedOperationError(FrameworkError):
     """The method cannot do this (e.g. drop its novel classes without being fitted again)."""
+
+
+class InputKindError(InputShapeError):
+    """Input of the wrong kind for the model: raw BioTac trials given to a model of
+    fixed-shape samples, or samples that are not its tactile images given to a model fitted
+    on raw trials. The message says which input the model takes."""
+
+
+class TrialInputError(InputShapeError):
+    """A raw trial given for recognition or enrolment is malformed. ``trial``, ``finger``
+    and ``channel`` say where (None where they do not apply), ``reason`` what, as the
+    ``RawTrialError`` it comes from (``__cause__``) says; ``field`` names the place in a
+    request's ``trials`` list (``trials[2].fingers[1].pac``)."""
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        reason: str = "",
+        trial: int | None = None,
+        finger: int | None = None,
+        channel: str | None = None,
+    ) -> None:
+        super().__init__(message)
+        self.reason, self.trial, self.finger, self.channel = reason, trial, finger, channel
+        place = "trials"
+        if trial is not None:
+            place += f"[{trial}]"
+            if finger is not None:
+                place += f".fingers[{finger}]"
+            if channel is not None:
+                place += f".{channel}"
+        self.field = place
+
+
+class ZeroShotUnavailableError(UnsupportedOperationError):
+    """A class cannot be enrolled from a description: the model was fitted on objects
+    without attributes, so it has no attribute to recognise a class by; enrol it from real
+    samples instead."""

@@ -130,6 +130,18 @@ class PaperRecognizer(TactileRecognizer):
         Share of the known objects set aside as Y_val, the validation-novel objects,
         when σ_nov is tuned (Sect. VI-B: 10 %); of every other object one whole trial
         is held out as X_te, the known samples the GMM did not see.
+    featurizer_params : dict or None, default None
+        Options of the ``TactileImageFeaturizer`` fitted when ``fit`` is given raw BioTac
+        trials: the tactile images of Sect. V-A that CONV_XF then takes
+        (``app.framework.tactile_image.featurizer_from_params``); an option left out (all
+        of them with None) takes the featurizer's default: 5 sub-sampling offsets per
+        training finger, the paper's augmentation, which recognised the BioTac pilot's
+        validation trials a little better than 1 (docs/RESULTS.md). Unused for
+        fixed-shape samples.
+
+    Fitted on classes without attributes (M = 0), the pipeline is CONV_XF + FC_Y and
+    ND(x): G and D need attribute vectors and are not built, and zero-shot enrolment is
+    refused.
     """
 
     method = "paper"
@@ -176,6 +188,7 @@ class PaperRecognizer(TactileRecognizer):
         novelty_pca_dims: int = 16,
         novelty_space: str = "input",
         novelty_val_fraction: float = 0.1,
+        featurizer_params: dict[str, Any] | None = None,
     ) -> None:
         super().__init__()
         self.seed = seed
@@ -203,6 +216,7 @@ class PaperRecognizer(TactileRecognizer):
         self.novelty_pca_dims = novelty_pca_dims
         self.novelty_space = novelty_space
         self.novelty_val_fraction = novelty_val_fraction
+        self.featurizer_params = featurizer_params
 
     # ---------------------------------------------------------------- building
     def _build(self, n_known: int, n_attributes: int) -> None:
@@ -214,8 +228,13 @@ class PaperRecognizer(TactileRecognizer):
         feature_shape = self.encoder_.feature_shape
         self.feature_shape_ = tuple(feature_shape)
         self.fc_y_ = FullyConnectedClassifier(self.encoder_.feature_dim, n_known)
-        self.generator_ = build_generator(n_attributes, feature_shape)
-        self.discriminator_ = build_discriminator(feature_shape)
+        # G and D map attribute vectors to features: without attributes there are none
+        self.generator_: nn.Module | None = (
+            build_generator(n_attributes, feature_shape) if n_attributes else None
+        )
+        self.discriminator_: nn.Module | None = (
+            build_discriminator(feature_shape) if n_attributes else None
+        )
         self.generator_alg1_: nn.Module | None = None
         self.fc_z_: FullyConnectedClassifier | None = None
         self.novelty_ = self._new_detector()
@@ -251,8 +270,39 @@ class PaperRecognizer(TactileRecognizer):
         self._fit_novelty(dataset, x, self.real_features_)
         timings["novelty_s"] = time.perf_counter() - t
 
-        # (2) Algorithm 1, then (3) Algorithm 2
+        # (2) Algorithm 1, then (3) Algorithm 2: only with attributes to generate from
         t = time.perf_counter()
+        alg1, alg2 = (
+            self._train_generator(dataset, progress)
+            if dataset.n_attributes
+            else ([None], {"loss_d": [], "loss_fc": [], "switches": []})
+        )
+        timings["generator_s"] = time.perf_counter() - t
+        timings["total_s"] = time.perf_counter() - t0
+        with torch.no_grad():
+            train_acc = float(
+                (self.fc_y_(torch.as_tensor(self.real_features_)).argmax(1).numpy() == y).mean()
+            )
+        self.metrics = {
+            "n_train_samples": int(len(dataset)),
+            "n_known_classes": int(dataset.n_classes),
+            "train_known_acc": train_acc,
+            "nd_known_kept": self.novelty_tuning.known_kept_at_threshold,
+            "nd_val_novel": self.novelty_tuning.val_novel_at_threshold,
+            "nd_val_auroc": self.novelty_tuning.auroc,
+            "alg1_final_loss": alg1[-1],
+            "alg2_final_loss_d": alg2["loss_d"][-1] if alg2["loss_d"] else None,
+            "alg2_final_loss_fc": alg2["loss_fc"][-1] if alg2["loss_fc"] else None,
+            "alg2_phase_switches": len(alg2["switches"]),
+            "timings": timings,
+            "params": self.get_params(),
+        }
+
+    def _train_generator(
+        self, dataset: TactileDataset, progress: bool
+    ) -> tuple[list[float], dict[str, list]]:
+        """(2) Algorithm 1, then (3) Algorithm 2; their loss histories."""
+        y = dataset.labels
         alg1 = train_generator_through_classifier(
             self.generator_,
             self.fc_y_,
@@ -280,26 +330,7 @@ class PaperRecognizer(TactileRecognizer):
             seed=self.seed,
             progress=progress,
         )
-        timings["generator_s"] = time.perf_counter() - t
-        timings["total_s"] = time.perf_counter() - t0
-        with torch.no_grad():
-            train_acc = float(
-                (self.fc_y_(torch.as_tensor(self.real_features_)).argmax(1).numpy() == y).mean()
-            )
-        self.metrics = {
-            "n_train_samples": int(len(dataset)),
-            "n_known_classes": int(dataset.n_classes),
-            "train_known_acc": train_acc,
-            "nd_known_kept": self.novelty_tuning.known_kept_at_threshold,
-            "nd_val_novel": self.novelty_tuning.val_novel_at_threshold,
-            "nd_val_auroc": self.novelty_tuning.auroc,
-            "alg1_final_loss": alg1[-1],
-            "alg2_final_loss_d": alg2["loss_d"][-1] if alg2["loss_d"] else None,
-            "alg2_final_loss_fc": alg2["loss_fc"][-1] if alg2["loss_fc"] else None,
-            "alg2_phase_switches": len(alg2["switches"]),
-            "timings": timings,
-            "params": self.get_params(),
-        }
+        return alg1, alg2
 
     def _train_encoder(self, x: np.ndarray, y: np.ndarray, progress: bool) -> None:
         gen = torch.Generator().manual_seed(self.seed)
@@ -498,9 +529,10 @@ class PaperRecognizer(TactileRecognizer):
         self._validate_params()
         reg = self.registry
         self._build(len(reg.known_names), len(reg.attribute_names))
-        self.generator_alg1_ = build_generator(
-            len(reg.attribute_names), self.encoder_.feature_shape
-        )
+        if reg.attribute_names:
+            self.generator_alg1_ = build_generator(
+                len(reg.attribute_names), self.encoder_.feature_shape
+            )
         if meta["has_fc_z"]:
             self.fc_z_ = FullyConnectedClassifier(self.encoder_.feature_dim, len(reg.novel_names))
         for name in self._MODULES:
@@ -569,6 +601,7 @@ class PaperFeatureGMMRecognizer(PaperRecognizer):
         novelty_pca_dims: int = 16,
         novelty_space: str = "features",
         novelty_val_fraction: float = 0.1,
+        featurizer_params: dict[str, Any] | None = None,
     ) -> None:
         super().__init__(
             seed=seed,
@@ -596,4 +629,5 @@ class PaperFeatureGMMRecognizer(PaperRecognizer):
             novelty_pca_dims=novelty_pca_dims,
             novelty_space=novelty_space,
             novelty_val_fraction=novelty_val_fraction,
+            featurizer_params=featurizer_params,
         )

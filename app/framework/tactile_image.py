@@ -39,7 +39,6 @@ from typing import Any, Self
 
 import numpy as np
 from scipy.interpolate import make_interp_spline
-from sklearn.decomposition import PCA
 
 from app.data.biotac import (
     N_ELECTRODES,
@@ -52,7 +51,7 @@ from app.data.biotac import (
     parse_trial,
 )
 from app.data.dataset import TactileDataset
-from app.framework.errors import NotFittedError
+from app.framework.errors import FrameworkError, NotFittedError
 
 STATE_KIND = "tactile-image"
 STATE_VERSION = 1
@@ -214,6 +213,8 @@ class TactileImageFeaturizer:
         rows = electrodes.transpose(0, 1, 3, 2).reshape(-1, N_ELECTRODES).astype(np.float64)
         if len(rows) < self.n_components:
             raise ValueError(f"fit needs at least {self.n_components} electrode samples")
+        from sklearn.decomposition import PCA  # fitting only: loading a model stays light
+
         pca = PCA(n_components=self.n_components, svd_solver="full").fit(rows)
         self.pca_mean_ = pca.mean_.astype(np.float64)
         self.pca_components_ = pca.components_.astype(np.float64)
@@ -430,6 +431,46 @@ class TactileImageFeaturizer:
         if (new.image_scale_ <= 0).any():
             raise ValueError("featurizer array 'image_scale' must be positive")
         return new
+
+
+#: the options ``featurizer_from_params`` takes: the constructor's parameters
+PARAMS = (
+    "n_steps",
+    "n_components",
+    "phase_names",
+    "phase_rule",
+    "baseline",
+    "n_offsets",
+    "normalize",
+)
+
+
+def featurizer_from_params(params: dict[str, Any] | None) -> TactileImageFeaturizer:
+    """An unfitted featurizer from a recognizer's ``featurizer_params`` hyper-parameter: a
+    JSON-able dict of constructor options (``get_params()``'s form: ``phase_rule`` as the
+    dict of a ``PhaseRule``), any of them left out taking its default; None: all defaults.
+    A bad option raises FrameworkError naming it."""
+    if params is None:
+        return TactileImageFeaturizer()
+    if not isinstance(params, dict):
+        raise FrameworkError(
+            f"featurizer_params must be None or a dict of the featurizer's options "
+            f"({', '.join(PARAMS)}), got {type(params).__name__}"
+        )
+    unknown = sorted(set(params) - set(PARAMS))
+    if unknown:
+        raise FrameworkError(
+            f"featurizer_params has unknown option(s) {', '.join(map(repr, unknown))}; "
+            f"the featurizer's options are {', '.join(PARAMS)}"
+        )
+    options = dict(params)
+    rule = options.get("phase_rule")
+    try:
+        if isinstance(rule, dict):
+            options["phase_rule"] = PhaseRule(**rule)
+        return TactileImageFeaturizer(**options)
+    except (TypeError, ValueError) as exc:
+        raise FrameworkError(f"featurizer_params: {exc}") from None
 
 
 def featurize_dataset(

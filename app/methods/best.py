@@ -1,4 +1,4 @@
-"""The ``best`` method (issue 5): the recognizer that measured best on PHAC-2's static features.
+"""The ``best`` method: the recognizer that measured best on PHAC-2's static features.
 
 Every sample is a flat vector (a C x T tactile image is flattened) scaled by
 ``RobustInputScaler`` (signed log1p, median/IQR, clipped); PHAC-2's features
@@ -30,6 +30,12 @@ reach 1e10.
 The forest is stored as plain arrays (``forest``), like every other part, so
 model bundles need no pickle, and enrolment never retrains it: ``add_novel_classes`` only scores the
 new attribute vectors and ``add_one_shot`` only computes signatures.
+
+Without attributes (a dataset with M = 0, such as the BioTac pilot without objects.csv)
+the forest, the novelty score and the one-shot signatures work as above; there is no
+zero-shot part, and a novel class is enrolled from its samples alone
+(``add_novel_classes_from_samples``): its probability is the one-shot softmax over the
+novel classes' signature prototypes.
 """
 
 from __future__ import annotations
@@ -118,10 +124,21 @@ class BestRecognizer(TactileRecognizer):
     n_jobs : int or None, default 1
         Parallel jobs of scikit-learn when the forests are fitted (None: one, -1: every
         core); recognition never uses them.
+    featurizer_params : dict or None, default None
+        Options of the ``TactileImageFeaturizer`` fitted when ``fit`` is given raw BioTac
+        trials (``app.framework.tactile_image.featurizer_from_params``: any of n_steps,
+        n_components, phase_names, phase_rule, baseline, n_offsets, normalize); an option
+        left out (all of them with None) takes the featurizer's default (8 readings x 3
+        phases x 30 steps), except ``n_offsets``, 1 here: each training finger once, not at
+        the paper's 5 sub-sampling offsets. On validation trials of the BioTac pilot the
+        forest carried objects across grip pressures worse the more offsets it was trained
+        on (docs/RESULTS.md). Unused when ``fit`` is given fixed-shape samples.
     """
 
     method = "best"
     novel_part_separable = True  # enrolments never touch the forest or the attribute models
+    learns_classes_from_samples = True  # one-shot signatures need no attribute
+    _featurizer_defaults = {"n_offsets": 1}  # see featurizer_params
 
     _parameter_constraints = {
         "n_estimators": integer(1),
@@ -143,6 +160,7 @@ class BestRecognizer(TactileRecognizer):
         ),
         "sae_lambda": number(0, include_low=True, allow_bool=False, finite=True),
         "sae_temperature": number(0, include_low=True, allow_bool=False, finite=True),
+        # featurizer_params: checked by building the featurizer (TactileRecognizer)
     }
 
     def __init__(
@@ -162,6 +180,7 @@ class BestRecognizer(TactileRecognizer):
         sae_lambda: float = 400.0,
         sae_temperature: float = 10.0,
         n_jobs: int | None = 1,
+        featurizer_params: dict[str, Any] | None = None,
     ) -> None:
         super().__init__()
         self.seed = seed
@@ -179,6 +198,7 @@ class BestRecognizer(TactileRecognizer):
         self.sae_lambda = sae_lambda
         self.sae_temperature = sae_temperature
         self.n_jobs = n_jobs
+        self.featurizer_params = featurizer_params
 
     def _cue_weights(self) -> np.ndarray:
         w = np.zeros(len(CUES))
@@ -244,12 +264,14 @@ class BestRecognizer(TactileRecognizer):
         z = self.known_.cues_model.scaled(flatten(dataset.samples))
         timings["known_model_s"] = time.perf_counter() - t
         t = time.perf_counter()
-        attrs = dataset.class_attributes
+        # (K, M) 0/1 attributes, or (K, 0) without any: then the attribute model predicts
+        # nothing and zero-shot enrolment is refused
+        attrs = self.registry.known_attributes
         self.attributes_ = LinearAttributeModel.fit(z, attrs[y], float(self.attribute_C))
         self.prior_ = attrs.mean(axis=0).astype(np.float64)
         self.sae_ = (
             semantic_autoencoder(z, attrs[y], float(self.sae_lambda)).astype(np.float32)
-            if self.sae_lambda > 0
+            if self.sae_lambda > 0 and self.has_attributes
             else None
         )
         timings["attributes_s"] = time.perf_counter() - t
@@ -287,6 +309,11 @@ class BestRecognizer(TactileRecognizer):
 
     def _novel_from(self, z: np.ndarray, known_p: np.ndarray | None) -> np.ndarray:
         reg = self.registry
+        if not self.has_attributes:
+            # every novel class came from samples (add_novel_classes_from_samples): the
+            # one-shot softmax over the signature prototypes is the whole answer
+            sim = signatures(known_p) @ self.shot_prototypes_.T
+            return softmax(sim / float(self.shot_temperature))
         scores = dap_log_scores(
             self.attributes_.predict_proba(z),
             reg.novel_attributes,
