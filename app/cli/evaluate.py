@@ -1,4 +1,6 @@
-"""``tactile-zsl evaluate``: the paper's Sect. VI protocol on random known/novel splits."""
+"""``tactile-zsl evaluate``: the paper's Sect. VI protocol on random known/novel splits, or,
+for raw BioTac trials (``biotac:DIR``), known-object recognition on trial-disjoint splits and
+held-out grip pressures (``app.evaluation.raw``)."""
 
 from __future__ import annotations
 
@@ -39,14 +41,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "Sect. VI-B on validation objects carved from the known set), AUROC, zero-shot and "
             "one-shot accuracy on the novel objects, and the full pipeline on known and novel "
             "test trials mixed (gzsl_seen, gzsl_unseen, gzsl_h). Writes the figures per split "
-            "and their means as JSON."
+            "and their means as JSON. A 'biotac:DIR' dataset of raw BioTac trials is measured "
+            "by the raw-trial protocol instead: known-object accuracy over --splits "
+            "trial-disjoint splits (--test-trials whole trials per object held out), each "
+            "model fitted on raw training trials (its tactile-image featurizer too) and "
+            "answering once per trial from both fingers, and accuracy on each held-out grip "
+            "pressure (train on the others), each with its standard deviation and 95% "
+            "confidence interval; --novel does not apply."
         ),
     )
     p.add_argument(
         "--dataset",
         default="simulated",
         help="dataset spec: 'phac2:PATH' (PHAC-2 static features folder), 'simulated' or "
-        "'simulated:N' (built-in simulator with N objects); default: %(default)s",
+        "'simulated:N' (built-in simulator with N objects), 'folder:DIR', or 'biotac:DIR' "
+        "(raw BioTac trials: the raw-trial protocol); default: %(default)s",
     )
     p.add_argument(
         "--novel",
@@ -58,8 +67,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--splits",
         type=_positive,
-        default=7,
-        help="number of random known/novel splits; the paper uses 7 (default: %(default)s)",
+        default=None,
+        help="number of random known/novel splits; the paper uses 7 (default: 7; for raw "
+        "trials: 10 trial-disjoint splits, and 10 fits per held-out grip pressure)",
     )
     p.add_argument(
         "--seed",
@@ -91,9 +101,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--test-trials",
         type=_positive,
-        default=2,
+        default=None,
         help="trials held out per known object as its test data, the rest train "
-        "(default: %(default)s)",
+        "(default: 2; for raw trials: 3)",
+    )
+    p.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="METHOD.NAME=VALUE",
+        help="a method's hyper-parameter, e.g. --param paper.encoder_epochs=30 (repeatable; "
+        "the value is parsed as JSON)",
+    )
+    p.add_argument(
+        "--validation",
+        action="store_true",
+        help="raw trials only: measure on validation trials carved from each split's "
+        "training trials (and, per held-out pressure, fit on one other pressure and "
+        "validate on the other), never on test trials: where options are chosen",
+    )
+    p.add_argument(
+        "--no-pressure",
+        action="store_true",
+        help="raw trials only: leave out the held-out grip pressure protocol",
     )
     p.add_argument(
         "--distinct-from-known",
@@ -112,27 +142,64 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=run)
 
 
+def method_params(items: list[str], methods: list[str]) -> dict[str, dict]:
+    """``--param METHOD.NAME=VALUE`` items as {method: {name: value}} (values parsed as JSON)."""
+    from app.cli.train import parse_params
+
+    out: dict[str, dict] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        method, dot, name = key.partition(".")
+        if not sep or not dot or not method or not name:
+            raise ValueError(f"--param expects METHOD.NAME=VALUE, got {item!r}")
+        if method not in methods:
+            raise ValueError(
+                f"--param {item!r} names method {method!r}, which is not among --methods "
+                f"({', '.join(methods)})"
+            )
+        out.setdefault(method, {}).update(parse_params([f"{name}={value}"]))
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
-    from app.data.sources import load_dataset
+    from app.data.biotac import BioTacDataset
+    from app.data.sources import open_dataset
     from app.evaluation.protocol import evaluate
+    from app.evaluation.raw import evaluate_raw
     from app.evaluation.report import write_report
     from app.framework.registry import DEFAULT_METHOD
     from app.framework.runtime import configure_threads
 
     configure_threads()  # TACTILE_TORCH_THREADS, else one thread (see app.framework.runtime)
     methods = args.methods or [DEFAULT_METHOD]
-    dataset = load_dataset(args.dataset, seed=args.data_seed)
-    results = evaluate(
-        dataset,
-        methods,
-        n_novel=args.novel,
-        n_splits=args.splits,
-        seed=args.seed,
-        test_trials=args.test_trials,
-        progress=not args.no_progress,
-        dataset_label=args.dataset,
-        distinct_from_known=args.distinct_from_known,
-    )
+    params = method_params(args.param, methods)
+    dataset = open_dataset(args.dataset, seed=args.data_seed)
+    if isinstance(dataset, BioTacDataset):
+        results = evaluate_raw(
+            dataset,
+            methods,
+            n_splits=args.splits or 10,
+            seed=args.seed,
+            test_trials=args.test_trials or 3,
+            method_params=params,
+            progress=not args.no_progress,
+            dataset_label=args.dataset,
+            held_out_pressure=not args.no_pressure,
+            validation=args.validation,
+        )
+    else:
+        results = evaluate(
+            dataset,
+            methods,
+            n_novel=args.novel,
+            n_splits=args.splits or 7,
+            seed=args.seed,
+            test_trials=args.test_trials or 2,
+            method_params=params,
+            progress=not args.no_progress,
+            dataset_label=args.dataset,
+            distinct_from_known=args.distinct_from_known,
+        )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=1))
     print(summary_table(results))
@@ -145,9 +212,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def summary_table(results: dict) -> str:
-    """Mean figures per method as a plain-text table."""
+    """Mean figures per method as a plain-text table (for raw-trial results, with each
+    figure's 95 % confidence interval)."""
+    from app.evaluation.raw import PROTOCOL
     from app.evaluation.report import ORDER
 
+    if results.get("protocol") == PROTOCOL:
+        return raw_summary_table(results)
     methods = list(results["methods"])
     present = {f for m in methods for f in results["methods"][m]["mean"]}
     rows = [f for f in ORDER if f in present]
@@ -158,6 +229,33 @@ def summary_table(results: dict) -> str:
         for m in methods:
             v = results["methods"][m]["mean"].get(f)
             cells.append(("—" if v is None else f"{v:.3f}").rjust(width))
+        lines.append(f.ljust(18) + "".join(cells))
+    lines.append(
+        "seconds".ljust(18)
+        + "".join(f"{results['methods'][m]['elapsed_s']:.0f}".rjust(width) for m in methods)
+    )
+    return "\n".join(lines)
+
+
+def raw_summary_table(results: dict) -> str:
+    """Raw-trial results: mean and 95 % confidence interval of every figure per method."""
+    from app.evaluation.raw import raw_figures
+
+    methods = list(results["methods"])
+    width = 26
+    lines = ["figure".ljust(18) + "".join(m.rjust(width) for m in methods)]
+    for f in raw_figures(results):
+        cells = []
+        for m in methods:
+            e = results["methods"][m]
+            mean = e["mean"].get(f)
+            lo, hi = e.get("ci95", {}).get(f) or (None, None)
+            if mean is None:
+                cells.append("—".rjust(width))
+            elif lo is None or hi is None:
+                cells.append(f"{mean:.3f}".rjust(width))
+            else:
+                cells.append(f"{mean:.3f} [{lo:.3f}, {hi:.3f}]".rjust(width))
         lines.append(f.ljust(18) + "".join(cells))
     lines.append(
         "seconds".ljust(18)

@@ -1,0 +1,208 @@
+"""The raw-trial protocol (``evaluate --dataset biotac:DIR``): trial-disjoint and
+held-out-pressure splits, models fitted on training trials only, its summaries, its
+report, and the command on the real pilot at tiny size."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from app.cli import main
+from app.evaluation import metrics, raw
+from app.evaluation.report import write_report
+from app.evaluation.splits import SplitError
+from app.framework import registry
+from app.methods.best import BestRecognizer
+from tests.framework.raw_data import pilot_path, synthetic_biotac
+
+
+class RecordingBest(BestRecognizer):
+    """``best`` that records the trial groups every fit was given."""
+
+    method = "recording-best"
+    fitted_on: list[set[str]] = []
+
+    def fit(self, dataset, progress=False):
+        RecordingBest.fitted_on.append(set(dataset.groups))
+        return super().fit(dataset, progress)
+
+
+@pytest.fixture()
+def recording(monkeypatch):
+    RecordingBest.fitted_on = []
+    monkeypatch.setitem(registry.METHODS, "recording-best", f"{__name__}:RecordingBest")
+    return RecordingBest
+
+
+@pytest.fixture(scope="module")
+def data():
+    return synthetic_biotac(n_objects=3, trials_per_object=6)
+
+
+FAST = {"n_estimators": 20, "tuning_rounds": 1, "featurizer_params": {"n_offsets": 1}}
+
+
+def test_trial_splits_hold_out_whole_trials_of_every_object(data):
+    splits = raw.trial_splits(data, n_splits=4, seed=3, test_trials=2)
+    assert len(splits) == 4
+    for train, test in splits:
+        assert not set(train) & set(test) and len(train) + len(test) == len(data)
+        assert np.bincount(data.labels[test]).tolist() == [2, 2, 2]
+    assert len({tuple(t) for _, t in splits}) > 1
+    again = raw.trial_splits(data, n_splits=4, seed=3, test_trials=2)
+    assert all(np.array_equal(a[1], b[1]) for a, b in zip(splits, again, strict=True))
+    with pytest.raises(SplitError, match="has 6 trial"):
+        raw.trial_splits(data, n_splits=1, seed=0, test_trials=6)
+
+
+def test_pressure_splits_test_on_one_pressure_and_train_on_the_others(data):
+    folds = raw.pressure_splits(data)
+    assert sorted(folds) == [100.0, 150.0, 200.0]
+    for level, (train, test) in folds.items():
+        assert (data.grip_pressure[test] == level).all()
+        assert (data.grip_pressure[train] != level).all()
+        assert len(train) + len(test) == len(data)
+    validation = raw.pressure_validation_splits(data)
+    for level, pairs in validation.items():
+        assert len(pairs) == 2
+        for fit, val in pairs:  # never a trial of the held-out pressure
+            assert (data.grip_pressure[np.r_[fit, val]] != level).all()
+            assert len(np.unique(data.grip_pressure[fit])) == 1
+            assert data.grip_pressure[fit[0]] != data.grip_pressure[val[0]]
+
+
+def test_pressure_splits_need_a_pressure_for_every_trial(data):
+    from dataclasses import replace
+
+    unnamed = replace(data, grip_pressure=np.r_[np.nan, data.grip_pressure[1:]])
+    with pytest.raises(SplitError, match="no grip pressure"):
+        raw.pressure_splits(unnamed)
+
+
+def test_mean_interval_is_students_t():
+    low, high = metrics.mean_interval([1.0, 2.0, 3.0])
+    half = 4.302652729911275 / math.sqrt(3)  # t(0.975, 2) x sd 1 / sqrt(3)
+    assert (low, high) == pytest.approx((2 - half, 2 + half))
+    assert all(math.isnan(v) for v in metrics.mean_interval([0.5]))
+    assert metrics.mean_interval([0.9, 0.9, 0.9]) == pytest.approx((0.9, 0.9))
+
+
+def test_every_model_is_fitted_on_training_trials_only(data, recording):
+    results = raw.evaluate_raw(
+        data,
+        ["recording-best"],
+        n_splits=2,
+        seed=1,
+        test_trials=2,
+        method_params={"recording-best": FAST},
+        progress=False,
+    )
+    entry = results["methods"]["recording-best"]
+    assert len(recording.fitted_on) == 2 + 3 * 2
+    for split, seen in zip(results["split_definitions"], recording.fitted_on[:2], strict=True):
+        assert not set(split["test_trials"]) & seen
+        assert len(seen) == len(data) - 6
+    pressure_of = dict(zip(data.groups, data.grip_pressure, strict=True))
+    levels = [100.0] * 2 + [150.0] * 2 + [200.0] * 2
+    for seen, level in zip(recording.fitted_on[2:], levels, strict=True):
+        assert level not in {pressure_of[g] for g in seen}
+    assert [p["pressure"] for p in entry["pressure"]] == levels
+    assert [p["seed"] for p in entry["pressure"]] == [1, 2] * 3
+    for figure in ("known_acc", "known_acc_finger", "nd_known_kept", "pressure_100"):
+        assert 0.0 <= entry["mean"][figure] <= 1.0
+        low, high = entry["ci95"][figure]
+        assert low <= entry["mean"][figure] <= high
+    accs = [s["known_acc"] for s in entry["splits"]]
+    assert entry["mean"]["known_acc"] == pytest.approx(np.mean(accs))
+    assert entry["std"]["known_acc"] == pytest.approx(np.std(accs, ddof=1))
+    by_repeat = [
+        np.mean([p["accuracy"] for p in entry["pressure"] if p["repeat"] == r]) for r in (1, 2)
+    ]
+    assert entry["mean"]["pressure_mean"] == pytest.approx(np.mean(by_repeat))
+    assert np.asarray(entry["confusion"]).sum() == 2 * 6  # test trials of both splits
+    assert np.asarray(entry["confusion_pressure"]).sum() == 2 * len(data)
+
+
+def test_validation_never_measures_on_test_trials(data, recording):
+    results = raw.evaluate_raw(
+        data,
+        ["recording-best"],
+        n_splits=2,
+        seed=1,
+        test_trials=1,
+        method_params={"recording-best": FAST},
+        progress=False,
+        validation=True,
+    )
+    assert results["validation"] is True
+    tests = raw.trial_splits(data, 2, 1, 1)
+    entry = results["methods"]["recording-best"]
+    fits = recording.fitted_on[:2]
+    for (_, test), seen, details in zip(tests, fits, entry["details"], strict=True):
+        test_groups = {data.groups[i] for i in test}
+        assert not test_groups & seen and not test_groups & set(details["test_trials"])
+        assert len(seen) == len(data) - 2 * 3  # test and validation trials out
+    assert len(recording.fitted_on) == 2 + 3 * 2 * 2  # two (fit, validation) pairs per pressure
+
+
+def test_raw_results_get_their_report(data, tmp_path):
+    results = raw.evaluate_raw(
+        data, ["best"], n_splits=2, method_params={"best": FAST}, progress=False
+    )
+    files = write_report(results, tmp_path)
+    names = {f.name for f in files}
+    assert names == {"report.md", "accuracy.png", "confusion_best.png"}
+    text = (tmp_path / "report.md").read_text()
+    assert "| `known_acc` |" in text and "| `pressure_150` |" in text
+    assert "95 % confidence interval" in text
+    assert (tmp_path / "accuracy.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_the_evaluate_command_on_the_pilot_at_tiny_size(tmp_path, capsys):
+    out = tmp_path / "results.json"
+    code = main(
+        [
+            "evaluate",
+            "--dataset",
+            f"biotac:{pilot_path()}",
+            "--splits",
+            "2",
+            "--methods",
+            "best,paper,extratrees",
+            "--param",
+            'best.featurizer_params={"n_offsets": 1}',
+            "--param",
+            "best.n_estimators=30",
+            "--param",
+            "paper.encoder_epochs=3",
+            "--param",
+            'paper.featurizer_params={"n_offsets": 1}',
+            "--param",
+            "extratrees.n_estimators=30",
+            "--param",
+            'extratrees.featurizer_params={"n_offsets": 1}',
+            "--out",
+            str(out),
+            "--report",
+            str(tmp_path / "report"),
+            "--no-progress",
+        ]
+    )
+    assert code == 0
+    results = json.loads(out.read_text())
+    assert results["protocol"] == "raw-trials" and results["pressures"] == [100.0, 150.0, 200.0]
+    assert results["config"]["n_trials"] == 74 and results["config"]["n_attributes"] == 0
+    for m in ("best", "paper", "extratrees"):
+        entry = results["methods"][m]
+        assert len(entry["splits"]) == 2 and len(entry["pressure"]) == 3 * 2
+        assert set(entry["mean"]) == {
+            "known_acc", "known_acc_finger", "nd_known_kept",
+            "pressure_100", "pressure_150", "pressure_200", "pressure_mean",
+        }  # fmt: skip
+    assert results["methods"]["best"]["mean"]["known_acc"] >= 0.8
+    printed = capsys.readouterr().out
+    assert "known_acc" in printed and "pressure_200" in printed
+    assert (tmp_path / "report" / "accuracy.png").is_file()
