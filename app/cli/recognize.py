@@ -23,7 +23,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "samples",
         help="a .npy file (one sample, or N samples of the model's input shape), a .json "
-        'file ({"samples": [...]} as the API takes), or - for that JSON on stdin',
+        'file ({"samples": [...]} as the API takes, or {"trials": [...]}: raw BioTac trials '
+        "for a model trained on raw trials, one answer per trial), or - for that JSON on stdin",
     )
     p.add_argument("--top-k", type=int, default=3, help="scores to list per sample (default 3)")
     p.add_argument(
@@ -57,14 +58,27 @@ def read_samples(source: str):
     raise ValueError(f"{path}: samples must be a .npy or .json file")
 
 
+class Trials(list):
+    """Raw trials read from a request's ``"trials"`` (answered one per trial)."""
+
+
 def _from_json(text: str, where: str):
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise ValueError(f"{where} is not JSON: {exc}") from None
+    if isinstance(data, dict) and isinstance(data.get("trials"), list) and "samples" not in data:
+        return Trials(data["trials"])
     if not isinstance(data, dict) or "samples" not in data:
-        raise ValueError(f'{where} must hold an object {{"samples": [...]}}')
+        raise ValueError(f'{where} must hold an object {{"samples": [...]}} or {{"trials": [...]}}')
     return data["samples"]
+
+
+def answers(model, request, top_k: int):
+    """A model's answers to samples, or to raw trials (one per trial)."""
+    if isinstance(request, Trials):
+        return model.recognize_trials(list(request), top_k=top_k)
+    return model.recognize_batch(request, top_k=top_k)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -80,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
         with open(args.samples) as lines:
             return answer_lines(args.model, lines, sys.stdout, args.top_k)
     model = bundle.load(args.model)
-    results = model.recognize_batch(read_samples(args.samples), top_k=args.top_k)
+    results = answers(model, read_samples(args.samples), args.top_k)
     print(json.dumps({"method": model.method, "results": results.records()}))
     return 0
 
@@ -105,7 +119,7 @@ def answer_lines(model_file: Path, lines: Iterable[str], out: TextIO, top_k: int
         except (ValueError, OSError) as exc:
             warning = f"the model file changed and cannot be read ({exc}); answering with the one read before"
         try:
-            results = model.recognize_batch(_from_json(line, "the line"), top_k=top_k)
+            results = answers(model, _from_json(line, "the line"), top_k)
             answer = {"method": model.method, "results": results.records()}
         except ValueError as exc:  # the framework's errors name the problem
             answer = {"error": str(exc)}

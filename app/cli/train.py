@@ -18,7 +18,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--dataset",
         default="simulated",
-        help="'simulated', 'simulated:N' (N objects) or 'phac2:PATH' (default: simulated)",
+        help="'simulated', 'simulated:N' (N objects), 'phac2:PATH', 'folder:DIR' or "
+        "'biotac:DIR' (raw BioTac trials: the model fits its tactile-image featurizer on them, "
+        "keeps it in the bundle and recognises raw trials) (default: simulated)",
     )
     p.add_argument(
         "--out", required=True, help="path of the model bundle to write (written atomically)"
@@ -59,22 +61,27 @@ def parse_params(items: list[str]) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from app.data.sources import load_dataset
+    from app.data.biotac import BioTacDataset
+    from app.data.sources import open_dataset
     from app.framework import bundle
     from app.framework.registry import DEFAULT_METHOD, make_method
     from app.framework.runtime import configure_threads
 
     configure_threads()  # TACTILE_TORCH_THREADS, else one thread (see app.framework.runtime)
-    dataset = load_dataset(args.dataset, seed=args.seed)
+    dataset = open_dataset(args.dataset, seed=args.seed)
     params = {"seed": args.seed, **parse_params(args.param)}
     try:
         model = make_method(args.method or DEFAULT_METHOD, **params)
     except TypeError as exc:
         raise ValueError(f"bad --param: {exc}") from None
     model._validate_params()  # fit checks them too; a bad value is refused before any work
+    what = (
+        f"{len(dataset)} raw trials"
+        if isinstance(dataset, BioTacDataset)
+        else f"{len(dataset)} samples, input {dataset.input_shape}"
+    )
     print(
-        f"training '{model.method}' on {dataset.name}: {len(dataset)} samples, "
-        f"{dataset.n_classes} classes, input {dataset.input_shape}",
+        f"training '{model.method}' on {dataset.name}: {what}, {dataset.n_classes} classes",
         file=sys.stderr,
     )
     model.fit(dataset, progress=not args.quiet)
