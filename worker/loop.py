@@ -193,6 +193,7 @@ class Worker:
             base_version=base_version,
             bundle_sha256=bundles.store_model(s, split),
             input_shape=list(new.input_shape),
+            input_kind=new.input_kind,
             metrics=repo.jsonable(new.metrics),
             classes=model_classes(new),
             sample_ids=plan.sample_ids,

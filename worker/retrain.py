@@ -24,11 +24,12 @@ import numpy as np
 from sqlalchemy.orm import Session
 
 from app.config import Settings
+from app.data.biotac import BioTacDataset
 from app.data.dataset import TactileDataset
-from app.framework.recognizer import ClassRegistry, TactileRecognizer
+from app.framework.recognizer import RAW_TRIALS, ClassRegistry, TactileRecognizer
 from app.framework.registry import make_method
 from app.store import repo
-from app.store.enums import ClassKind, JobKind, JobStatus, Origin, VersionReason
+from app.store.enums import ClassKind, JobKind, JobStatus, Origin, SampleForm, VersionReason
 from app.store.models import Job, ModelVersion, ObjectClass, Sample
 
 # enrolled samples get trial ids far above any dataset's, one trial per sample
@@ -206,11 +207,11 @@ def build(
             np.stack([repo.key_vector(c.attribute_key) for c in new_classes]),
         )
     for name, rows in new_samples.items():
-        model = model.add_one_shot(name, _stack(rows))
+        model = model.add_one_shot(name, _samples(model, rows))
     return model
 
 
-def known_dataset(s: Session, plan: Plan) -> TactileDataset:
+def known_dataset(s: Session, plan: Plan) -> TactileDataset | BioTacDataset:
     """Every known class (promoted ones included) with its stored samples, for a full retrain."""
     promoted, demoted = {c.id for c in plan.promote}, {c.id for c in plan.demote}
     live = set(plan.sample_ids)
@@ -223,18 +224,40 @@ def known_dataset(s: Session, plan: Plan) -> TactileDataset:
     rows = [
         r for r in repo.samples_of(s, list(index)) if r.origin == Origin.DATASET or r.id in live
     ]
+    labels = np.array([index[r.class_id] for r in rows])
+    trials = np.array(
+        [r.trial if r.trial is not None else ENROLLED_TRIAL_OFFSET + r.id for r in rows]
+    )
+    attributes = np.stack([repo.key_vector(c.attribute_key) for c in known])
+    names = [c.name for c in known]
+    if rows and rows[0].form == SampleForm.RAW_TRIAL:  # the model fits its featurizer anew
+        return BioTacDataset(
+            trials=[repo.decode_trial(r.data) for r in rows],
+            labels=labels,
+            trial_ids=trials,
+            class_names=names,
+            attribute_names=repo.attribute_names(s),
+            attribute_values=attributes,
+            name="store",
+        )
     return TactileDataset(
         samples=_stack(rows),
-        labels=np.array([index[r.class_id] for r in rows]),
-        trials=np.array(
-            [r.trial if r.trial is not None else ENROLLED_TRIAL_OFFSET + r.id for r in rows]
-        ),
-        class_attributes=np.stack([repo.key_vector(c.attribute_key) for c in known]),
+        labels=labels,
+        trials=trials,
+        class_attributes=attributes,
         attribute_names=repo.attribute_names(s),
-        class_names=[c.name for c in known],
+        class_names=names,
         object_ids=[c.id for c in known],
         name="store",
     )
+
+
+def _samples(model: TactileRecognizer, rows: list[Sample]) -> np.ndarray:
+    """What the model learns from these stored samples: the arrays, or the images its
+    featurizer makes of raw trials (one per finger)."""
+    if model.input_kind == RAW_TRIALS:
+        return model.trial_samples([repo.decode_trial(r.data) for r in rows])[0]
+    return _stack(rows)
 
 
 def _stack(rows: list[Sample]) -> np.ndarray:

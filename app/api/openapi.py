@@ -16,10 +16,13 @@ from fastapi import FastAPI
 from pydantic import BaseModel
 
 from app.api.problems import COMPONENTS
-from app.api.schemas import RecognizeRequest, SampleCreate
+from app.api.schemas import RecognizeRequest, RecognizeTrialsRequest, SampleCreate
 
 # bodies read by hand, which FastAPI therefore does not list among its components
-BODIES: dict[str, type[BaseModel]] = {"RecognizeRequest": RecognizeRequest}
+BODIES: dict[str, type[BaseModel]] = {
+    "RecognizeRequest": RecognizeRequest,
+    "RecognizeTrialsRequest": RecognizeTrialsRequest,
+}
 REF = "#/components/schemas/{model}"
 
 

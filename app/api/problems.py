@@ -25,9 +25,11 @@ from app.framework.errors import (
     BundleError,
     DuplicateClassError,
     FrameworkError,
+    InputKindError,
     InputShapeError,
     NonFiniteInputError,
     NotFittedError,
+    TrialInputError,
     UnknownClassError,
     UnsupportedOperationError,
 )
@@ -38,6 +40,8 @@ MEDIA_TYPE = "application/problem+json"
 
 # framework error -> (status, field named when the route did not name one)
 FRAMEWORK_STATUS: dict[type[FrameworkError], tuple[int, str]] = {
+    InputKindError: (409, "samples"),  # raw trials for a model of samples, or the reverse
+    TrialInputError: (422, "trials"),
     InputShapeError: (422, "samples"),
     NonFiniteInputError: (422, "samples"),
     AttributeVectorError: (422, "attributes"),
@@ -78,7 +82,9 @@ def blame(field: str) -> Iterator[None]:
     try:
         yield
     except FrameworkError as exc:
-        if not isinstance(exc, ABOUT_THE_MODEL):
+        if isinstance(exc, TrialInputError):  # it knows the place: trials[2].fingers[1].pac
+            exc.field = exc.field.replace("trials", field, 1)
+        elif not isinstance(exc, ABOUT_THE_MODEL):
             exc.field = field
         raise
 
@@ -151,6 +157,8 @@ MAX_ERRORS = 5
 def _validation_reason(err: dict[str, Any]) -> str:
     if err.get("type") == "json_invalid":
         return f"malformed JSON: {err.get('ctx', {}).get('error', 'cannot be parsed')}"
+    if err.get("type") == "value_error":  # our validators' own words, without pydantic's prefix
+        return str(err.get("ctx", {}).get("error", err.get("msg", "invalid")))
     return _REASONS.get(err.get("type", ""), str(err.get("msg", "invalid")))
 
 

@@ -113,9 +113,23 @@ class ClassCreated(BaseModel):
 
 # --------------------------------------------------------------------- samples
 class SampleCreate(Strict):
-    sample: SampleData = Field(
-        description="One sample, of the shape `input_shape` of `GET /v1/models/active` says."
+    """One sample, or one raw trial for a model fitted on raw trials."""
+
+    sample: SampleData | None = Field(
+        None,
+        description="One sample, of the shape `input_shape` of `GET /v1/models/active` says.",
     )
+    trial: TrialIn | None = Field(
+        None,
+        description="One raw BioTac trial, for a model whose `input_kind` is `raw_trials`; "
+        "stored as sent, so a later model can featurize it anew.",
+    )
+
+    @model_validator(mode="after")
+    def _one_input(self) -> SampleCreate:
+        if (self.sample is None) == (self.trial is None):
+            raise ValueError("give exactly one of 'sample' or 'trial'")
+        return self
 
 
 class SampleCreated(BaseModel):
@@ -144,8 +158,13 @@ class SampleOut(BaseModel):
 class SampleDetail(SampleOut):
     """A stored sample with its data, as it was enrolled or read from the dataset."""
 
-    shape: list[int] = Field(description="The sample's shape (the model's input shape).")
-    sample: list = Field(description="The sample's values, nested as its shape.")
+    shape: list[int] = Field(
+        description="The sample's shape (the model's input shape); [] for a raw trial."
+    )
+    sample: list | TrialIn = Field(
+        description="The sample's values, nested as its shape; a raw trial as it was enrolled "
+        '(`{"fingers": [...]}`, as `POST /v1/recognize` takes trials).'
+    )
 
 
 class SampleList(BaseModel):
@@ -164,11 +183,44 @@ class Withdrawal(BaseModel):
 
 
 # ------------------------------------------------------------------- recognize
+class FingerIn(Strict):
+    """One BioTac finger's channels as recorded (T frames), named as in the BioTac ROS
+    driver and the recordings' HDF5 files."""
+
+    pdc: list[float] = Field(description="DC pressure, (T,).")
+    tdc: list[float] = Field(description="DC temperature, (T,).")
+    tac: list[float] = Field(description="AC temperature (heat flow), (T,).")
+    pac: list[list[float]] = Field(description="AC pressure (vibration), (T, 22).")
+    electrodes: list[list[float]] = Field(description="The 19 electrodes' impedance, (T, 19).")
+
+
+class TrialIn(Strict):
+    """One raw exploration (a trial): each finger's channels, of any length T."""
+
+    fingers: list[FingerIn] = Field(min_length=1, description="One or more fingers.")
+    phases: list[tuple[int, int]] | None = Field(
+        None,
+        description="`[start, end)` frames of each exploration phase (tap, hold, squeeze); "
+        "found from `pdc` when absent (docs/DATASETS.md).",
+    )
+    timestamps: list[float] | None = Field(None, description="Time of each frame, (T,).")
+
+
 class RecognizeRequest(Strict):
     samples: list[SampleData] = Field(
         min_length=1,
         description="1 … batch_limit samples (`TACTILE_BATCH_LIMIT`), each of the "
         "shape `input_shape` of `GET /v1/models/active` says.",
+    )
+
+
+class RecognizeTrialsRequest(Strict):
+    """Raw trials, for a model fitted on them (`input_kind` `raw_trials`)."""
+
+    trials: list[TrialIn] = Field(
+        min_length=1,
+        description="1 … batch_limit raw BioTac trials; one answer per trial, from all its "
+        "fingers.",
     )
 
 
@@ -251,6 +303,12 @@ class ModelSummary(BaseModel):
     reason: VersionReason
     base_version: int | None
     sha256: str = Field(validation_alias="bundle_sha256")
+    input_kind: str = Field(
+        "samples",
+        description="What the version takes: `samples` of `input_shape`, or `raw_trials` (raw "
+        "BioTac trials, which its featurizer turns into samples of `input_shape`, one per "
+        "finger).",
+    )
     input_shape: list[int] = Field(
         description="The shape of one sample to send: `POST /v1/recognize` and `POST /v1/describe` "
         "take a batch of samples of this shape (nested lists), `POST /v1/classes/{id}/samples` one."
@@ -274,3 +332,7 @@ class Health(BaseModel):
     model_version: int | None = Field(
         None, description="The model version this process serves; null until one is loaded."
     )
+
+
+SampleCreate.model_rebuild()
+SampleDetail.model_rebuild()

@@ -37,7 +37,7 @@ import re
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -469,18 +469,22 @@ def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 # -------------------------------------------------------------------------------- HDF5
-def read_biotac_h5(path: str | Path) -> dict[str, RawTrial]:
-    """Every trial of one HDF5 file, ``{group name: RawTrial}`` in the file's group order.
+def read_biotac_h5(path: str | Path | BinaryIO) -> dict[str, RawTrial]:
+    """Every trial of one HDF5 file (a path, or a binary file object such as a request
+    body in ``io.BytesIO``), ``{group name: RawTrial}`` in the file's group order.
 
-    Errors are RawTrialError naming the file, the group, the finger and the channel.
+    Errors are RawTrialError naming the file (when it has a path), the group, the finger
+    and the channel.
     """
     import h5py
 
-    path = Path(path)
+    if isinstance(path, str | Path):
+        path = Path(path)
+    where = str(path) if isinstance(path, Path) else None
     try:
         fh = h5py.File(path, "r")
     except OSError as exc:
-        raise RawTrialError(f"cannot read as HDF5: {exc}", file=str(path)) from None
+        raise RawTrialError(f"cannot read as HDF5: {exc}", file=where) from None
     trials: dict[str, RawTrial] = {}
     with fh:
         for name, group in fh.items():
@@ -489,11 +493,11 @@ def read_biotac_h5(path: str | Path) -> dict[str, RawTrial]:
             try:
                 trials[name] = _read_group(group)
             except RawTrialError as err:
-                raise err.located(file=str(path), group=name) from None
+                raise err.located(file=where, group=name) from None
             except (OSError, KeyError, TypeError) as exc:  # unreadable or truncated data
-                raise RawTrialError(f"cannot read: {exc}", file=str(path), group=name) from None
+                raise RawTrialError(f"cannot read: {exc}", file=where, group=name) from None
     if not trials:
-        raise RawTrialError("holds no trial group", file=str(path))
+        raise RawTrialError("holds no trial group", file=where)
     return trials
 
 

@@ -16,6 +16,7 @@ from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
+from app.data.biotac import BioTacDataset
 from app.data.dataset import TactileDataset
 from app.framework import bundle
 from app.framework.recognizer import TactileRecognizer
@@ -24,22 +25,23 @@ from app.store import bundles, leases, migrate, repo
 from app.store.enums import ClassKind, Origin, VersionReason
 
 LEASE = "bootstrap"
-Trainer = Callable[[], tuple[TactileRecognizer, TactileDataset]]
+Dataset = TactileDataset | BioTacDataset
+Trainer = Callable[[], tuple[TactileRecognizer, Dataset]]
 
 
 def say(msg: str) -> None:
     print(f"tactile-zsl: {msg}", file=sys.stderr, flush=True)
 
 
-def train_base(
-    settings: Settings, progress: bool = True
-) -> tuple[TactileRecognizer, TactileDataset]:
-    from app.data.sources import load_dataset  # heavy; only a bootstrap needs it
+def train_base(settings: Settings, progress: bool = True) -> tuple[TactileRecognizer, Dataset]:
+    from app.data.sources import open_dataset  # heavy; only a bootstrap needs it
 
-    dataset = load_dataset(settings.dataset)
+    # raw trials stay raw: the model fits its featurizer on them and keeps it
+    dataset = open_dataset(settings.dataset)
+    what = "raw trials" if isinstance(dataset, BioTacDataset) else "samples"
     say(
         f"training the base model ({settings.method}) on '{settings.dataset}': "
-        f"{len(dataset)} samples of {dataset.n_classes} objects; this runs once"
+        f"{len(dataset)} {what} of {dataset.n_classes} objects; this runs once"
     )
     model = make_method(settings.method, **settings.method_params).fit(dataset, progress=progress)
     return model, dataset
@@ -85,10 +87,13 @@ def ensure_ready(
             leases.release(s, LEASE, holder)
 
 
-def store_base_model(s: Session, model: TactileRecognizer, dataset: TactileDataset) -> int:
+def store_base_model(s: Session, model: TactileRecognizer, dataset: Dataset) -> int:
+    """The dataset's vocabulary, classes and samples (raw trials as they were read), and the
+    model as version 1, active."""
     repo.add_attributes(s, dataset.attribute_names)
     ids = []
-    for name, vector in zip(dataset.class_names, dataset.class_attributes, strict=True):
+    vectors = np.nan_to_num(dataset.attribute_values)  # not known: stored as absent (0)
+    for name, vector in zip(dataset.class_names, vectors, strict=True):
         ids.append(
             repo.add_class(s, name, repo.vector_key(vector), ClassKind.KNOWN, Origin.DATASET).id
         )
@@ -99,12 +104,17 @@ def store_base_model(s: Session, model: TactileRecognizer, dataset: TactileDatas
         base_version=None,
         bundle_sha256=bundles.store_model(s, bundle.split(model)),
         input_shape=list(model.input_shape),
+        input_kind=model.input_kind,
         metrics=repo.jsonable(model.metrics),
         classes=model_classes(model),
         sample_ids=[],
     )
     repo.activate(s, row.version)
-    repo.add_dataset_samples(s, np.asarray(ids)[dataset.labels], dataset.samples, dataset.trials)
+    if isinstance(dataset, BioTacDataset):
+        samples, trials = dataset.trials, dataset.trial_ids
+    else:
+        samples, trials = dataset.samples, dataset.trials
+    repo.add_dataset_samples(s, np.asarray(ids)[dataset.labels], samples, trials)
     return row.version
 
 

@@ -42,6 +42,34 @@ class RecognitionService:
             results = await self.batcher.recognize(model, x, self.top_k)
         else:
             results = await run_in_threadpool(rec.recognize_batch, samples, self.top_k)
+        return self._counted(results)
+
+    async def recognize_object(
+        self, model: LoadedModel, samples: np.ndarray | list
+    ) -> RecognitionBatch:
+        """One answer for all ``samples``, touches of one object, their evidence fused."""
+        groups = np.zeros(len(samples), np.int64)
+        rec = model.recognizer
+        return self._counted(
+            await run_in_threadpool(rec.recognize_batch, samples, self.top_k, groups)
+        )
+
+    async def recognize_trials(
+        self, model: LoadedModel, trials: list, same_object: bool = False
+    ) -> RecognitionBatch:
+        """One answer per raw trial from all its fingers (with ``same_object``, one for all
+        the trials): featurized by the model's own featurizer."""
+        rec = model.recognizer
+
+        def run() -> RecognitionBatch:
+            images, groups = rec.trial_samples(trials)
+            if same_object:
+                groups = np.zeros_like(groups)
+            return rec.recognize_batch(images, self.top_k, groups)
+
+        return self._counted(await run_in_threadpool(run))
+
+    def _counted(self, results: RecognitionBatch) -> RecognitionBatch:
         novel = int(results.is_novel_class.sum())
         for kind, count in ((ClassKind.KNOWN, len(results) - novel), (ClassKind.NOVEL, novel)):
             if count:

@@ -52,3 +52,10 @@ class VersionReason(StrEnum):
     UPDATE = "update"  # classes or samples added, or a class described anew
     PROMOTION = "promotion"  # fitted again on the stored samples: a class became known
     WITHDRAWAL = "withdrawal"  # something withdrawn left the model
+
+
+class SampleForm(StrEnum):
+    """``samples.form``: how ``samples.data`` holds the sample."""
+
+    ARRAY = "array"  # float32 bytes in C order, of ``samples.shape``
+    RAW_TRIAL = "raw_trial"  # a raw BioTac trial as sent, as .npz (``encoding.encode_trial``)

@@ -25,7 +25,7 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, query_expression
 
-from app.store.enums import JobStatus, Origin
+from app.store.enums import JobStatus, Origin, SampleForm
 
 # Stable constraint names so Alembic migrations (and SQLite batch mode) can refer to them.
 NAMING = {
@@ -105,7 +105,8 @@ class ObjectClass(Base):
 
 
 class Sample(Base):
-    """A real tactile sample: float32 bytes in C order with their shape."""
+    """A real tactile sample: float32 bytes in C order with their shape, or a raw BioTac
+    trial as it was sent (``form``), which a later model can featurize again."""
 
     __tablename__ = "samples"
 
@@ -113,8 +114,11 @@ class Sample(Base):
     class_id: Mapped[int] = mapped_column(ForeignKey("classes.id"), index=True)
     origin: Mapped[str] = mapped_column(String(10))  # Origin
     trial: Mapped[int | None] = mapped_column(Integer)  # dataset trial id, for grouped splits
-    shape: Mapped[list[int]] = mapped_column(JSON)
+    shape: Mapped[list[int]] = mapped_column(JSON)  # [] for a raw trial
     data: Mapped[bytes] = mapped_column(LargeBinary)
+    form: Mapped[str] = mapped_column(
+        String(10), default=SampleForm.ARRAY, server_default=SampleForm.ARRAY.value
+    )  # SampleForm
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     withdrawn_at: Mapped[datetime | None] = mapped_column(UTCDateTime)  # see ObjectClass
 
@@ -140,6 +144,9 @@ class ModelVersion(Base):
     base_version: Mapped[int | None] = mapped_column(Integer)
     bundle_sha256: Mapped[str] = mapped_column(ForeignKey("bundles.sha256"))
     input_shape: Mapped[list[int]] = mapped_column(JSON)
+    # what the version takes: "samples" of input_shape, or "raw_trials" (its featurizer makes
+    # input_shape images of them)
+    input_kind: Mapped[str] = mapped_column(String(12), default="samples", server_default="samples")
     metrics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     classes: Mapped[list[dict[str, Any]]] = mapped_column(JSON)  # [{"name", "kind"}]
     sample_ids: Mapped[list[int]] = mapped_column(JSON, default=list)  # enrolled samples inside

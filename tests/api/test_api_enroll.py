@@ -252,9 +252,12 @@ def test_sample_for_known_class_is_409(client, sample):
 
 
 def test_sample_missing_field(client, novel_class, sample):
-    problem(
-        client.post(f"/v1/classes/{novel_class}/samples", json={"samples": [sample]}), 422, "sample"
-    )
+    url = f"/v1/classes/{novel_class}/samples"
+    problem(client.post(url, json={"samples": [sample]}), 422, "samples")  # misspelt
+    found = problem(client.post(url, json={}), 422, "body")
+    assert found["errors"] == [
+        {"field": "body", "reason": "give exactly one of 'sample' or 'trial'"}
+    ]
 
 
 def test_rejected_writes_store_nothing(client, app, novel_class, sample):

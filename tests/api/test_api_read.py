@@ -128,7 +128,11 @@ def test_docs_page_needs_no_internet(client):
 def test_openapi_documents_problem_responses_and_npy(client):
     spec = client.get("/openapi.json").json()
     recognize = spec["paths"]["/v1/recognize"]["post"]
-    assert set(recognize["requestBody"]["content"]) == {"application/json", "application/x-npy"}
+    assert set(recognize["requestBody"]["content"]) == {
+        "application/json",
+        "application/x-npy",
+        "application/x-hdf5",
+    }
     assert PROBLEM in recognize["responses"]["422"]["content"]
     register = spec["paths"]["/v1/classes"]["post"]
     assert "202" in register["responses"] and "409" in register["responses"]

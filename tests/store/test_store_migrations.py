@@ -14,7 +14,7 @@ from app.store import migrate
 from app.store.db import make_engine
 from tests.service_fixtures import fresh_postgres_database, postgres_url, require_postgres
 
-HEAD = "0005"
+HEAD = "0006"
 PG_URL = postgres_url()
 
 TABLES = {
@@ -212,4 +212,40 @@ def test_postgresql_upgrade_downgrade_and_bundle_storage():
         assert set(inspect(engine).get_table_names()) <= {"alembic_version"}
         migrate.upgrade(engine)
         assert TABLES <= set(inspect(engine).get_table_names()) and bundle_storage(engine) == "e"
+        engine.dispose()
+
+
+@pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
+def test_0006_marks_every_sample_an_array_and_refuses_to_drop_raw_trials(backend, tmp_path):
+    with _database(backend, tmp_path) as url:
+        engine = make_engine(url)
+        migrate.upgrade(engine, "0005")
+        with engine.begin() as conn:
+            conn.execute(
+                text(
+                    "INSERT INTO classes (name, kind, origin, attribute_key, created_at) "
+                    "VALUES ('mug', 'known', 'dataset', '01', '2026-11-24')"
+                )
+            )
+            conn.execute(
+                text(
+                    "INSERT INTO samples (class_id, origin, shape, data, created_at) "
+                    "VALUES (1, 'dataset', '[2]', :data, '2026-11-24')"
+                ),
+                {"data": b"\0" * 8},
+            )
+        migrate.upgrade(engine)
+        with engine.connect() as conn:
+            assert conn.execute(text("SELECT form FROM samples")).scalars().all() == ["array"]
+        with engine.begin() as conn:
+            conn.execute(text("UPDATE samples SET form = 'raw_trial'"))
+        with pytest.raises(RuntimeError, match="1 raw-trial samples"):
+            migrate.downgrade(engine, "0005")
+        assert migrate.current_revision(engine) == HEAD and "form" in _columns(engine, "samples")
+        with engine.begin() as conn:
+            conn.execute(text("UPDATE samples SET form = 'array'"))
+        migrate.downgrade(engine, "0005")
+        assert "form" not in _columns(engine, "samples")
+        with engine.connect() as conn:
+            assert conn.execute(text("SELECT COUNT(*) FROM samples")).scalar() == 1
         engine.dispose()

@@ -7,7 +7,7 @@ from fastapi.concurrency import run_in_threadpool
 from app.api import problems
 from app.api.deps import RecognizingDep
 from app.api.problems import blame
-from app.api.routes.recognize import OPENAPI_EXTRA, read_samples
+from app.api.routes.recognize import OPENAPI_EXTRA, read_body
 from app.api.schemas import AttributeScore, DescribeResponse, Description
 
 router = APIRouter(prefix="/v1", tags=["describe"], responses=problems.responses(401, 403, 429))
@@ -34,14 +34,19 @@ async def describe(
     model's attribute classifiers. For an object the robot found novel that nobody has
     registered: a person checks the `suggested` attributes and registers the object with
     them; with `same_object`, several touches of the object give one description too. Takes
-    the samples as `POST /v1/recognize` does. Only methods that predict
+    the samples (or raw trials: one description per trial) as `POST /v1/recognize` does. Only methods that predict
     attributes from a sample answer (`best` does; otherwise 409). On objects the model was
     never trained on these predictions are far from certain: docs/RESULTS.md measures them."""
     model, service = recognizing
     rec = model.recognizer
-    samples, _ = await read_samples(request, rec.input_shape, service.batch_limit)
-    with blame("samples"):  # a method without attribute classifiers: 409, naming the model
-        proba = await run_in_threadpool(rec.attribute_proba, samples)
+    body = await read_body(request, rec.input_shape, service.batch_limit)
+    # a method without attribute classifiers: 409, naming the model
+    if body.trials is not None:
+        with blame("trials"):
+            proba = await run_in_threadpool(rec.attribute_proba_trials, body.trials)
+    else:
+        with blame("samples"):
+            proba = await run_in_threadpool(rec.attribute_proba, body.samples)
     names = rec.registry.attribute_names
     return DescribeResponse(
         model_version=model.version,

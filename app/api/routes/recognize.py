@@ -1,16 +1,20 @@
+import contextlib
 import io
+import json
+from typing import Annotated, NamedTuple
 
 import numpy as np
 import orjson
-from fastapi import APIRouter, Request, Response
+from fastapi import APIRouter, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 from fastapi.exceptions import RequestValidationError
 from pydantic import ValidationError
 
-from app.api import problems
+from app.api import problems, trials
 from app.api.deps import JSON, NPY, RecognizingDep, api_key_header, media_type
 from app.api.problems import Problem, blame
 from app.api.schemas import RecognizeRequest, RecognizeResponse
+from app.data.biotac import RawTrial
 from app.framework.recognizer import RecognitionBatch
 
 router = APIRouter(prefix="/v1", tags=["recognize"], responses=problems.responses(401, 403, 429))
@@ -19,14 +23,21 @@ router = APIRouter(prefix="/v1", tags=["recognize"], responses=problems.response
 # the event loop.
 PARSE_INLINE_BYTES = 64 * 1024
 
-# The body is read by hand to accept JSON or .npy; this documents both, and the API key
+# The body is read by hand to accept JSON, .npy or HDF5; this documents them, and the API key
 # that RecognizingDep checks (the other routes' Security dependency documents it for them).
 OPENAPI_EXTRA = {
     "security": [{api_key_header.scheme_name: []}],
     "requestBody": {
         "required": True,
         "content": {
-            JSON: {"schema": {"$ref": "#/components/schemas/RecognizeRequest"}},
+            JSON: {
+                "schema": {
+                    "oneOf": [
+                        {"$ref": "#/components/schemas/RecognizeRequest"},
+                        {"$ref": "#/components/schemas/RecognizeTrialsRequest"},
+                    ]
+                }
+            },
             NPY: {
                 "schema": {
                     "type": "string",
@@ -34,9 +45,37 @@ OPENAPI_EXTRA = {
                     "description": "A float array (N, *input_shape) saved with numpy.save.",
                 },
             },
+            trials.HDF5: {
+                "schema": {
+                    "type": "string",
+                    "format": "binary",
+                    "description": "Raw BioTac trials, for a model fitted on raw trials: an "
+                    "HDF5 file with one group per trial holding finger_0, finger_1, … groups "
+                    "of the channels pdc, tdc, tac (T), pac (T, 22) and electrodes (T, 19), "
+                    "as the BioTac recordings are laid out (docs/DATASETS.md); answered in "
+                    "the file's group order.",
+                },
+            },
         },
     },
 }
+
+SameObject = Annotated[
+    bool,
+    Query(
+        description="The samples (or trials) are touches of one object: answer once for all "
+        "of them, their evidence fused (the mean of their class probabilities and novelty "
+        "scores)."
+    ),
+]
+
+
+class Body(NamedTuple):
+    """A recognition request's input: ``n`` samples, or ``n`` raw trials."""
+
+    samples: np.ndarray | None
+    trials: list[RawTrial] | None
+    n: int
 
 
 @router.post(
@@ -45,43 +84,56 @@ OPENAPI_EXTRA = {
     openapi_extra=OPENAPI_EXTRA,
     responses=problems.responses(413, 415, 422, 503),
 )
-async def recognize(request: Request, recognizing: RecognizingDep) -> Response:
+async def recognize(
+    request: Request, recognizing: RecognizingDep, same_object: SameObject = False
+) -> Response:
     """Recognise a batch of samples as known or novel objects.
 
     Send `{"samples": [...]}` as JSON, or the same batch as a binary `.npy` body
-    with `Content-Type: application/x-npy`.
+    with `Content-Type: application/x-npy`. A model fitted on raw BioTac trials
+    (`input_kind` `raw_trials` in `GET /v1/models/active`) takes `{"trials": [...]}`
+    instead, or an HDF5 body, and answers once per trial from all its fingers; the other
+    kind of input is a 409 that says which the model takes.
     """
     model, service = recognizing
-    samples, n = await read_samples(request, model.recognizer.input_shape, service.batch_limit)
-    with blame("samples"):
-        results = await service.recognize(model, samples, n)
+    body = await read_body(request, model.recognizer.input_shape, service.batch_limit)
+    if body.trials is not None:
+        with blame("trials"):
+            results = await service.recognize_trials(model, body.trials, same_object)
+    else:
+        with blame("samples"):
+            if same_object:
+                results = await service.recognize_object(model, body.samples)
+            else:
+                results = await service.recognize(model, body.samples, body.n)
     return Response(
         _to_json(model.version, results, model.class_ids), media_type="application/json"
     )
 
 
-async def read_samples(
-    request: Request,
-    input_shape: tuple[int, ...],
-    batch_limit: int,
-) -> tuple[np.ndarray | list, int]:
-    """The body's samples (JSON, or .npy by its Content-Type) and how many there are, at
-    most ``batch_limit``; the model validates them."""
-    content_type = media_type(request, (JSON, NPY))
+async def read_body(request: Request, input_shape: tuple[int, ...], batch_limit: int) -> Body:
+    """The body's samples (JSON or .npy) or raw trials (JSON or HDF5), by its Content-Type,
+    at most ``batch_limit``; the model validates samples, the trials are validated here."""
+    content_type = media_type(request, (JSON, NPY, trials.HDF5))
     body = await request.body()
+    if content_type == trials.HDF5:
+        parsed = await run_in_threadpool(trials.from_hdf5, body, batch_limit)
+        return Body(None, parsed, len(parsed))
     if content_type == NPY:
         samples = _from_npy(body)
         n = 1 if samples.ndim <= len(input_shape) else len(samples)  # one bare sample
     else:
-        samples = (
-            await run_in_threadpool(_from_json, body, input_shape)
+        parsed = (
+            await run_in_threadpool(_from_json, body, input_shape, batch_limit)
             if len(body) > PARSE_INLINE_BYTES
-            else _from_json(body, input_shape)
+            else _from_json(body, input_shape, batch_limit)
         )
-        n = len(samples)
+        if parsed.trials is not None:
+            return parsed
+        samples, n = parsed.samples, parsed.n
     if n > batch_limit:
         raise Problem(422, f"{n} samples is more than the batch limit of {batch_limit}", "samples")
-    return samples, n
+    return Body(samples, None, n)
 
 
 def _to_json(version: int, batch: RecognitionBatch, class_ids: dict[str, int]) -> bytes:
@@ -89,9 +141,9 @@ def _to_json(version: int, batch: RecognitionBatch, class_ids: dict[str, int]) -
     return orjson.dumps({"model_version": version, "results": batch.records(class_ids)})
 
 
-def _from_json(body: bytes, input_shape: tuple[int, ...]) -> np.ndarray:
+def _from_json(body: bytes, input_shape: tuple[int, ...], batch_limit: int) -> Body:
     """The samples of a JSON body: an array when well-formed, else pydantic's errors or a
-    422 naming the first sample not of ``input_shape``.
+    422 naming the first sample not of ``input_shape``; or its validated ``trials``.
 
     The fast path (orjson, then one numpy conversion) takes only what the schema accepts:
     an object holding just a non-empty ``samples`` list of numeric samples, each a list
@@ -100,23 +152,33 @@ def _from_json(body: bytes, input_shape: tuple[int, ...]) -> np.ndarray:
     """
     try:
         data = orjson.loads(body)
+        if isinstance(data, dict) and "trials" in data:
+            parsed = trials.parse(data, batch_limit)
+            return Body(None, parsed, len(parsed))
         samples = data["samples"] if isinstance(data, dict) and len(data) == 1 else None
         if isinstance(samples, list) and samples:
             x = np.asarray(samples)
             if x.dtype.kind in "fiu" and x.ndim in (2, 3):
                 with np.errstate(over="ignore"):  # beyond float32 is inf: rejected by name below
-                    return x.astype(np.float32, copy=False)
+                    x = x.astype(np.float32, copy=False)
+                    return Body(x, None, len(x))
     except (orjson.JSONDecodeError, KeyError, ValueError, OverflowError):
         pass
-    # pydantic's own JSON parser; like json.loads it reads NaN/Infinity literals, which
-    # the framework then rejects by name
+    # json and pydantic read NaN/Infinity literals, which the trial validator or the
+    # framework then rejects by name
+    with contextlib.suppress(ValueError, RecursionError):
+        data = json.loads(body)
+        if isinstance(data, dict) and "trials" in data:
+            parsed = trials.parse(data, batch_limit)
+            return Body(None, parsed, len(parsed))
     try:
-        samples = RecognizeRequest.model_validate_json(body).samples
+        request = RecognizeRequest.model_validate_json(body)
     except ValidationError as exc:
         raise RequestValidationError(
             [{**e, "loc": ("body", *e["loc"])} for e in exc.errors(include_url=False)]
         ) from None
-    return np.stack([_one(s, i, input_shape) for i, s in enumerate(samples)])
+    samples = np.stack([_one(s, i, input_shape) for i, s in enumerate(request.samples)])
+    return Body(samples, None, len(samples))
 
 
 def _one(sample: list, i: int, input_shape: tuple[int, ...]) -> np.ndarray:

@@ -4,7 +4,7 @@ from typing import Annotated
 import numpy as np
 from fastapi import APIRouter, Header, Response
 
-from app.api import problems
+from app.api import problems, trials
 from app.api.deps import (
     NPY,
     EnrollAccess,
@@ -29,6 +29,8 @@ from app.api.schemas import (
     Withdrawal,
 )
 from app.api.withdrawals import queue_withdrawal
+from app.data.biotac import RawTrial
+from app.framework.recognizer import RAW_TRIALS
 from app.store import repo
 from app.store.enums import ClassKind, JobKind, Origin
 
@@ -81,12 +83,14 @@ def get_sample(
     row = repo.sample_record(session, class_id, sample_id)
     if row is None:
         raise not_found("sample", "sample_id", sample_id)
-    x = repo.decode_sample(row.data, row.shape)
+    x = repo.decode(row)
+    fields = {k: v for k, v in row._mapping.items() if k not in ("data", "form")}
+    if isinstance(x, RawTrial):  # as it was enrolled, as POST /v1/recognize takes trials
+        return SampleDetail(**fields, sample=x.to_dict())
     if NPY in accept.lower():
         body = io.BytesIO()
         np.save(body, x, allow_pickle=False)
         return Response(body.getvalue(), media_type=NPY)
-    fields = {k: v for k, v in row._mapping.items() if k != "data"}
     return SampleDetail(**fields, sample=x.tolist())
 
 
@@ -122,12 +126,27 @@ def add_sample(
             "class_id",
         )
     rec = model.recognizer
-    x = one_sample(body.sample, rec.input_shape)
-    with blame("sample"):
-        x = rec.validate_samples(x)  # NaN and infinity become a named 422
-    recognized_as = rec.recognize_batch(x).records(model.class_ids)[0]
+    if body.trial is not None:
+        kept = trials.one(body.trial.model_dump(exclude_none=True))
+        with blame("trial"):  # 409 when the model takes samples
+            x, _ = rec.trial_samples([kept])
+    elif rec.input_kind == RAW_TRIALS:  # a later featurizer could not make anything of it
+        raise Problem(
+            409,
+            "this model was fitted on raw BioTac trials: send the sample as "
+            "'trial', a raw trial, which the store keeps as sent",
+            "sample",
+        )
+    else:
+        x = one_sample(body.sample, rec.input_shape)
+        with blame("sample"):
+            x = rec.validate_samples(x)  # NaN and infinity become a named 422
+        kept = x[0]
+    # one answer for all of it (both fingers of a trial)
+    answer = rec.recognize_batch(x, groups=np.zeros(len(x), np.int64))
+    recognized_as = answer.records(model.class_ids)[0]
     with idempotency.writing(session):  # a concurrent retry with this key may win
-        row = repo.add_sample(session, class_id, x[0])
+        row = repo.add_sample(session, class_id, kept)
         job = repo.add_job(session, JobKind.ADD_SAMPLE, class_id, row.id, requested_by=principal.id)
         out = SampleCreated(
             sample_id=row.id,

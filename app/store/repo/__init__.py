@@ -43,8 +43,12 @@ from app.store.repo.classes import (
 )
 from app.store.repo.encoding import (
     attribute_labels,
+    decode,
     decode_sample,
+    decode_trial,
+    encode,
     encode_sample,
+    encode_trial,
     key_vector,
     vector_key,
 )
@@ -119,8 +123,12 @@ __all__ = [
     "withdraw_sample",
     # encoding
     "attribute_labels",
+    "decode",
     "decode_sample",
+    "decode_trial",
+    "encode",
     "encode_sample",
+    "encode_trial",
     "jsonable",
     "key_vector",
     "vector_key",

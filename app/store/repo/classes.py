@@ -10,9 +10,10 @@ import numpy as np
 from sqlalchemy import Row, Select, func, insert, select, update
 from sqlalchemy.orm import Session, aliased, defer
 
+from app.data.biotac import RawTrial
 from app.store.enums import ClassKind, JobKind, Origin
 from app.store.models import Attribute, Job, ObjectClass, Sample, utcnow
-from app.store.repo.encoding import encode_sample
+from app.store.repo.encoding import encode
 
 # ---------------------------------------------------------------- attributes
 
@@ -125,10 +126,11 @@ def demote_classes(session: Session, class_ids: Collection[int]) -> None:
 
 
 def add_sample(
-    session: Session, class_id: int, sample: np.ndarray, origin: str = Origin.ENROLLED
+    session: Session, class_id: int, sample: np.ndarray | RawTrial, origin: str = Origin.ENROLLED
 ) -> Sample:
-    data, shape = encode_sample(sample)
-    row = Sample(class_id=class_id, origin=origin, shape=shape, data=data)
+    """A sample row: an array, or a raw trial kept as it was sent."""
+    data, shape, form = encode(sample)
+    row = Sample(class_id=class_id, origin=origin, shape=shape, data=data, form=form)
     session.add(row)
     session.flush()
     return row
@@ -137,14 +139,14 @@ def add_sample(
 def add_dataset_samples(
     session: Session,
     class_ids: Sequence[int],
-    samples: np.ndarray,
+    samples: np.ndarray | Sequence[RawTrial],
     trials: Sequence[int],
 ) -> None:
-    """Bulk insert (one executemany) of a whole training set."""
+    """Bulk insert (one executemany) of a whole training set: arrays, or raw trials."""
     now = utcnow()
     rows = []
     for cid, x, trial in zip(class_ids, samples, trials, strict=True):
-        data, shape = encode_sample(x)
+        data, shape, form = encode(x)
         rows.append(
             {
                 "class_id": int(cid),
@@ -152,6 +154,7 @@ def add_dataset_samples(
                 "trial": int(trial),
                 "shape": shape,
                 "data": data,
+                "form": form,
                 "created_at": now,
             }
         )
@@ -183,8 +186,11 @@ def list_samples(
 
 
 def sample_record(session: Session, class_id: int, sample_id: int) -> Row | None:
-    """The ``list_samples`` row of one live sample, with its ``shape`` and ``data``."""
-    stmt = _live_samples(class_id, Sample.shape, Sample.data).where(Sample.id == sample_id)
+    """The ``list_samples`` row of one live sample, with its ``shape``, ``data`` and ``form``
+    (``encoding.decode`` reads it)."""
+    stmt = _live_samples(class_id, Sample.shape, Sample.data, Sample.form).where(
+        Sample.id == sample_id
+    )
     return session.execute(stmt).first()
 
 

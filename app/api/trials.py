@@ -1,0 +1,69 @@
+"""Raw BioTac trials on the wire: JSON (``{"trials": [...]}``, or one ``"trial"``) and, for
+high-rate robots, HDF5 in the layout the BioTac recordings use (one group per trial with
+``finger_0``, ``finger_1``, … groups of channels; ``docs/DATASETS.md``).
+
+A malformed trial is a 422 naming the trial, the finger and the channel, e.g. the field
+``trials[2].fingers[1].pac``; nothing is stored."""
+
+from __future__ import annotations
+
+import io
+from typing import Any
+
+from app.api.problems import Problem
+from app.data.biotac import RawTrial, RawTrialError, parse_trial, read_biotac_h5
+
+HDF5 = "application/x-hdf5"
+
+
+def field_of(err: RawTrialError, prefix: str) -> str:
+    """Where in the request a trial error is: ``trials[2].fingers[1].pac``."""
+    place = prefix if err.trial is None else f"{prefix}[{err.trial}]"
+    if err.group is not None:
+        place = f"{prefix}[{err.group!r}]"
+    if err.finger is not None:
+        place += f".fingers[{err.finger}]"
+    if err.channel is not None:
+        place += f".{err.channel}"
+    return place
+
+
+def parse(data: Any, batch_limit: int) -> list[RawTrial]:
+    """``data["trials"]`` of a JSON body as validated trials (at most ``batch_limit``)."""
+    trials = data.get("trials") if isinstance(data, dict) else None
+    if not isinstance(trials, list) or not trials:
+        raise Problem(422, "'trials' must be a non-empty list of trials", "trials")
+    if len(trials) > batch_limit:
+        raise Problem(
+            422, f"{len(trials)} trials is more than the batch limit of {batch_limit}", "trials"
+        )
+    extra = set(data) - {"trials"}
+    if extra:
+        raise Problem(422, f"not a field of this request: {sorted(extra)[0]!r}", sorted(extra)[0])
+    return [one(t, "trials", i) for i, t in enumerate(trials)]
+
+
+def one(data: Any, prefix: str = "trial", index: int | None = None) -> RawTrial:
+    """One trial's JSON form, validated; a 422 naming its place otherwise."""
+    try:
+        return parse_trial(data, trial=index)
+    except RawTrialError as err:
+        raise Problem(422, str(err), field_of(err, prefix)) from None
+
+
+def from_hdf5(body: bytes, batch_limit: int) -> list[RawTrial]:
+    """The trials of an HDF5 body, in the file's group order."""
+    try:
+        trials = list(read_biotac_h5(io.BytesIO(body)).values())
+    except RawTrialError as err:
+        raise Problem(422, str(err), field_of(err, "trials")) from None
+    if len(trials) > batch_limit:
+        raise Problem(
+            422, f"{len(trials)} trials is more than the batch limit of {batch_limit}", "trials"
+        )
+    try:
+        for i, t in enumerate(trials):
+            parse_trial(t, trial=i)  # phases must be findable, as for JSON trials
+    except RawTrialError as err:
+        raise Problem(422, str(err), field_of(err, "trials")) from None
+    return trials
