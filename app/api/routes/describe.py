@@ -6,8 +6,8 @@ from fastapi.concurrency import run_in_threadpool
 
 from app.api import problems
 from app.api.deps import RecognizingDep
-from app.api.problems import blame
-from app.api.routes.recognize import OPENAPI_EXTRA, read_body
+from app.api.problems import Problem, blame
+from app.api.routes.recognize import OPENAPI_EXTRA, read_body, takes_kind
 from app.api.schemas import AttributeScore, DescribeResponse, Description
 
 router = APIRouter(prefix="/v1", tags=["describe"], responses=problems.responses(401, 403, 429))
@@ -40,6 +40,14 @@ async def describe(
     model, service = recognizing
     rec = model.recognizer
     body = await read_body(request, rec.input_shape, service.batch_limit)
+    takes_kind(rec, body)
+    if not rec.has_attributes:
+        raise Problem(
+            409,
+            "the served model has no attributes (its dataset had none): there is nothing to "
+            "describe a touch by",
+            "model",
+        )
     # a method without attribute classifiers: 409, naming the model
     if body.trials is not None:
         with blame("trials"):

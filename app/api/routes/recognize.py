@@ -15,7 +15,7 @@ from app.api.deps import JSON, NPY, RecognizingDep, api_key_header, media_type
 from app.api.problems import Problem, blame
 from app.api.schemas import RecognizeRequest, RecognizeResponse
 from app.data.biotac import RawTrial
-from app.framework.recognizer import RecognitionBatch
+from app.framework.recognizer import RAW_TRIALS, RecognitionBatch, TactileRecognizer
 
 router = APIRouter(prefix="/v1", tags=["recognize"], responses=problems.responses(401, 403, 429))
 
@@ -97,6 +97,7 @@ async def recognize(
     """
     model, service = recognizing
     body = await read_body(request, model.recognizer.input_shape, service.batch_limit)
+    takes_kind(model.recognizer, body)
     if body.trials is not None:
         with blame("trials"):
             results = await service.recognize_trials(model, body.trials, same_object)
@@ -109,6 +110,19 @@ async def recognize(
     return Response(
         _to_json(model.version, results, model.class_ids), media_type="application/json"
     )
+
+
+def takes_kind(rec: TactileRecognizer, body: Body) -> None:
+    """A 409 for samples sent to a model of raw trials: its featurizer makes its samples,
+    and answers must come from what the robot touched, not from images made elsewhere.
+    (Trials sent to a model of samples are refused by the model itself.)"""
+    if body.samples is not None and rec.input_kind == RAW_TRIALS:
+        raise Problem(
+            409,
+            "this model was fitted on raw BioTac trials and takes raw trials: send "
+            '{"trials": [...]} (or an HDF5 body), not samples',
+            "samples",
+        )
 
 
 async def read_body(request: Request, input_shape: tuple[int, ...], batch_limit: int) -> Body:

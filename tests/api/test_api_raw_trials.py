@@ -1,0 +1,178 @@
+"""Raw BioTac trials over HTTP, on a service bootstrapped from the real pilot recordings
+(``../shared/data/biotac_pilot``): recognition of held-out trials (JSON and HDF5), bad
+trials named by trial, finger and channel, the wrong kind of input, and enrolment."""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from app.data.biotac import RawTrial, write_biotac_h5
+from app.framework.registry import make_method
+from tests.service_fixtures import problem, quick_settings, wait_for_job
+
+PILOT = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "biotac_pilot"
+HDF5 = {"Content-Type": "application/x-hdf5"}
+PARAMS = {"seed": 0, "n_estimators": 30, "tuning_rounds": 1, "distance_components": 8}
+
+
+@pytest.fixture(scope="module")
+def pilot():
+    """(model fitted on 4 of every 5 pilot trials, its training set, the held-out trials)."""
+    if not (PILOT / "cork.h5").is_file():
+        pytest.skip(f"BioTac pilot data not found at {PILOT.resolve()}")
+    from app.data.sources import open_dataset
+
+    raw = open_dataset(f"biotac:{PILOT}")
+    held = np.arange(len(raw)) % 5 == 2
+    train = raw.subset(~held)
+    return make_method("best", **PARAMS).fit(train), train, raw.subset(held)
+
+
+@pytest.fixture
+def raw_service(tmp_path, pilot):
+    """(client, app) of a service whose model takes raw trials."""
+    from app.api.main import create_app
+
+    model, train, _ = pilot
+    settings = quick_settings(tmp_path, method="best", method_params=PARAMS)
+    app = create_app(settings, trainer=lambda: (model, train))
+    with TestClient(app) as client:
+        yield client, app
+
+
+def trial_json(trial: RawTrial) -> dict:
+    return trial.to_dict()
+
+
+def test_the_active_model_says_it_takes_raw_trials(raw_service, pilot):
+    client, _ = raw_service
+    active = client.get("/v1/models/active").json()
+    assert active["input_kind"] == "raw_trials"
+    assert active["input_shape"] == list(pilot[0].input_shape)
+    assert client.get("/v1/attributes").json() == {"attributes": []}
+
+
+def test_held_out_trials_are_recognised_once_each_from_both_fingers(raw_service, pilot):
+    client, _ = raw_service
+    _, _, held = pilot
+    body = {"trials": [trial_json(t) for t in held.trials]}
+    r = client.post("/v1/recognize", json=body)
+    assert r.status_code == 200, r.text
+    results = r.json()["results"]
+    assert len(results) == len(held)
+    right = [res["class_name"] == held.class_names[y] for res, y in zip(results, held.labels)]
+    assert np.mean(right) >= 0.9, right
+
+
+def test_an_hdf5_body_gets_the_answers_of_the_json_one(raw_service, pilot, tmp_path):
+    client, _ = raw_service
+    trials = list(pilot[2].trials[:3])
+    path = tmp_path / "trials.h5"
+    write_biotac_h5(path, {f"t{i}": t for i, t in enumerate(trials)})
+    by_hdf5 = client.post("/v1/recognize", content=path.read_bytes(), headers=HDF5)
+    by_json = client.post("/v1/recognize", json={"trials": [trial_json(t) for t in trials]})
+    assert by_hdf5.status_code == 200, by_hdf5.text
+    assert by_hdf5.json() == by_json.json()
+
+
+def test_touches_of_one_object_get_one_answer(raw_service, pilot):
+    client, _ = raw_service
+    _, _, held = pilot
+    cork = [t for t, y in zip(held.trials, held.labels) if held.class_names[y] == "cork"][:3]
+    r = client.post(
+        "/v1/recognize?same_object=true", json={"trials": [trial_json(t) for t in cork]}
+    )
+    assert r.status_code == 200 and len(r.json()["results"]) == 1
+    assert r.json()["results"][0]["class_name"] == "cork"
+
+
+def _bad(trial: dict, finger: int, channel: str, value) -> dict:
+    bad = json.loads(json.dumps(trial))
+    if value is None:
+        del bad["fingers"][finger][channel]
+    else:
+        bad["fingers"][finger][channel] = value
+    return bad
+
+
+@pytest.mark.parametrize(
+    "change, field, words",
+    [
+        (lambda t: _bad(t, 1, "pac", None), "trials[1].fingers[1].pac", "missing"),
+        (
+            lambda t: _bad(t, 0, "electrodes", [r[:18] for r in t["fingers"][0]["electrodes"]]),
+            "trials[1].fingers[0].electrodes",
+            "19",
+        ),
+        (
+            lambda t: _bad(t, 1, "tdc", t["fingers"][1]["tdc"][:-5]),
+            "trials[1].fingers[1].tdc",
+            "frames",
+        ),
+        (
+            lambda t: _bad(t, 0, "pdc", [t["fingers"][0]["pdc"][0]] * len(t["fingers"][0]["pdc"])),
+            "trials[1].fingers[0]",
+            "contact",
+        ),
+        (
+            lambda t: {**t, "fingers": [{**t["fingers"][0], "pdcc": t["fingers"][0]["pdc"]}]},
+            "trials[1].fingers[0].pdcc",
+            "pdc",
+        ),
+    ],
+)
+def test_a_bad_trial_is_a_422_naming_trial_finger_and_channel(
+    raw_service, pilot, change, field, words
+):
+    client, _ = raw_service
+    good = trial_json(pilot[2].trials[0])
+    before = client.get("/metrics").text.count("tactile_recognitions_total")
+    r = client.post("/v1/recognize", json={"trials": [good, change(good)]})
+    found = problem(r, 422)
+    assert found["errors"][0]["field"].startswith(field), found
+    assert words in found["detail"], found
+    assert client.get("/metrics").text.count("tactile_recognitions_total") == before
+
+
+def test_nan_in_a_trial_is_named(raw_service, pilot):
+    client, _ = raw_service
+    good = trial_json(pilot[2].trials[0])
+    text = json.dumps({"trials": [good]}).replace(str(good["fingers"][1]["tac"][7]), "NaN", 1)
+    r = client.post("/v1/recognize", content=text, headers={"Content-Type": "application/json"})
+    found = problem(r, 422)
+    assert found["errors"][0]["field"].startswith("trials[0].fingers[") and "NaN" in found["detail"]
+
+
+def test_samples_for_a_raw_trial_model_and_trials_for_a_sample_model_are_409(
+    raw_service, pilot, client, sample
+):
+    raw_client, _ = raw_service
+    image = np.zeros(pilot[0].input_shape).tolist()
+    found = problem(raw_client.post("/v1/recognize", json={"samples": [image]}), 409)
+    assert "raw" in found["detail"] and "trials" in found["detail"]
+    trial = trial_json(pilot[2].trials[0])
+    found = problem(client.post("/v1/recognize", json={"trials": [trial]}), 409, "trials")
+    assert "samples of shape" in found["detail"]
+
+
+def test_describe_without_attributes_is_409(raw_service, pilot):
+    client, _ = raw_service
+    r = client.post("/v1/describe", json={"trials": [trial_json(pilot[2].trials[0])]})
+    problem(r, 409)
+
+
+def test_a_stored_trial_comes_back_as_it_was_read(raw_service, pilot):
+    client, app = raw_service
+    cork = client.get("/v1/classes").json()["classes"][1]
+    sid = client.get(f"/v1/classes/{cork['id']}/samples").json()["samples"][0]["id"]
+    stored = client.get(f"/v1/classes/{cork['id']}/samples/{sid}").json()
+    assert stored["shape"] == [] and len(stored["sample"]["fingers"]) == 2
+    trial = RawTrial(**{k: v for k, v in stored["sample"].items()})
+    train = pilot[1]
+    assert any(trial.same_as(t) for t in train.trials)
