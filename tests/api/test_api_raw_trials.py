@@ -4,7 +4,6 @@ trials named by trial, finger and channel, the wrong kind of input, and enrolmen
 
 from __future__ import annotations
 
-import io
 import json
 from pathlib import Path
 
@@ -14,7 +13,7 @@ from fastapi.testclient import TestClient
 
 from app.data.biotac import RawTrial, write_biotac_h5
 from app.framework.registry import make_method
-from tests.service_fixtures import problem, quick_settings, wait_for_job
+from tests.service_fixtures import problem, quick_settings
 
 PILOT = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "biotac_pilot"
 HDF5 = {"Content-Type": "application/x-hdf5"}
@@ -66,7 +65,10 @@ def test_held_out_trials_are_recognised_once_each_from_both_fingers(raw_service,
     assert r.status_code == 200, r.text
     results = r.json()["results"]
     assert len(results) == len(held)
-    right = [res["class_name"] == held.class_names[y] for res, y in zip(results, held.labels)]
+    right = [
+        res["class_name"] == held.class_names[y]
+        for res, y in zip(results, held.labels, strict=True)
+    ]
     assert np.mean(right) >= 0.9, right
 
 
@@ -84,7 +86,9 @@ def test_an_hdf5_body_gets_the_answers_of_the_json_one(raw_service, pilot, tmp_p
 def test_touches_of_one_object_get_one_answer(raw_service, pilot):
     client, _ = raw_service
     _, _, held = pilot
-    cork = [t for t, y in zip(held.trials, held.labels) if held.class_names[y] == "cork"][:3]
+    cork = [
+        t for t, y in zip(held.trials, held.labels, strict=True) if held.class_names[y] == "cork"
+    ][:3]
     r = client.post(
         "/v1/recognize?same_object=true", json={"trials": [trial_json(t) for t in cork]}
     )
