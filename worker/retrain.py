@@ -200,12 +200,22 @@ def build(
         new_classes = plan.novel
         new_samples = {c.name: plan.samples[c.id] for c in plan.novel if plan.samples.get(c.id)}
     else:
-        new_classes, new_samples = plan.new_classes, plan.new_samples
-    if new_classes:
+        new_classes, new_samples = plan.new_classes, dict(plan.new_samples)
+    described = [c for c in new_classes if c.attribute_key]
+    if described:
         model = model.add_novel_classes(
-            [c.name for c in new_classes],
-            np.stack([repo.key_vector(c.attribute_key) for c in new_classes]),
+            [c.name for c in described],
+            np.stack([repo.key_vector(c.attribute_key) for c in described]),
         )
+    # classes registered without a description (a model without attributes) are learnt
+    # from their samples; one whose samples are not in this round waits for them
+    learnt = {
+        c.name: _samples(model, new_samples.pop(c.name))
+        for c in new_classes
+        if not c.attribute_key and c.name in new_samples
+    }
+    if learnt:
+        model = model.add_novel_classes_from_samples(learnt)
     for name, rows in new_samples.items():
         model = model.add_one_shot(name, _samples(model, rows))
     return model

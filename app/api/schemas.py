@@ -52,7 +52,35 @@ class ClassDescription(Strict):
 
 
 class ClassCreate(ClassDescription):
+    """A novel class: described by its attributes (zero-shot), or, for a model without
+    attributes, learnt from real samples or raw trials sent with it."""
+
     name: ClassName
+    samples: list[SampleData] | None = Field(
+        None,
+        min_length=1,
+        description="Real samples of the object, for a model without attributes "
+        "(`GET /v1/attributes` empty): the class is recognised from them alone.",
+    )
+    trials: list[TrialIn] | None = Field(
+        None,
+        min_length=1,
+        description="Raw BioTac trials of the object, the same for a model of raw trials.",
+    )
+
+    @model_validator(mode="after")
+    def _one_description(self) -> ClassCreate:
+        given = [
+            f
+            for f in ("attributes", "attribute_vector", "samples", "trials")
+            if getattr(self, f) is not None
+        ]
+        if len(given) != 1:
+            raise ValueError(
+                "give exactly one of 'attributes' or 'attribute_vector' (a description), or "
+                "'samples' or 'trials' (for a model without attributes)"
+            )
+        return self
 
 
 class ClassOut(BaseModel):
@@ -336,3 +364,4 @@ class Health(BaseModel):
 
 SampleCreate.model_rebuild()
 SampleDetail.model_rebuild()
+ClassCreate.model_rebuild()

@@ -4,6 +4,7 @@ trials named by trial, finger and channel, the wrong kind of input, and enrolmen
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -20,17 +21,27 @@ HDF5 = {"Content-Type": "application/x-hdf5"}
 PARAMS = {"seed": 0, "n_estimators": 30, "tuning_rounds": 1, "distance_components": 8}
 
 
+NEW_OBJECT = "metal_bar"  # left out of training: enrolled through the API
+
+
 @pytest.fixture(scope="module")
 def pilot():
-    """(model fitted on 4 of every 5 pilot trials, its training set, the held-out trials)."""
+    """(model fitted on 4 of every 5 trials of four pilot objects, its training set, their
+    held-out trials, the trials of the fifth object)."""
     if not (PILOT / "cork.h5").is_file():
         pytest.skip(f"BioTac pilot data not found at {PILOT.resolve()}")
     from app.data.sources import open_dataset
 
     raw = open_dataset(f"biotac:{PILOT}")
-    held = np.arange(len(raw)) % 5 == 2
-    train = raw.subset(~held)
-    return make_method("best", **PARAMS).fit(train), train, raw.subset(held)
+    new = np.asarray(raw.class_names)[raw.labels] == NEW_OBJECT
+    held = (np.arange(len(raw)) % 5 == 2) & ~new
+    assert raw.class_names[-1] == NEW_OBJECT  # so the others keep their labels
+    kept = raw.subset(~held & ~new)
+    train = dataclasses.replace(
+        kept, class_names=raw.class_names[:-1], attribute_values=np.zeros((4, 0), np.float32)
+    )
+    model = make_method("best", **PARAMS).fit(train)
+    return model, train, raw.subset(held), raw.subset(new)
 
 
 @pytest.fixture
@@ -38,7 +49,7 @@ def raw_service(tmp_path, pilot):
     """(client, app) of a service whose model takes raw trials."""
     from app.api.main import create_app
 
-    model, train, _ = pilot
+    model, train = pilot[:2]
     settings = quick_settings(tmp_path, method="best", method_params=PARAMS)
     app = create_app(settings, trainer=lambda: (model, train))
     with TestClient(app) as client:
@@ -58,8 +69,9 @@ def test_the_active_model_says_it_takes_raw_trials(raw_service, pilot):
 
 
 def test_held_out_trials_are_recognised_once_each_from_both_fingers(raw_service, pilot):
+    """Trials of the training objects that training never saw."""
     client, _ = raw_service
-    _, _, held = pilot
+    held = pilot[2]
     body = {"trials": [trial_json(t) for t in held.trials]}
     r = client.post("/v1/recognize", json=body)
     assert r.status_code == 200, r.text
@@ -85,7 +97,7 @@ def test_an_hdf5_body_gets_the_answers_of_the_json_one(raw_service, pilot, tmp_p
 
 def test_touches_of_one_object_get_one_answer(raw_service, pilot):
     client, _ = raw_service
-    _, _, held = pilot
+    held = pilot[2]
     cork = [
         t for t, y in zip(held.trials, held.labels, strict=True) if held.class_names[y] == "cork"
     ][:3]
@@ -172,7 +184,7 @@ def test_describe_without_attributes_is_409(raw_service, pilot):
 
 
 def test_a_stored_trial_comes_back_as_it_was_read(raw_service, pilot):
-    client, app = raw_service
+    client, _ = raw_service
     cork = client.get("/v1/classes").json()["classes"][1]
     sid = client.get(f"/v1/classes/{cork['id']}/samples").json()["samples"][0]["id"]
     stored = client.get(f"/v1/classes/{cork['id']}/samples/{sid}").json()
@@ -180,3 +192,56 @@ def test_a_stored_trial_comes_back_as_it_was_read(raw_service, pilot):
     trial = RawTrial(**{k: v for k, v in stored["sample"].items()})
     train = pilot[1]
     assert any(trial.same_as(t) for t in train.trials)
+
+
+@pytest.fixture
+def raw_worker(raw_service):
+    from worker import Worker
+
+    _, app = raw_service
+    state = app.state.service
+    return Worker(state.settings, state.sessions, on_activate=state.holder.serve)
+
+
+def test_a_new_object_is_enrolled_from_raw_trials_and_recognised(raw_service, raw_worker, pilot):
+    """A model without attributes learns a class from the trials registered with it; a
+    trial added later joins it; other trials of the object are then recognised as it."""
+    client, _ = raw_service
+    new = pilot[3]
+    first, later, rest = new.trials[:2], new.trials[2], new.trials[3:]
+    r = client.post(
+        "/v1/classes", json={"name": NEW_OBJECT, "trials": [t.to_dict() for t in first]}
+    )
+    assert r.status_code == 202, r.text
+    created = r.json()
+    assert created["class"]["n_samples"] == 2 and created["class"]["attributes"] == []
+    raw_worker.run_once()
+    assert client.get(f"/v1/jobs/{created['job']['id']}").json()["status"] == "succeeded"
+    added = client.post(
+        f"/v1/classes/{created['class']['id']}/samples", json={"trial": later.to_dict()}
+    )
+    assert added.status_code == 202, added.text
+    assert added.json()["recognized_as"]["class_name"] == NEW_OBJECT  # known from 2 trials
+    raw_worker.run_once()
+    assert client.get(f"/v1/jobs/{added.json()['job']['id']}").json()["status"] == "succeeded"
+    results = client.post("/v1/recognize", json={"trials": [t.to_dict() for t in rest]}).json()[
+        "results"
+    ]
+    right = [res["class_name"] == NEW_OBJECT for res in results]
+    assert np.mean(right) >= 0.8, results
+
+
+def test_a_model_without_attributes_refuses_descriptions_and_samples(raw_service, pilot):
+    client, _ = raw_service
+    found = problem(client.post("/v1/classes", json={"name": "x", "attributes": []}), 409)
+    assert "no attributes" in found["detail"] and "samples or trials" in found["detail"]
+    image = np.zeros(pilot[0].input_shape).tolist()
+    found = problem(client.post("/v1/classes", json={"name": "x", "samples": [image]}), 409)
+    assert "'trials'" in found["detail"]
+    bad = pilot[3].trials[0].to_dict()
+    del bad["fingers"][0]["pac"]
+    found = problem(client.post("/v1/classes", json={"name": "x", "trials": [bad]}), 422)
+    assert found["errors"][0]["field"].startswith("trials[0].fingers[0]")
+    assert [c["name"] for c in client.get("/v1/classes").json()["classes"]] == list(
+        pilot[1].class_names
+    )  # nothing stored

@@ -4,10 +4,11 @@ import numpy as np
 from fastapi import APIRouter, Response
 from sqlalchemy.orm import Session
 
-from app.api import problems
+from app.api import problems, trials
 from app.api.deps import (
     EnrollAccess,
     Enroller,
+    Idempotency,
     IdempotencyDep,
     JsonBody,
     MetricsDep,
@@ -18,6 +19,7 @@ from app.api.deps import (
     SessionDep,
 )
 from app.api.problems import Problem, blame, not_found
+from app.api.routes.samples import one_sample
 from app.api.schemas import (
     ClassCreate,
     ClassCreated,
@@ -28,7 +30,10 @@ from app.api.schemas import (
     Withdrawal,
 )
 from app.api.withdrawals import queue_withdrawal
+from app.framework.recognizer import RAW_TRIALS
 from app.service.holder import LoadedModel
+from app.service.keys import Principal
+from app.service.metrics import Metrics
 from app.store import repo
 from app.store.enums import JobKind, Origin
 from app.store.models import Job, ObjectClass
@@ -105,9 +110,20 @@ def register_class(
     back (same id) with the new attributes and none of its old samples. With an
     ``Idempotency-Key``, a retry gets the first answer."""
     idempotency.replay(session)
+    if body.samples is not None or body.trials is not None:
+        return _register_from_samples(
+            body, session, model, metrics, response, idempotency, principal
+        )
+    field = "attributes" if body.attributes is not None else "attribute_vector"
+    if not model.recognizer.has_attributes:  # (an empty description is a 422 otherwise)
+        raise Problem(
+            409,
+            "the served model has no attributes, so a class cannot be described, nor "
+            "recognised zero-shot: send the object's samples or trials with the registration",
+            field,
+        )
     vector = _attribute_vector(body, model)
     key = repo.vector_key(vector)
-    field = "attributes" if body.attributes is not None else "attribute_vector"
     cls = _failed_registration(session, body.name, key)
     if cls is None:
         _check_unique(session, body.name, key, field)
@@ -167,6 +183,77 @@ def redescribe_class(
         idempotency.accept(session, out, job.id, response)
     metrics.enrollments.labels("redescription").inc()
     return out
+
+
+def _register_from_samples(
+    body: ClassCreate,
+    session: Session,
+    model: LoadedModel,
+    metrics: Metrics,
+    response: Response,
+    idempotency: Idempotency,
+    principal: Principal,
+) -> ClassCreated:
+    """A class without a description, learnt from the samples or trials sent with it: the
+    class, its samples (one ``add_sample`` job each) and its registration in one commit."""
+    rec = model.recognizer
+    field = "trials" if body.trials is not None else "samples"
+    if rec.has_attributes:
+        raise Problem(
+            409,
+            "this model describes classes by attributes: register the class "
+            "with 'attributes', then add its samples",
+            field,
+        )
+    if not rec.learns_classes_from_samples:
+        raise Problem(
+            409,
+            f"method '{rec.method}' cannot recognise a class from its samples "
+            "alone; method 'best' can",
+            field,
+        )
+    if body.trials is not None:
+        kept = [
+            trials.one(t.model_dump(exclude_none=True), "trials", i)
+            for i, t in enumerate(body.trials)
+        ]
+        with blame("trials"):
+            rec.trial_samples(kept)  # a model of samples: 409; phases not found: 422
+    elif rec.input_kind == RAW_TRIALS:
+        raise Problem(
+            409,
+            "this model was fitted on raw BioTac trials: send 'trials', raw "
+            "trials, which the store keeps as sent",
+            "samples",
+        )
+    else:
+        kept = []
+        for i, data in enumerate(body.samples):
+            x = one_sample(data, rec.input_shape, f"samples[{i}]")
+            with blame(f"samples[{i}]"):
+                kept.append(rec.validate_samples(x)[0])
+    if repo.class_by_name(session, body.name) is not None:
+        raise Problem(409, f"a class named '{body.name}' already exists", "name")
+    with idempotency.writing(session, recheck=lambda: _check_name(session, body.name)):
+        withdrawn = repo.class_by_name(session, body.name, withdrawn=True)
+        cls = (
+            repo.revive_class(session, withdrawn, "")
+            if withdrawn is not None
+            else repo.add_class(session, body.name, "")
+        )
+        for item in kept:
+            row = repo.add_sample(session, cls.id, item)
+            repo.add_job(session, JobKind.ADD_SAMPLE, cls.id, row.id, requested_by=principal.id)
+        job = repo.add_job(session, JobKind.REGISTER_CLASS, cls.id, requested_by=principal.id)
+        out = _class_accepted(session, cls, job, model)
+        idempotency.accept(session, out, job.id, response)
+    metrics.enrollments.labels("class").inc()
+    return out
+
+
+def _check_name(session: Session, name: str) -> None:
+    if repo.class_by_name(session, name) is not None:
+        raise Problem(409, f"a class named '{name}' already exists", "name")
 
 
 def _class_accepted(

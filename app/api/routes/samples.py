@@ -159,15 +159,16 @@ def add_sample(
     return out
 
 
-def one_sample(data: list, input_shape: tuple[int, ...]) -> np.ndarray:
-    """``data`` as one sample of ``input_shape``, or a 422 that names the shape expected."""
+def one_sample(data: list, input_shape: tuple[int, ...], field: str = "sample") -> np.ndarray:
+    """``data`` as one sample of ``input_shape``, or a 422 at ``field`` that names the shape
+    expected."""
     expected = f"expected one sample of shape {list(input_shape)}"
     try:
         x = np.asarray(data, dtype=np.float32)
     except ValueError:  # ragged nesting
-        raise Problem(422, f"{expected}; its rows have different lengths", "sample") from None
+        raise Problem(422, f"{expected}; its rows have different lengths", field) from None
     if x.shape != input_shape:
-        raise Problem(422, f"{expected}, got one of shape {list(x.shape)}", "sample")
+        raise Problem(422, f"{expected}, got one of shape {list(x.shape)}", field)
     return x[None]
 
 
