@@ -73,6 +73,8 @@ class Attribute(Base):
 
 
 LIVE_ENROLLED = f"origin = '{Origin.ENROLLED}' AND withdrawn_at IS NULL"
+# classes registered without a description (a model without attributes) share the empty key
+DESCRIBED_LIVE_ENROLLED = f"{LIVE_ENROLLED} AND attribute_key <> ''"
 
 
 class ObjectClass(Base):
@@ -92,14 +94,14 @@ class ObjectClass(Base):
 
     __table_args__ = (
         # Two concurrent registrations of one vector cannot both commit; dataset
-        # classes are exempt because real datasets may repeat a vector, and a
-        # withdrawn class no longer holds its vector.
+        # classes are exempt because real datasets may repeat a vector, a withdrawn
+        # class no longer holds its vector, and classes without one have nothing to share.
         Index(
             "uq_classes_live_enrolled_attribute_key",
             "attribute_key",
             unique=True,
-            sqlite_where=text(LIVE_ENROLLED),
-            postgresql_where=text(LIVE_ENROLLED),
+            sqlite_where=text(DESCRIBED_LIVE_ENROLLED),
+            postgresql_where=text(DESCRIBED_LIVE_ENROLLED),
         ),
     )
 

@@ -1,5 +1,6 @@
 """Raw BioTac trials: ``samples.form`` says how ``data`` holds a sample, and
-``model_versions.input_kind`` what a version takes.
+``model_versions.input_kind`` what a version takes; classes registered without a
+description (the empty attribute key) are left out of the unique index on vectors.
 
 ``array`` (every existing row): float32 bytes of ``shape``, as before. ``raw_trial``: the
 trial as a robot sent it (``.npz`` of its fingers' channels, phases and timestamps), kept so
@@ -25,7 +26,26 @@ branch_labels = None
 depends_on = None
 
 
+INDEX = "uq_classes_live_enrolled_attribute_key"
+OLD_WHERE = "origin = 'enrolled' AND withdrawn_at IS NULL"
+NEW_WHERE = f"{OLD_WHERE} AND attribute_key <> ''"
+
+
+def _vector_index(where: str) -> None:
+    op.drop_index(INDEX, table_name="classes")
+    op.create_index(
+        INDEX,
+        "classes",
+        ["attribute_key"],
+        unique=True,
+        sqlite_where=sa.text(where),
+        postgresql_where=sa.text(where),
+    )
+
+
 def upgrade() -> None:
+    # classes registered from samples alone (a model without attributes) have the empty key
+    _vector_index(NEW_WHERE)
     op.add_column(
         "samples", sa.Column("form", sa.String(10), nullable=False, server_default="array")
     )
@@ -48,6 +68,15 @@ def downgrade() -> None:
             f"cannot downgrade below 0006: the store holds {raw} raw-trial samples, which "
             "the older schema would misread as arrays"
         )
+    undescribed = bind.scalar(
+        sa.text(f"SELECT COUNT(*) FROM classes WHERE {OLD_WHERE} AND attribute_key = ''")
+    )
+    if undescribed > 1:
+        raise RuntimeError(
+            f"cannot downgrade below 0006: {undescribed} live classes were registered without "
+            "a description, which the older schema's unique index forbids"
+        )
+    _vector_index(OLD_WHERE)
     if "input_kind" in versions:
         op.drop_column("model_versions", "input_kind")
     op.drop_column("samples", "form")

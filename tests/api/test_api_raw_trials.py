@@ -245,3 +245,14 @@ def test_a_model_without_attributes_refuses_descriptions_and_samples(raw_service
     assert [c["name"] for c in client.get("/v1/classes").json()["classes"]] == list(
         pilot[1].class_names
     )  # nothing stored
+
+
+def test_several_classes_without_a_description_can_be_registered(raw_service, pilot):
+    """They all have the empty attribute key, which the unique index on vectors leaves out."""
+    client, _ = raw_service
+    trials = pilot[3].trials
+    for i, name in enumerate(("bar one", "bar two")):
+        r = client.post("/v1/classes", json={"name": name, "trials": [trials[i].to_dict()]})
+        assert r.status_code == 202, r.text
+    names = [c["name"] for c in client.get("/v1/classes").json()["classes"]]
+    assert names[-2:] == ["bar one", "bar two"]
