@@ -111,11 +111,15 @@ def summarize(values: Sequence[float]) -> tuple[float, float]:
     return float(v.mean()), float(v.std())
 
 
-def mean_interval(values: Sequence[float], level: float = 0.95) -> tuple[float, float]:
+def mean_interval(
+    values: Sequence[float], level: float = 0.95, bounds: tuple[float, float] | None = None
+) -> tuple[float, float]:
     """Confidence interval of the mean of ``values`` (Student's t with n - 1 degrees of
     freedom and the sample standard deviation), ignoring NaN; (nan, nan) with fewer than 2
-    finite values. The values are taken as independent draws: for figures of repeated
-    random splits, which share data, the interval is narrower than the true uncertainty."""
+    finite values. ``bounds``: the range the mean cannot leave (0 and 1 for a fraction),
+    which clips the interval. The values are taken as independent draws: for figures of
+    repeated random splits, which share data, the interval is narrower than the true
+    uncertainty."""
     from scipy.stats import t as student_t
 
     if not 0.0 < level < 1.0:
@@ -126,4 +130,20 @@ def mean_interval(values: Sequence[float], level: float = 0.95) -> tuple[float, 
         return float("nan"), float("nan")
     half = float(student_t.ppf(0.5 + level / 2, v.size - 1) * v.std(ddof=1) / np.sqrt(v.size))
     mean = float(v.mean())
-    return mean - half, mean + half
+    low, high = mean - half, mean + half
+    if bounds is not None:
+        low, high = max(low, bounds[0]), min(high, bounds[1])
+    return low, high
+
+
+def wilson_interval(fraction: float, n: int, level: float = 0.95) -> tuple[float, float]:
+    """Wilson score interval of a success fraction measured on ``n`` independent trials:
+    how far an accuracy on ``n`` test trials may be from the accuracy on all such trials."""
+    from scipy.stats import norm
+
+    if n < 1 or not 0.0 <= fraction <= 1.0:
+        raise ValueError(f"need n >= 1 and a fraction in [0, 1], got {fraction} of {n}")
+    z = float(norm.ppf(0.5 + level / 2))
+    centre = (fraction + z * z / (2 * n)) / (1 + z * z / n)
+    half = z / (1 + z * z / n) * np.sqrt(fraction * (1 - fraction) / n + z * z / (4 * n * n))
+    return max(0.0, float(centre - half)), min(1.0, float(centre + half))

@@ -31,8 +31,11 @@ options (``--param``) are chosen, as docs/RESULTS.md reports.
 
 In protocol 1 a method's seed is ``seed + split index``. Summaries per figure: the mean,
 the sample standard deviation (ddof 1) and a 95 % confidence interval of the mean from
-Student's t over splits (``metrics.mean_interval``). Repeated random splits share trials,
-so that interval is narrower than the uncertainty about a new set of trials would be.
+Student's t over splits (``metrics.mean_interval``, clipped to [0, 1]). Repeated random
+splits share trials, so that interval is narrower than the uncertainty about a new set of
+trials would be. A held-out pressure's test set is fixed (its trials), so its figures also
+get the Wilson 95 % interval of the mean accuracy on that many trials (``binomial95``):
+what the size of the test set allows.
 """
 
 from __future__ import annotations
@@ -224,7 +227,7 @@ def _summary(values: Sequence[float]) -> tuple[float, float, list[float]]:
     if v.size == 0:
         return float("nan"), float("nan"), [float("nan"), float("nan")]
     std = float(v.std(ddof=1)) if v.size > 1 else float("nan")
-    return float(v.mean()), std, list(metrics.mean_interval(v))
+    return float(v.mean()), std, list(metrics.mean_interval(v, bounds=(0.0, 1.0)))
 
 
 def evaluate_raw(
@@ -245,8 +248,9 @@ def evaluate_raw(
     Layout: {"dataset", "protocol": "raw-trials", "seed", "splits", "test_trials",
     "pressures", "config", "split_definitions", "methods": {name: {"splits": [per-split
     figures], "pressure": [{"pressure", "repeat", "seed", "accuracy"}], "mean", "std",
-    "ci95" ([low, high] per figure), "confusion" (trial splits, summed), "confusion_pressure"
-    (summed), "elapsed_s", "details"}}}.
+    "ci95" ([low, high] per figure), "binomial95" ([low, high] per held-out pressure),
+    "confusion" (trial splits, summed), "confusion_pressure" (summed), "elapsed_s",
+    "details"}}}.
     """
     methods = list(dict.fromkeys(methods))
     if not methods:
@@ -353,6 +357,11 @@ def _summarise(entry: dict[str, Any], pressures: list[float], n_repeats: int) ->
     entry["mean"], entry["std"], entry["ci95"] = {}, {}, {}
     for figure, values in series.items():
         entry["mean"][figure], entry["std"][figure], entry["ci95"][figure] = _summary(values)
+    entry["binomial95"] = {}
+    for level in pressures:
+        figure = pressure_figure(level)
+        n = next(p["n_test_trials"] for p in entry["pressure"] if p["pressure"] == level)
+        entry["binomial95"][figure] = list(metrics.wilson_interval(entry["mean"][figure], n))
 
 
 def raw_figures(results: dict[str, Any]) -> list[str]:

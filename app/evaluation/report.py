@@ -464,6 +464,27 @@ def raw_markdown(results: dict[str, Any], images: dict[str, list[str]] | None = 
             mean, std = e.get("mean", {}).get(f), e.get("std", {}).get(f)
             cells.append(f"{_fmt(mean, std)} {_fmt_interval(e.get('ci95', {}).get(f))}")
         lines.append(f"| `{f}` | " + " | ".join(cells) + " |")
+    binomial = [
+        f for f in figures if any(f in results["methods"][m].get("binomial95", {}) for m in methods)
+    ]
+    if binomial:
+        lines += [
+            "",
+            "A held-out pressure's test set is its trials, the same in every repeat: the "
+            "Wilson 95 % interval of each mean accuracy for that many test trials says how "
+            "much the figure itself could move with other trials.",
+            "",
+            "| figure | test trials | " + " | ".join(methods) + " |",
+            "| --- | --- | " + " | ".join("---" for _ in methods) + " |",
+        ]
+        for f in binomial:
+            level = float(f.removeprefix("pressure_"))
+            first = results["methods"][methods[0]].get("pressure", [])
+            n = next((p["n_test_trials"] for p in first if p["pressure"] == level), "?")
+            cells = [
+                _fmt_interval(results["methods"][m].get("binomial95", {}).get(f)) for m in methods
+            ]
+            lines.append(f"| `{f}` | {n} | " + " | ".join(cells) + " |")
     lines += ["", "## What each figure is", ""]
     lines += [f"- `{f}`: {_raw_description(f)}" for f in figures]
     lines += [

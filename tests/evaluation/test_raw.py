@@ -88,6 +88,20 @@ def test_mean_interval_is_students_t():
     assert (low, high) == pytest.approx((2 - half, 2 + half))
     assert all(math.isnan(v) for v in metrics.mean_interval([0.5]))
     assert metrics.mean_interval([0.9, 0.9, 0.9]) == pytest.approx((0.9, 0.9))
+    # a fraction's interval stays within [0, 1] when asked
+    assert metrics.mean_interval([1.0, 1.0, 0.8], bounds=(0.0, 1.0))[1] == 1.0
+    assert metrics.mean_interval([1.0, 1.0, 0.8])[1] > 1.0
+
+
+def test_wilson_interval_of_an_accuracy_on_n_trials():
+    # 25 of 25: the centre (1 + z^2/2n) / (1 + z^2/n) and half-width z^2/2n / (1 + z^2/n)
+    z2 = 1.959963984540054**2
+    low, high = metrics.wilson_interval(1.0, 25)
+    assert high == pytest.approx(1.0) and low == pytest.approx(1 / (1 + z2 / 25))
+    low, high = metrics.wilson_interval(0.5, 100)
+    assert (low + high) / 2 == pytest.approx(0.5) and high - low == pytest.approx(0.1923, abs=1e-3)
+    with pytest.raises(ValueError):
+        metrics.wilson_interval(0.5, 0)
 
 
 def test_every_model_is_fitted_on_training_trials_only(data, recording):
@@ -122,6 +136,10 @@ def test_every_model_is_fitted_on_training_trials_only(data, recording):
         np.mean([p["accuracy"] for p in entry["pressure"] if p["repeat"] == r]) for r in (1, 2)
     ]
     assert entry["mean"]["pressure_mean"] == pytest.approx(np.mean(by_repeat))
+    n_trials = int(np.sum(data.grip_pressure == 150.0))
+    low, high = metrics.wilson_interval(entry["mean"]["pressure_150"], n_trials)
+    assert entry["binomial95"]["pressure_150"] == pytest.approx([low, high])
+    assert set(entry["binomial95"]) == {"pressure_100", "pressure_150", "pressure_200"}
     assert np.asarray(entry["confusion"]).sum() == 2 * 6  # test trials of both splits
     assert np.asarray(entry["confusion_pressure"]).sum() == 2 * len(data)
 
@@ -157,7 +175,7 @@ def test_raw_results_get_their_report(data, tmp_path):
     assert names == {"report.md", "accuracy.png", "confusion_best.png"}
     text = (tmp_path / "report.md").read_text()
     assert "| `known_acc` |" in text and "| `pressure_150` |" in text
-    assert "95 % confidence interval" in text
+    assert "95 % confidence interval" in text and "Wilson 95 % interval" in text
     assert (tmp_path / "accuracy.png").read_bytes()[:4] == b"\x89PNG"
 
 
