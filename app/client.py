@@ -86,25 +86,52 @@ class TactileClient:
         self.close()
 
     # ------------------------------------------------------------ recognition
-    def recognize(self, samples: Any) -> dict[str, Any]:
-        """Recognise one sample or a batch (N, *input shape)."""
+    def recognize(self, samples: Any, same_object: bool = False) -> dict[str, Any]:
+        """Recognise one sample or a batch (N, *input shape); with ``same_object``, the
+        samples are touches of one object and get one answer, their evidence fused."""
         x = np.asarray(samples, dtype=np.float32)
         try:
             r = self._send(
                 "POST",
                 "/v1/recognize",
                 content=_npy(x),
+                params={"same_object": same_object},
                 headers={"Content-Type": "application/x-npy"},
             )
         except ServiceUnreachable as exc:
             model, meta = self._offline_model(exc)
-            batch = model.recognize_batch(x, top_k=self.offline_top_k)
-            return {
-                "model_version": meta.get("version"),
-                "results": batch.records(meta.get("class_ids", {})),
-                "source": "offline",
-            }
+            x = model.validate_samples(x)
+            groups = np.zeros(len(x), np.int64) if same_object else None
+            batch = model.recognize_batch(x, top_k=self.offline_top_k, groups=groups)
+            return self._offline_answer(batch, meta)
         return {**r.json(), "source": "service"}
+
+    def recognize_trials(self, trials: Any, same_object: bool = False) -> dict[str, Any]:
+        """Recognise raw BioTac trials (``RawTrial``s or their JSON form), one answer per
+        trial from all its fingers (with ``same_object``, one for all of them); offline,
+        the model file's own featurizer makes the images."""
+        body = [t.to_dict() if hasattr(t, "to_dict") else t for t in trials]
+        try:
+            r = self._send(
+                "POST", "/v1/recognize", json={"trials": body}, params={"same_object": same_object}
+            )
+        except ServiceUnreachable as exc:
+            model, meta = self._offline_model(exc)
+            images, groups = model.trial_samples(body)
+            if same_object:
+                groups = np.zeros_like(groups)
+            return self._offline_answer(
+                model.recognize_batch(images, top_k=self.offline_top_k, groups=groups), meta
+            )
+        return {**r.json(), "source": "service"}
+
+    @staticmethod
+    def _offline_answer(batch: Any, meta: dict[str, Any]) -> dict[str, Any]:
+        return {
+            "model_version": meta.get("version"),
+            "results": batch.records(meta.get("class_ids", {})),
+            "source": "offline",
+        }
 
     def describe(self, samples: Any, same_object: bool = False) -> dict[str, Any]:
         """What each touch feels like (``POST /v1/describe``): every attribute's probability

@@ -256,3 +256,27 @@ def test_several_classes_without_a_description_can_be_registered(raw_service, pi
         assert r.status_code == 202, r.text
     names = [c["name"] for c in client.get("/v1/classes").json()["classes"]]
     assert names[-2:] == ["bar one", "bar two"]
+
+
+def test_a_robot_recognises_trials_online_and_from_its_model_file(raw_service, pilot, tmp_path):
+    """TactileClient sends trials; offline, the downloaded model's own featurizer makes the
+    images, so the answers are the service's."""
+    from app.client import TactileClient
+    from tests.reliability.harness import free_port
+
+    client, _ = raw_service
+    trials = list(pilot[2].trials[:4])
+    model_file = tmp_path / "robot" / "model.bundle"
+    robot = TactileClient(http=client, model_file=model_file, retries=0, timeout=5)
+    robot.sync_model()
+    online = robot.recognize_trials(trials)
+    away = TactileClient(
+        f"http://127.0.0.1:{free_port()}", model_file=model_file, retries=0, timeout=2
+    )
+    offline = away.recognize_trials(trials)
+    assert online["source"] == "service" and offline["source"] == "offline"
+    assert [r["class_name"] for r in offline["results"]] == [
+        r["class_name"] for r in online["results"]
+    ]
+    one = away.recognize_trials(trials[:2], same_object=True)
+    assert len(one["results"]) == 1

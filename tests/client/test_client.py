@@ -168,3 +168,16 @@ def test_a_touch_is_described_for_the_operator(best_service, best_base):
         answer == client.post("/v1/describe", json={"samples": dataset.samples[:2].tolist()}).json()
     )
     assert len(answer["results"]) == 2 and answer["results"][0]["suggested"]
+
+
+def test_touches_of_one_object_get_one_answer_online_and_offline(robot, dataset, tmp_path):
+    robot.sync_model()
+    touches = dataset.samples[dataset.labels == 3][:3]
+    online = robot.recognize(touches, same_object=True)
+    offline = unreachable(tmp_path, retries=0).recognize(touches, same_object=True)
+    assert len(online["results"]) == len(offline["results"]) == 1
+    assert online["results"][0]["class_name"] == offline["results"][0]["class_name"]
+    np.testing.assert_allclose(
+        online["results"][0]["novelty_score"], offline["results"][0]["novelty_score"], rtol=1e-5
+    )
+    assert len(robot.recognize(touches)["results"]) == 3
