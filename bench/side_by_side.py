@@ -1,0 +1,469 @@
+"""Side by side in one run, on one machine: the service, the framework's floor, a first
+scikit-learn service, and the model's own in-process speed.
+
+    .venv/bin/python -m bench.side_by_side [--seconds 10] [--clients 32]
+
+Three servers on the same stack (uvicorn, uvloop, httptools; no access log), each hammered
+in turn by the lean keep-alive client of ``bench/load.py`` (``--clients`` connections, one
+JSON body ``{"samples": [[...32 rows of 30 floats...]]}``, the simulator's first sample):
+
+- the service: ``tactile-zsl serve --processes 1`` on the embedded default (the simulator,
+  method ``best``, embedded worker) in a fresh temporary data dir (the first start trains
+  the base model), then ``--processes 2`` on the same store; the rate limit is off
+  (``TACTILE_RATE_LIMIT=0``, as ``bench/load.py`` runs it), so capacity is measured;
+- the floor: a bare FastAPI app (``floor_app`` below) whose ``POST /v1/recognize`` parses
+  the body into a float32 array (orjson + numpy) and answers a fixed small JSON, on one
+  uvicorn process and on two (uvicorn's ``workers=2``);
+- a first scikit-learn service (``sklearn_app``): the same parsing, and
+  ``ExtraTreesClassifier(n_estimators=100).predict_proba`` of a forest fitted at start-up on
+  the simulator's dataset (flattened samples), on one uvicorn process.
+
+Then batch throughput over HTTP (``.npy`` bodies of ``--batch`` samples,
+``Content-Type: application/x-npy``, 4 clients as ``bench/load.py``) against the model's own
+in-process throughput (``BestRecognizer.recognize_batch`` on the same batch, in this
+process, on the model the service trained, read from its store through
+``GET /v1/models/active/bundle``, one BLAS thread as the service runs it), and the
+in-process cost of ``recognize_batch`` on one sample against its batch-amortised cost per
+sample.
+
+It prints JSON: the ratios first, then the targets they are compared with, then the
+absolute figures of this machine and the machine. Every process it starts is stopped
+before it exits, also on error or SIGTERM. Only 127.0.0.1 is ever targeted.
+"""
+
+from __future__ import annotations
+
+# Only what the floor and the scikit-learn app need is imported at module level: uvicorn
+# imports this module in the servers' own processes, and the floor should carry nothing
+# else (a larger heap makes every garbage collection, and so the floor's p99, longer).
+# The bench's own machinery (bench/load.py, the test harness, the recognizer) is imported
+# inside the functions that run in the bench process.
+import argparse
+import contextlib
+import io
+import os
+import platform
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import orjson
+from fastapi import FastAPI, Request, Response
+
+ROOT = Path(__file__).resolve().parents[1]
+HOST = "127.0.0.1"
+STACK = {"loop": "uvloop", "http": "httptools", "access_log": False, "log_level": "warning"}
+START_TIMEOUT_S = 420  # the service's first start trains the base model
+WARMUP_S = 2.0
+BATCH_CLIENTS = 4  # as bench/load.py's batch phase
+
+FLOOR_ANSWER = orjson.dumps(
+    {"results": [{"label": "object-00", "probability": 1.0, "is_novel": False}]}
+)
+
+
+def parse_samples(body: bytes) -> np.ndarray:
+    """The body ``{"samples": [...]}`` as a float32 array: what both apps do with it."""
+    return np.asarray(orjson.loads(body)["samples"], dtype=np.float32)
+
+
+def floor_app() -> FastAPI:
+    """The framework's floor: FastAPI reading the body, parsing it, answering fixed bytes."""
+    app = FastAPI()
+
+    @app.get("/healthz")
+    async def healthz() -> Response:
+        return Response(b'{"status":"ok"}', media_type="application/json")
+
+    @app.post("/v1/recognize")
+    async def recognize(request: Request) -> Response:
+        parse_samples(await request.body())
+        return Response(FLOOR_ANSWER, media_type="application/json")
+
+    return app
+
+
+def sklearn_app() -> FastAPI:
+    """What a user writes first: a scikit-learn forest fitted at start-up, answering
+    ``predict_proba`` of each request's samples."""
+    from sklearn.ensemble import ExtraTreesClassifier
+
+    from app.data.simulator import simulate_dataset
+
+    data = simulate_dataset()
+    forest = ExtraTreesClassifier(n_estimators=100, random_state=0)
+    forest.fit(data.samples.reshape(len(data.samples), -1), data.labels)
+    names = np.asarray(data.class_names)[forest.classes_]
+    app = FastAPI()
+
+    @app.get("/healthz")
+    async def healthz() -> Response:
+        return Response(b'{"status":"ok"}', media_type="application/json")
+
+    @app.post("/v1/recognize")
+    async def recognize(request: Request) -> Response:
+        x = parse_samples(await request.body())
+        proba = forest.predict_proba(x.reshape(len(x), -1))
+        best = proba.argmax(axis=1)
+        results = [
+            {"label": str(names[b]), "probability": float(p[b])}
+            for b, p in zip(best, proba, strict=True)
+        ]
+        return Response(orjson.dumps({"results": results}), media_type="application/json")
+
+    return app
+
+
+APPS = {"floor": "floor_app", "sklearn": "sklearn_app"}
+
+
+# ----------------------------------------------------------------- server processes
+
+
+@contextlib.contextmanager
+def app_server(kind: str, workers: int, log_dir: Path):
+    """One of this module's apps under uvicorn in a process of its own (``workers``
+    processes on its port); yields (url, pid). Stopped on exit, whatever happened."""
+    import httpx
+
+    from tests.reliability.harness import free_port
+
+    port = free_port()
+    log = open(log_dir / f"{kind}-{workers}.log", "wb")  # noqa: SIM115
+    cmd = [sys.executable, "-m", "bench.side_by_side", "--serve", kind, "--port", str(port)]
+    proc = subprocess.Popen(
+        [*cmd, "--workers", str(workers)],
+        cwd=ROOT,
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        start_new_session=True,  # its own process group, so that its workers go with it
+    )
+    url = f"http://{HOST}:{port}"
+    try:
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while True:
+            if proc.poll() is not None:
+                raise RuntimeError(f"{kind} server exited with {proc.returncode}: {tail(log)}")
+            with contextlib.suppress(httpx.TransportError):
+                if httpx.get(f"{url}/healthz", timeout=2).status_code == 200:
+                    break
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"{kind} server not up after {START_TIMEOUT_S} s: {tail(log)}")
+            time.sleep(0.2)
+        yield url, proc.pid
+    finally:
+        stop_group(proc)
+        log.close()
+
+
+def stop_group(proc: subprocess.Popen) -> None:
+    """SIGTERM to the process group this bench started (the server and its workers), the
+    whole group SIGKILLed after 30 s."""
+    if proc.poll() is not None:
+        return
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(proc.pid, signal.SIGTERM)
+    try:
+        proc.wait(30)
+    except subprocess.TimeoutExpired:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+
+
+def tail(log, n: int = 2000) -> str:
+    log.flush()
+    return Path(log.name).read_text(errors="replace")[-n:]
+
+
+@contextlib.contextmanager
+def service(data_dir: Path, processes: int):
+    """``tactile-zsl serve --processes N`` (embedded worker) on the embedded default, through
+    the test harness's ``Cluster``; yields (url, pid). Its polling intervals, lease and
+    version count are put back to the service's defaults (the harness shortens them)."""
+    from app.config import Settings
+    from app.framework.registry import DEFAULT_METHOD
+    from tests.reliability.harness import Cluster
+
+    fields = Settings.model_fields
+    defaults = {
+        f"TACTILE_{name.upper()}": str(fields[name].default)
+        for name in ("model_poll_seconds", "worker_poll_seconds", "lease_seconds", "keep_versions")
+    }
+    env = {
+        **defaults,
+        "TACTILE_DATASET": "simulated",
+        "TACTILE_METHOD": DEFAULT_METHOD,
+        "TACTILE_METHOD_PARAMS": "{}",
+        "TACTILE_RATE_LIMIT": "0",
+    }
+    cluster = Cluster(
+        data_dir, n_api=1, n_workers=0, embedded_worker=True, processes=processes, extra_env=env
+    )
+    try:
+        cluster.start()
+        cluster.wait_ready(START_TIMEOUT_S)
+        yield cluster.urls[0], cluster.apis[0].popen.pid
+    finally:
+        cluster.stop()
+
+
+# ----------------------------------------------------------------- measurements
+
+
+def load_phase(url: str, pid: int, seconds: float, clients: int, request: bytes) -> dict:
+    """``bench/load.py``'s ``hammer`` after a warm-up, on a fresh uvloop loop."""
+    import uvloop
+
+    from bench.load import hammer
+
+    async def go() -> dict:
+        await hammer([url], WARMUP_S, clients, request)
+        return await hammer([url], seconds, clients, request, pids={"server": pid})
+
+    return uvloop.run(go())
+
+
+def fetch_bundle(url: str) -> bytes:
+    import httpx
+
+    r = httpx.get(f"{url}/v1/models/active/bundle", timeout=60)
+    r.raise_for_status()
+    return r.content
+
+
+def in_process(bundle: bytes, batch: np.ndarray, seconds: float) -> dict:
+    """``recognize_batch`` on the whole batch and on its first sample, each repeated for
+    ``seconds`` (at least 5 calls) after one warm-up call, in this process."""
+    from app.framework import bundle as bundles
+    from app.framework.runtime import configure_threads
+
+    configure_threads(1)  # as every serve process does by default (TACTILE_TORCH_THREADS)
+    model = bundles.from_bytes(bundle)
+
+    def timed(x: np.ndarray) -> list[float]:
+        model.recognize_batch(x)
+        times, deadline = [], time.monotonic() + seconds
+        while len(times) < 5 or time.monotonic() < deadline:
+            t = time.perf_counter()
+            model.recognize_batch(x)
+            times.append(time.perf_counter() - t)
+        return times
+
+    batch_times = timed(batch)
+    single_times = timed(batch[:1])
+    batch_median = statistics.median(batch_times)
+    return {
+        "method": model.method,
+        "batch": len(batch),
+        "batch_samples_per_s": round(len(batch) * len(batch_times) / sum(batch_times), 1),
+        "batch_calls": len(batch_times),
+        "batch_median_ms": round(1000 * batch_median, 3),
+        "batch_amortised_us_per_sample": round(1e6 * batch_median / len(batch), 2),
+        "single_median_us": round(1e6 * statistics.median(single_times), 1),
+        "single_p99_us": round(1e6 * float(np.percentile(single_times, 99)), 1),
+        "single_calls": len(single_times),
+    }
+
+
+def machine() -> dict:
+    model = "unknown"
+    with contextlib.suppress(OSError), open("/proc/cpuinfo") as f:
+        model = next(
+            (ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")), model
+        )
+    return {
+        "cpu": model,
+        "cores": os.cpu_count(),
+        "cores_usable": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+    }
+
+
+def loadavg() -> list[float] | None:
+    try:
+        with open("/proc/loadavg") as f:
+            return [float(v) for v in f.read().split()[:3]]
+    except OSError:
+        return None
+
+
+def ratio(a: float, b: float, digits: int = 3) -> float | None:
+    return round(a / b, digits) if a and b else None
+
+
+def ratios(r: dict) -> dict:
+    """The ratios the targets are stated in, from the absolute figures ``r``."""
+    s = r["single"]
+    floor1, floor2, sk = s["floor_1_process"], s["floor_2_processes"], s["sklearn_1_process"]
+    svc1, svc2 = s["service_1_process"], s["service_2_processes"]
+    ip = r["in_process"]
+    return {
+        "service_over_floor_1_process": {
+            "rps": ratio(svc1["rps"], floor1["rps"]),
+            "p99": ratio(svc1["p99_ms"], floor1["p99_ms"]),
+        },
+        "service_over_floor_2_processes": {
+            "rps": ratio(svc2["rps"], floor2["rps"]),
+            "p99": ratio(svc2["p99_ms"], floor2["p99_ms"]),
+        },
+        "service_2_processes_over_floor_1_process": {
+            "rps": ratio(svc2["rps"], floor1["rps"]),
+            "p99": ratio(svc2["p99_ms"], floor1["p99_ms"]),
+        },
+        "sklearn_over_floor_1_process": {
+            "rps": ratio(sk["rps"], floor1["rps"], 4),
+            "p99": ratio(sk["p99_ms"], floor1["p99_ms"]),
+        },
+        "http_batch_over_in_process_batch": {
+            "1_process": ratio(
+                r["batch_http"]["service_1_process"]["samples_per_s"], ip["batch_samples_per_s"]
+            ),
+            "2_processes": ratio(
+                r["batch_http"]["service_2_processes"]["samples_per_s"],
+                ip["batch_samples_per_s"],
+            ),
+        },
+        "single_in_process_over_batch_amortised_per_sample": ratio(
+            ip["single_median_us"], ip["batch_amortised_us_per_sample"], 1
+        ),
+    }
+
+
+def targets(q: dict) -> dict:
+    """The product owner's targets, each with the measured ratio and whether it is met."""
+
+    def at_least(v, goal):
+        return {"goal": f">= {goal}", "measured": v, "met": v is not None and v >= goal}
+
+    def at_most(v, goal):
+        return {"goal": f"<= {goal}", "measured": v, "met": v is not None and v <= goal}
+
+    out = {}
+    for n in ("1_process", "2_processes"):
+        s = q[f"service_over_floor_{n}"]
+        out[f"service_rps_over_floor_{n}"] = at_least(s["rps"], 0.8)
+        out[f"service_p99_over_floor_{n}"] = at_most(s["p99"], 1.25)
+    out["http_batch_over_in_process_1_process"] = at_least(
+        q["http_batch_over_in_process_batch"]["1_process"], 0.8
+    )
+    out["single_over_batch_amortised"] = at_most(
+        q["single_in_process_over_batch_amortised_per_sample"], 3
+    )
+    return out
+
+
+def run(seconds: float, clients: int, batch_size: int) -> dict:
+    from app.data.simulator import simulate_dataset
+    from bench.load import Connection
+
+    samples = simulate_dataset().samples
+    single = Connection.prepare(
+        "POST",
+        "/v1/recognize",
+        orjson.dumps({"samples": samples[:1].tolist()}),
+        "application/json",
+    )
+    batch = np.resize(samples, (batch_size, *samples.shape[1:])).astype(np.float32)
+    buf = io.BytesIO()
+    np.save(buf, batch)
+    npy = Connection.prepare("POST", "/v1/recognize", buf.getvalue(), "application/x-npy")
+
+    r: dict = {"single": {}, "batch_http": {}, "loadavg_at_start": loadavg()}
+    with tempfile.TemporaryDirectory(prefix="side-by-side-") as tmp:
+        tmp = Path(tmp)
+        for kind, workers, name in (
+            ("floor", 1, "floor_1_process"),
+            ("floor", 2, "floor_2_processes"),
+            ("sklearn", 1, "sklearn_1_process"),
+        ):
+            with app_server(kind, workers, tmp) as (url, pid):
+                r["single"][name] = load_phase(url, pid, seconds, clients, single)
+            print(f"{name}: {r['single'][name]['rps']} requests/s", file=sys.stderr)
+        bundle = b""
+        for n, name in ((1, "service_1_process"), (2, "service_2_processes")):
+            t = time.monotonic()
+            with service(tmp / "service", n) as (url, pid):
+                started = round(time.monotonic() - t, 1)
+                r["single"][name] = load_phase(url, pid, seconds, clients, single)
+                b = load_phase(url, pid, seconds, BATCH_CLIENTS, npy)
+                b["samples_per_s"] = round(b["rps"] * batch_size, 1)
+                r["batch_http"][name] = b
+                bundle = bundle or fetch_bundle(url)
+            r["single"][name]["start_s"] = started  # the first start trains the base model
+            print(f"{name}: {r['single'][name]['rps']} requests/s", file=sys.stderr)
+    # after every server has stopped: nothing else of ours on the CPU
+    r["in_process"] = in_process(bundle, batch, seconds)
+    r["loadavg_at_end"] = loadavg()
+    return r
+
+
+def serve(kind: str, port: int, workers: int) -> int:
+    import uvicorn
+
+    uvicorn.run(
+        f"bench.side_by_side:{APPS[kind]}",
+        factory=True,
+        host=HOST,
+        port=port,
+        workers=workers,
+        **STACK,
+    )
+    return 0
+
+
+def git(*args: str) -> str:
+    done = subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True)
+    return done.stdout
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--seconds", type=float, default=10, help="length of each measured phase")
+    p.add_argument("--clients", type=int, default=32, help="concurrent single-sample clients")
+    p.add_argument("--batch", type=int, default=1024, help="samples per .npy batch")
+    p.add_argument("--serve", choices=sorted(APPS), help=argparse.SUPPRESS)
+    p.add_argument("--port", type=int, help=argparse.SUPPRESS)
+    p.add_argument("--workers", type=int, default=1, help=argparse.SUPPRESS)
+    args = p.parse_args()
+    if args.serve:
+        return serve(args.serve, args.port, args.workers)
+    if args.seconds <= 0 or args.seconds > 600 or not 1 <= args.clients <= 1024:
+        p.error("--seconds must be in (0, 600] and --clients in [1, 1024]")
+    # SIGTERM unwinds like Ctrl-C, so that every server this run started is stopped
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
+    commit = git("rev-parse", "--short", "HEAD").strip()
+    # the servers run the working tree: code changed since the commit is named with it
+    changed = git("status", "--porcelain", "--", "app", "worker", "migrations").splitlines()
+    absolute = run(args.seconds, args.clients, args.batch)
+    q = ratios(absolute)
+    report = {
+        "ratios": q,
+        "targets": targets(q),
+        "on_this_machine": absolute,
+        "machine": machine(),
+        "settings": {
+            "seconds": args.seconds,
+            "clients": args.clients,
+            "batch": args.batch,
+            "batch_clients": BATCH_CLIENTS,
+            "warmup_s": WARMUP_S,
+            "server_stack": "uvicorn + uvloop + httptools (the service: its coalescing "
+            "httptools protocol), no access log, 127.0.0.1",
+            "commit": commit,
+            "uncommitted_code_changes": [line[3:] for line in changed],
+            "date": time.strftime("%Y-%m-%d"),
+        },
+    }
+    print(orjson.dumps(report, option=orjson.OPT_INDENT_2).decode())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

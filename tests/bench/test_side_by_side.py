@@ -1,0 +1,71 @@
+"""bench/side_by_side.py at tiny size: its floor server starts, answers the bench's request
+under load and stops with every process it started; the report's ratios and targets have
+the documented shape.
+
+The full run trains the service's base model and takes minutes, so the ratios are checked
+here on figures of the same shape as the run's (nothing in a test is timed).
+"""
+
+from __future__ import annotations
+
+import os
+
+import orjson
+
+from bench import side_by_side as sbs
+from bench.load import Connection
+
+
+def test_floor_server_under_load_and_stopped(tmp_path) -> None:
+    body = orjson.dumps({"samples": [[[0.5] * 30] * 32]})
+    request = Connection.prepare("POST", "/v1/recognize", body, "application/json")
+    with sbs.app_server("floor", 1, tmp_path) as (url, pid):
+        phase = sbs.load_phase(url, pid, 0.3, 2, request)
+    assert phase["requests"] > 0 and phase["errors"] == 0
+    assert {"rps", "p50_ms", "p99_ms", "cpu_us_per_request"} <= set(phase)
+    try:
+        os.kill(pid, 0)
+        alive = True
+    except ProcessLookupError:
+        alive = False
+    assert not alive, "the floor server outlived app_server"
+
+
+def test_ratios_and_targets_shape() -> None:
+    def phase(rps: float, p99: float) -> dict:
+        return {"rps": rps, "p99_ms": p99}
+
+    absolute = {
+        "single": {
+            "floor_1_process": phase(4000, 10),
+            "floor_2_processes": phase(5000, 8),
+            "sklearn_1_process": phase(100, 400),
+            "service_1_process": phase(3600, 11),
+            "service_2_processes": phase(3000, 12),
+        },
+        "batch_http": {
+            "service_1_process": {"samples_per_s": 30000},
+            "service_2_processes": {"samples_per_s": 45000},
+        },
+        "in_process": {
+            "batch_samples_per_s": 40000,
+            "batch_amortised_us_per_sample": 25,
+            "single_median_us": 100,
+        },
+    }
+    q = sbs.ratios(absolute)
+    assert list(q)[0] == "service_over_floor_1_process"
+    assert q["service_over_floor_1_process"] == {"rps": 0.9, "p99": 1.1}
+    assert q["service_over_floor_2_processes"] == {"rps": 0.6, "p99": 1.5}
+    assert q["sklearn_over_floor_1_process"]["rps"] == 0.025
+    assert q["http_batch_over_in_process_batch"] == {"1_process": 0.75, "2_processes": 1.125}
+    assert q["single_in_process_over_batch_amortised_per_sample"] == 4.0
+    met = {name: t["met"] for name, t in sbs.targets(q).items()}
+    assert met == {
+        "service_rps_over_floor_1_process": True,
+        "service_p99_over_floor_1_process": True,
+        "service_rps_over_floor_2_processes": False,
+        "service_p99_over_floor_2_processes": False,
+        "http_batch_over_in_process_1_process": False,
+        "single_over_batch_amortised": False,
+    }
