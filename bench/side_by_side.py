@@ -217,16 +217,62 @@ def service(data_dir: Path, processes: int):
 
 
 def load_phase(url: str, pid: int, seconds: float, clients: int, request: bytes) -> dict:
-    """``bench/load.py``'s ``hammer`` after a warm-up, on a fresh uvloop loop."""
+    """``bench/load.py``'s ``hammer`` after a warm-up, on a fresh uvloop loop; with
+    ``cores_used``: the cores each server process, the load generator and everything else
+    on the machine (other users of a shared machine) kept busy meanwhile."""
     import uvloop
 
     from bench.load import hammer
 
     async def go() -> dict:
         await hammer([url], WARMUP_S, clients, request)
-        return await hammer([url], seconds, clients, request, pids={"server": pid})
+        before = cpu_snapshot(pid)
+        out = await hammer([url], seconds, clients, request, pids={"server": pid})
+        out["cores_used"] = cores_used(before, cpu_snapshot(pid))
+        return out
 
     return uvloop.run(go())
+
+
+def process_tree(pid: int) -> list[int]:
+    from bench.load import child_pids
+
+    try:
+        return [pid] + [p for k in child_pids(pid) for p in process_tree(k)]
+    except OSError:
+        return [pid]
+
+
+def cpu_snapshot(server: int) -> dict:
+    """The machine's busy CPU seconds, and each server process's and this process's own."""
+    from bench.load import cpu_jiffies, process_cpu_s
+
+    jiffies = cpu_jiffies()
+    busy = sum(jiffies[i] for i in (0, 1, 2, 5, 6)) if jiffies else None  # not idle, io, steal
+    return {
+        "t": time.monotonic(),
+        "busy_s": busy / os.sysconf("SC_CLK_TCK") if busy is not None else None,
+        "server": {p: process_cpu_s(p, children=False) for p in process_tree(server)},
+        "self": process_cpu_s(os.getpid(), children=False),
+    }
+
+
+def cores_used(before: dict, after: dict) -> dict | None:
+    wall = after["t"] - before["t"]
+    if before["busy_s"] is None or before["self"] is None or wall <= 0:
+        return None
+    servers = [
+        (after["server"][p] - before["server"][p]) / wall
+        for p in after["server"]
+        if before["server"].get(p) is not None and after["server"][p] is not None
+    ]
+    generator = (after["self"] - before["self"]) / wall
+    busy = (after["busy_s"] - before["busy_s"]) / wall
+    return {
+        "server_processes": [round(c, 2) for c in servers if c >= 0.005],
+        "load_generator": round(generator, 2),
+        "others": round(max(0.0, busy - sum(servers) - generator), 2),
+    }
 
 
 def fetch_bundle(url: str) -> bytes:

@@ -22,7 +22,8 @@ def test_floor_server_under_load_and_stopped(tmp_path) -> None:
     with sbs.app_server("floor", 1, tmp_path) as (url, pid):
         phase = sbs.load_phase(url, pid, 0.3, 2, request)
     assert phase["requests"] > 0 and phase["errors"] == 0
-    assert {"rps", "p50_ms", "p99_ms", "cpu_us_per_request"} <= set(phase)
+    assert {"rps", "p50_ms", "p99_ms", "cpu_us_per_request", "cores_used"} <= set(phase)
+    assert set(phase["cores_used"]) == {"server_processes", "load_generator", "others"}
     try:
         os.kill(pid, 0)
         alive = True
