@@ -94,7 +94,7 @@ def train_adversarially(
     for _ in tqdm(range(epochs), desc="G and D, Algorithm 2", disable=not progress, leave=False):
         order = torch.randperm(len(f_real), generator=gen)
         for b in range(n_batches):
-            real_idx = order[b * batch_size:(b + 1) * batch_size]
+            real_idx = order[b * batch_size : (b + 1) * batch_size]
             # class attributes paired with the real batch's labels keep classes balanced with the data
             y = y_real[real_idx]
             a = noisy(a_all[y], noise_std, gen)
@@ -122,7 +122,9 @@ def train_adversarially(
                 opt_g.step()
                 log["loss_fc"].append(loss_fc.item())
                 log["loss_g"].append(loss_g.item())
-                if (loss_fc.item() < sigma_g and loss_g.item() < sigma_g) or phase_steps >= max_phase_steps:
+                if (
+                    loss_fc.item() < sigma_g and loss_g.item() < sigma_g
+                ) or phase_steps >= max_phase_steps:
                     train_d, phase_steps = True, 0
                     log["switches"].append(len(log["loss_d"]) + len(log["loss_g"]))
     generator.eval()

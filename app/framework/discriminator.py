@@ -37,7 +37,9 @@ class ConvFeatureDiscriminator(nn.Module):
 class MLPFeatureDiscriminator(nn.Module):
     def __init__(self, feature_dim: int, hidden: int = 128) -> None:
         super().__init__()
-        self.net = nn.Sequential(nn.Linear(feature_dim, hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, 1))
+        self.net = nn.Sequential(
+            nn.Linear(feature_dim, hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, 1)
+        )
         _xavier(self)
 
     def forward(self, f: torch.Tensor) -> torch.Tensor:

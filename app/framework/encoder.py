@@ -40,7 +40,15 @@ class ConvFeatureExtractor(nn.Module):
     the largest divisor of 32 that also divides C, so any channel count works.
     """
 
-    def __init__(self, in_channels: int, length: int, channels=(96, 256), kernel: int = 3, stride: int = 2, groups: int = 32) -> None:
+    def __init__(
+        self,
+        in_channels: int,
+        length: int,
+        channels=(96, 256),
+        kernel: int = 3,
+        stride: int = 2,
+        groups: int = 32,
+    ) -> None:
         super().__init__()
         g = math.gcd(in_channels, groups)
         self.net = nn.Sequential(
@@ -53,7 +61,9 @@ class ConvFeatureExtractor(nn.Module):
         for _ in range(2):
             t = (t - kernel) // stride + 1
         if t < 1:
-            raise ValueError(f"time axis of length {length} is too short for two stride-{stride} convolutions")
+            raise ValueError(
+                f"time axis of length {length} is too short for two stride-{stride} convolutions"
+            )
         self.feature_shape = (channels[1], t)
         self.feature_dim = channels[1] * t
         _xavier(self)
@@ -66,7 +76,9 @@ class ConvFeatureExtractor(nn.Module):
 class MLPFeatureExtractor(nn.Module):
     """Flat features (N, D) -> (N, F): two ReLU layers with dropout for small datasets."""
 
-    def __init__(self, in_features: int, hidden: int = 256, feature_dim: int = 128, dropout: float = 0.2) -> None:
+    def __init__(
+        self, in_features: int, hidden: int = 256, feature_dim: int = 128, dropout: float = 0.2
+    ) -> None:
         super().__init__()
         self.net = nn.Sequential(
             nn.Dropout(dropout / 2),
@@ -85,7 +97,10 @@ class MLPFeatureExtractor(nn.Module):
 
 
 def build_encoder(
-    input_shape: tuple[int, ...], mlp_hidden: int = 256, mlp_features: int = 128, mlp_dropout: float = 0.5
+    input_shape: tuple[int, ...],
+    mlp_hidden: int = 256,
+    mlp_features: int = 128,
+    mlp_dropout: float = 0.5,
 ) -> nn.Module:
     """CONV_XF for (C, T) tactile images, the MLP twin for (D,) flat features."""
     if len(input_shape) == 2:

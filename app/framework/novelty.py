@@ -21,8 +21,14 @@ class GMMNoveltyDetector:
     """PCA to ``pca_dims`` (a full-covariance GMM cannot be fitted in 960-D from
     ~500 samples), then scikit-learn's GaussianMixture."""
 
-    def __init__(self, n_components: int = 4, covariance_type: str = "full", pca_dims: int = 16,
-                 reg_covar: float = 1e-3, seed: int = 0) -> None:
+    def __init__(
+        self,
+        n_components: int = 4,
+        covariance_type: str = "full",
+        pca_dims: int = 16,
+        reg_covar: float = 1e-3,
+        seed: int = 0,
+    ) -> None:
         self.n_components = n_components
         self.covariance_type = covariance_type
         self.pca_dims = pca_dims
@@ -37,8 +43,13 @@ class GMMNoveltyDetector:
         self.pca_ = PCA(n_components=dims, random_state=self.seed).fit(x)
         z = self.pca_.transform(x)
         k = min(self.n_components, len(x))
-        self.gmm_ = GaussianMixture(k, covariance_type=self.covariance_type, reg_covar=self.reg_covar,
-                                    random_state=self.seed, n_init=2).fit(z)
+        self.gmm_ = GaussianMixture(
+            k,
+            covariance_type=self.covariance_type,
+            reg_covar=self.reg_covar,
+            random_state=self.seed,
+            n_init=2,
+        ).fit(z)
         return self
 
     def log_likelihood(self, x: np.ndarray) -> np.ndarray:
@@ -72,9 +83,14 @@ class GMMNoveltyDetector:
     # Stored as plain arrays so a bundle never needs pickle.
     def get_state(self) -> dict[str, np.ndarray]:
         g, p = self.gmm_, self.pca_
-        return {"pca_mean": p.mean_, "pca_components": p.components_, "weights": g.weights_,
-                "means": g.means_, "covariances": g.covariances_,
-                "precisions_cholesky": g.precisions_cholesky_}
+        return {
+            "pca_mean": p.mean_,
+            "pca_components": p.components_,
+            "weights": g.weights_,
+            "means": g.means_,
+            "covariances": g.covariances_,
+            "precisions_cholesky": g.precisions_cholesky_,
+        }
 
     def set_state(self, a: dict[str, np.ndarray]) -> None:
         p = PCA(n_components=len(a["pca_components"]))
@@ -97,7 +113,9 @@ def _precisions(chol: np.ndarray, covariance_type: str) -> np.ndarray:
     return chol**2
 
 
-def tune_threshold(known_scores: np.ndarray, novel_scores: np.ndarray, n_thresholds: int = 200) -> NoveltyTuning:
+def tune_threshold(
+    known_scores: np.ndarray, novel_scores: np.ndarray, n_thresholds: int = 200
+) -> NoveltyTuning:
     """Pick the threshold that maximises the mean of the accuracy of calling known
     samples known and novel samples novel (Sect. VI-B, Fig. 7)."""
     known_scores = np.asarray(known_scores, np.float64)

@@ -11,7 +11,11 @@ from app.framework.generator import noisy
 
 @torch.no_grad()
 def generate_features(
-    generator: nn.Module, attributes: np.ndarray, per_class: int, noise_std: float = 0.1, seed: int = 0
+    generator: nn.Module,
+    attributes: np.ndarray,
+    per_class: int,
+    noise_std: float = 0.1,
+    seed: int = 0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """GEN-F: ``per_class`` features G(a_z + ns) for each row a_z; returns (features, labels)."""
     gen = torch.Generator().manual_seed(seed)

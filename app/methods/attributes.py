@@ -49,7 +49,9 @@ class LinearAttributeModel:
         self._weights_t32 = np.ascontiguousarray(self.weights.T, np.float32)
 
     @classmethod
-    def fit(cls, z: np.ndarray, targets: np.ndarray, C: float, max_iter: int = 1000) -> LinearAttributeModel:
+    def fit(
+        cls, z: np.ndarray, targets: np.ndarray, C: float, max_iter: int = 1000
+    ) -> LinearAttributeModel:
         from sklearn.linear_model import LogisticRegression  # fitting only: loading stays light
 
         targets = (np.asarray(targets) > 0.5).astype(np.int64)
@@ -82,7 +84,6 @@ class LinearAttributeModel:
         return cls(arrays["weights"], arrays["bias"], arrays["constant"])
 
 
-
 def semantic_autoencoder(z: np.ndarray, targets: np.ndarray, lam: float) -> np.ndarray:
     """The semantic autoencoder of Kodirov et al. (2017): the (M, D) projection W that
     minimises ||Z - W^T A||^2 + lam ||W Z - A||^2 over samples Z (D, N) and their classes'
@@ -100,6 +101,7 @@ def semantic_autoencoder(z: np.ndarray, targets: np.ndarray, lam: float) -> np.n
 
 def cosine_scores(z: np.ndarray, projection: np.ndarray, vectors: np.ndarray) -> np.ndarray:
     """(N, L) cosine between each projected sample W z and each class's attribute vector."""
+
     def unit(m: np.ndarray) -> np.ndarray:
         return m / np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-12)
 

@@ -23,8 +23,17 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-_KEYS = ("feature", "threshold", "left", "right", "roots", "leaf_of_node", "leaf_ptr", "leaf_class",
-         "leaf_value")
+_KEYS = (
+    "feature",
+    "threshold",
+    "left",
+    "right",
+    "roots",
+    "leaf_of_node",
+    "leaf_ptr",
+    "leaf_class",
+    "leaf_value",
+)
 
 
 class FlatForest:
@@ -50,7 +59,9 @@ class FlatForest:
 
     def _check(self) -> None:
         n = len(self.feature)
-        if not (len(self.threshold) == len(self.left) == len(self.right) == len(self.leaf_of_node) == n):
+        if not (
+            len(self.threshold) == len(self.left) == len(self.right) == len(self.leaf_of_node) == n
+        ):
             raise ValueError("forest node arrays differ in length")
         if len(self.roots) == 0 or self.roots.min() < 0 or self.roots.max() >= n:
             raise ValueError("forest roots are out of range")
@@ -67,10 +78,16 @@ class FlatForest:
         leaves = self.leaf_of_node[~internal]
         if leaves.min() < 0 or leaves.max() + 1 >= len(self.leaf_ptr):
             raise ValueError("forest leaves are out of range")
-        if (len(self.leaf_class) != len(self.leaf_value) or self.leaf_ptr[0] != 0
-                or self.leaf_ptr[-1] != len(self.leaf_class) or (np.diff(self.leaf_ptr) < 0).any()):
+        if (
+            len(self.leaf_class) != len(self.leaf_value)
+            or self.leaf_ptr[0] != 0
+            or self.leaf_ptr[-1] != len(self.leaf_class)
+            or (np.diff(self.leaf_ptr) < 0).any()
+        ):
             raise ValueError("forest leaf distributions are inconsistent")
-        if len(self.leaf_class) and (self.leaf_class.min() < 0 or self.leaf_class.max() >= self.n_classes):
+        if len(self.leaf_class) and (
+            self.leaf_class.min() < 0 or self.leaf_class.max() >= self.n_classes
+        ):
             raise ValueError("forest leaf classes are out of range")
 
     @property
@@ -111,10 +128,14 @@ class FlatForest:
             offset += n
             n_leaves += len(values)
         arrays = {
-            "feature": np.concatenate(feats), "threshold": np.concatenate(thrs),
-            "left": np.concatenate(lefts), "right": np.concatenate(rights),
-            "roots": np.asarray(roots, np.int32), "leaf_of_node": np.concatenate(leaf_of),
-            "leaf_ptr": np.asarray(ptr, np.int64), "leaf_class": np.concatenate(leaf_cls),
+            "feature": np.concatenate(feats),
+            "threshold": np.concatenate(thrs),
+            "left": np.concatenate(lefts),
+            "right": np.concatenate(rights),
+            "roots": np.asarray(roots, np.int32),
+            "leaf_of_node": np.concatenate(leaf_of),
+            "leaf_ptr": np.asarray(ptr, np.int64),
+            "leaf_class": np.concatenate(leaf_cls),
             "leaf_value": np.concatenate(leaf_val),
         }
         return cls(arrays, len(classes), int(forest.n_features_in_))
@@ -143,12 +164,21 @@ class FlatForest:
         out /= self.n_trees
         return out
 
-    def _walk(self, x: np.ndarray, leaves: np.ndarray | None = None,
-              proba: np.ndarray | None = None) -> None:
+    def _walk(
+        self, x: np.ndarray, leaves: np.ndarray | None = None, proba: np.ndarray | None = None
+    ) -> None:
         none = np.zeros((0, 0), np.int32)
-        _walk(x, self._nodes, self._nodes.view(np.float32), self.roots, self.leaf_ptr, self.leaf_class,
-              self.leaf_value, none if leaves is None else leaves,
-              none.astype(np.float64) if proba is None else proba)
+        _walk(
+            x,
+            self._nodes,
+            self._nodes.view(np.float32),
+            self.roots,
+            self.leaf_ptr,
+            self.leaf_class,
+            self.leaf_value,
+            none if leaves is None else leaves,
+            none.astype(np.float64) if proba is None else proba,
+        )
 
     def _prepare_walk(self) -> None:
         # For a float32 x, x <= t (float64) exactly when x <= the largest float32 <= t, so
@@ -172,7 +202,9 @@ class FlatForest:
         return {k: getattr(self, k) for k in _KEYS}
 
     @classmethod
-    def from_state(cls, arrays: dict[str, np.ndarray], n_classes: int, n_features: int) -> FlatForest:
+    def from_state(
+        cls, arrays: dict[str, np.ndarray], n_classes: int, n_features: int
+    ) -> FlatForest:
         return cls(arrays, n_classes, n_features)
 
     def __deepcopy__(self, memo: dict) -> FlatForest:

@@ -20,7 +20,7 @@ The novelty score is a fixed weighted sum of the cues (by default
 ``1 - max p + 0.1 log knn1 + 0.1 log top``). Fixed weights, not learned ones: a
 logistic combination learned on pseudo-novel objects separated known from novel
 samples as well (AUROC) but its scale moved between the Sect. VI-B probe and the
-deployed model, so the tuned threshold did not carry over (see bench/explore_best.py
+deployed model, so the tuned threshold did not carry over (see bench/research/explore_best.py
 and docs/RESULTS.md).
 """
 

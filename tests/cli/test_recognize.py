@@ -36,8 +36,11 @@ def test_npy_samples_get_the_models_own_answers(saved, tmp_path, capsys):
     expected = model.recognize_batch(x, top_k=2).records()
     assert [r["class_name"] for r in printed["results"]] == [r["class_name"] for r in expected]
     assert all(len(r["top_k"]) == 2 and "class_id" not in r for r in printed["results"])
-    np.testing.assert_allclose([r["novelty_score"] for r in printed["results"]],
-                               [r["novelty_score"] for r in expected], rtol=1e-6)
+    np.testing.assert_allclose(
+        [r["novelty_score"] for r in printed["results"]],
+        [r["novelty_score"] for r in expected],
+        rtol=1e-6,
+    )
 
 
 def test_one_bare_sample_and_json_from_a_file_or_stdin(saved, tmp_path, capsys, monkeypatch):
@@ -53,16 +56,23 @@ def test_one_bare_sample_and_json_from_a_file_or_stdin(saved, tmp_path, capsys, 
     assert one["results"][0]["class_name"] == from_file["results"][0]["class_name"]
 
 
-@pytest.mark.parametrize("make, message", [
-    (lambda d, x: d / "missing.npy", "no samples file at"),
-    (lambda d, x: _write(d / "x.csv", "1,2"), "must be a .npy or .json file"),
-    (lambda d, x: _write(d / "x.json", "{not json"), "is not JSON"),
-    (lambda d, x: _write(d / "x.json", "[1, 2]"), 'must hold an object {"samples": [...]}'),
-    (lambda d, x: _write(d / "x.npy", "garbage"), "is not a readable .npy array"),
-    (lambda d, x: _save(d / "x.npy", x[:, :3]), "expected samples of shape"),
-    (lambda d, x: _save(d / "x.npy", np.where(np.arange(x.size).reshape(x.shape) == 7, np.nan, x)),
-     "contains NaN or infinity"),
-])
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda d, x: d / "missing.npy", "no samples file at"),
+        (lambda d, x: _write(d / "x.csv", "1,2"), "must be a .npy or .json file"),
+        (lambda d, x: _write(d / "x.json", "{not json"), "is not JSON"),
+        (lambda d, x: _write(d / "x.json", "[1, 2]"), 'must hold an object {"samples": [...]}'),
+        (lambda d, x: _write(d / "x.npy", "garbage"), "is not a readable .npy array"),
+        (lambda d, x: _save(d / "x.npy", x[:, :3]), "expected samples of shape"),
+        (
+            lambda d, x: _save(
+                d / "x.npy", np.where(np.arange(x.size).reshape(x.shape) == 7, np.nan, x)
+            ),
+            "contains NaN or infinity",
+        ),
+    ],
+)
 def test_bad_samples_exit_2_and_say_why(saved, tmp_path, capsys, make, message):
     path, _, x = saved
     code, _, err = run(capsys, "--model", str(path), str(make(tmp_path, x)))
@@ -74,7 +84,9 @@ def test_a_missing_or_damaged_model_exits_2(saved, tmp_path, capsys):
     samples = _save(tmp_path / "x.npy", x)
     code, _, err = run(capsys, "--model", str(tmp_path / "none.bundle"), str(samples))
     assert code == 2 and "no model bundle at" in err
-    code, _, err = run(capsys, "--model", str(_write(tmp_path / "bad.bundle", "garbage")), str(samples))
+    code, _, err = run(
+        capsys, "--model", str(_write(tmp_path / "bad.bundle", "garbage")), str(samples)
+    )
     assert code == 2 and "not a readable model bundle" in err
     code, _, err = run(capsys, "--model", str(saved[0]), "--top-k", "0", str(samples))
     assert code == 2 and "--top-k must be at least 1" in err
@@ -118,10 +130,14 @@ def test_lines_are_answered_one_by_one_and_a_new_model_file_is_picked_up(saved, 
     answers = [json.loads(line) for line in out.getvalue().splitlines()]
     assert len(answers) == 5
     assert answers[0]["results"] == model.recognize_batch(x).records()
-    assert "is not JSON" in answers[1]["error"] and "expected samples of shape" in answers[2]["error"]
+    assert (
+        "is not JSON" in answers[1]["error"] and "expected samples of shape" in answers[2]["error"]
+    )
     assert answers[3]["results"] == model.recognize_batch(x).records()
     assert "cannot be read" in answers[3]["warning"]
-    assert answers[4]["results"] == newer.recognize_batch(x).records() and "warning" not in answers[4]
+    assert (
+        answers[4]["results"] == newer.recognize_batch(x).records() and "warning" not in answers[4]
+    )
 
 
 def test_a_lines_process_answers_each_line_as_it_comes(saved):
@@ -130,15 +146,21 @@ def test_a_lines_process_answers_each_line_as_it_comes(saved):
     from tests.reliability.harness import tactile_zsl
 
     path, model, x = saved
-    proc = subprocess.Popen([*tactile_zsl(), "recognize", "--model", str(path), "--lines", "-"],
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [*tactile_zsl(), "recognize", "--model", str(path), "--lines", "-"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         for samples in (x[:2], x[2:3]):
             proc.stdin.write(json.dumps({"samples": samples.tolist()}) + "\n")
             proc.stdin.flush()
             answer = json.loads(proc.stdout.readline())  # answered before the input ends
             assert [r["class_name"] for r in answer["results"]] == [
-                r["class_name"] for r in model.recognize_batch(samples).records()]
+                r["class_name"] for r in model.recognize_batch(samples).records()
+            ]
         proc.stdin.write("[1]\n")
         proc.stdin.flush()
         assert "must hold an object" in json.loads(proc.stdout.readline())["error"]

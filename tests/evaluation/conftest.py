@@ -31,9 +31,12 @@ class OracleRecognizer(TactileRecognizer):
     def _fit(self, dataset: TactileDataset, progress: bool) -> None:
         OracleRecognizer.seen_training.append({_key(x) for x in dataset.samples})
         self.novelty_tuning = NoveltyTuning(
-            thresholds=np.array([0.0, 0.5, 1.0]), known_kept=np.array([0.2, 0.9, 1.0]),
-            val_novel=np.array([1.0, 0.7, 0.0]), threshold=0.5,
-            known_kept_at_threshold=0.9, val_novel_at_threshold=0.7,
+            thresholds=np.array([0.0, 0.5, 1.0]),
+            known_kept=np.array([0.2, 0.9, 1.0]),
+            val_novel=np.array([1.0, 0.7, 0.0]),
+            threshold=0.5,
+            known_kept_at_threshold=0.9,
+            val_novel_at_threshold=0.7,
         )
         self.novelty_threshold = 0.5
         self.wrong = False
@@ -83,9 +86,15 @@ def oracle(monkeypatch):
     attrs = ds.class_attributes.copy()
     attrs[1:4] = attrs[0]  # objects 0-3 are twins: at most one of them is novel in a split
     ds = replace(ds, class_attributes=attrs)
-    OracleRecognizer.truth = {_key(x): ds.class_names[y] for x, y in zip(ds.samples, ds.labels, strict=True)}
+    OracleRecognizer.truth = {
+        _key(x): ds.class_names[y] for x, y in zip(ds.samples, ds.labels, strict=True)
+    }
     OracleRecognizer.seen_training = []
     OracleRecognizer.one_shots = []
-    monkeypatch.setitem(registry.METHODS, "oracle", f"{OracleRecognizer.__module__}:OracleRecognizer")
-    monkeypatch.setitem(protocol.ZSL_VARIANTS, "oracle", {"zsl_wrong": {"wrong": True}, "zsl_same": None})
+    monkeypatch.setitem(
+        registry.METHODS, "oracle", f"{OracleRecognizer.__module__}:OracleRecognizer"
+    )
+    monkeypatch.setitem(
+        protocol.ZSL_VARIANTS, "oracle", {"zsl_wrong": {"wrong": True}, "zsl_same": None}
+    )
     return ds

@@ -10,14 +10,29 @@ import pytest
 
 from app.cli import main
 
-OPTIONS = ["--dataset", "--novel", "--splits", "--seed", "--methods", "--out", "--report",
-           "--test-trials", "--distinct-from-known", "--data-seed", "--no-progress"]
+OPTIONS = [
+    "--dataset",
+    "--novel",
+    "--splits",
+    "--seed",
+    "--methods",
+    "--out",
+    "--report",
+    "--test-trials",
+    "--distinct-from-known",
+    "--data-seed",
+    "--no-progress",
+]
 
 
 def test_help_lists_every_option():
     code = "import sys; from app.cli import main; sys.exit(main())"
-    proc = subprocess.run([sys.executable, "-c", code, "evaluate", "--help"],
-                          capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-c", code, "evaluate", "--help"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert proc.returncode == 0, proc.stderr
     text = proc.stdout
     for option in OPTIONS:
@@ -34,9 +49,28 @@ def test_help_lists_every_option():
 
 def test_small_run_writes_results_and_report(tmp_path, capsys):
     out = tmp_path / "r.json"
-    code = main(["evaluate", "--dataset", "simulated:14", "--novel", "3", "--splits", "1",
-                 "--seed", "2", "--methods", "eszsl", "--out", str(out), "--report",
-                 str(tmp_path / "rep"), "--test-trials", "2", "--no-progress"])
+    code = main(
+        [
+            "evaluate",
+            "--dataset",
+            "simulated:14",
+            "--novel",
+            "3",
+            "--splits",
+            "1",
+            "--seed",
+            "2",
+            "--methods",
+            "eszsl",
+            "--out",
+            str(out),
+            "--report",
+            str(tmp_path / "rep"),
+            "--test-trials",
+            "2",
+            "--no-progress",
+        ]
+    )
     assert code == 0
     res = json.loads(out.read_text())
     assert res["dataset"] == "simulated:14" and res["novel"] == 3 and res["seed"] == 2
@@ -48,8 +82,18 @@ def test_small_run_writes_results_and_report(tmp_path, capsys):
 
 
 def test_errors_are_clear(tmp_path, capsys):
-    code = main(["evaluate", "--dataset", "simulated:14", "--methods", "nope",
-                 "--out", str(tmp_path / "r.json"), "--no-progress"])
+    code = main(
+        [
+            "evaluate",
+            "--dataset",
+            "simulated:14",
+            "--methods",
+            "nope",
+            "--out",
+            str(tmp_path / "r.json"),
+            "--no-progress",
+        ]
+    )
     assert code == 2
     assert "unknown method 'nope'" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:

@@ -17,13 +17,24 @@ N_NOVEL = 3
 
 def test_oracle_figures_are_exact(oracle):
     ds = oracle
-    res = evaluate(ds, ["oracle"], n_novel=N_NOVEL, n_splits=4, seed=4, test_trials=1, progress=False)
+    res = evaluate(
+        ds, ["oracle"], n_novel=N_NOVEL, n_splits=4, seed=4, test_trials=1, progress=False
+    )
     entry = res["methods"]["oracle"]
     assert len(entry["splits"]) == 4
     # a novel object with a known twin (same attribute vector) is enrolled and measured
     assert any(set(s["novel_objects"]) & {0, 1, 2, 3} for s in entry["splits"])
     for s in entry["splits"]:
-        for f in ("known_acc", "zsl", "osl", "nd_novel_detected", "nd_auroc", "gzsl_seen", "gzsl_unseen", "gzsl_h"):
+        for f in (
+            "known_acc",
+            "zsl",
+            "osl",
+            "nd_novel_detected",
+            "nd_auroc",
+            "gzsl_seen",
+            "gzsl_unseen",
+            "gzsl_h",
+        ):
             assert s[f] == 1.0, f
         assert s["nd_known_kept"] == 0.9 and s["nd_val_novel"] == 0.7  # taken from the tuning
         assert s["zsl_wrong"] == pytest.approx(1 / N_NOVEL)  # balanced test set, one class answered
@@ -38,7 +49,9 @@ def test_oracle_figures_are_exact(oracle):
 
 def test_no_test_data_reaches_training_and_one_shots_are_right(oracle):
     ds = oracle
-    res = evaluate(ds, ["oracle"], n_novel=N_NOVEL, n_splits=2, seed=4, test_trials=1, progress=False)
+    res = evaluate(
+        ds, ["oracle"], n_novel=N_NOVEL, n_splits=2, seed=4, test_trials=1, progress=False
+    )
     novel_names = {n for s in res["methods"]["oracle"]["splits"] for n in s["novel_names"]}
     from app.evaluation.splits import make_zsl_splits
 
@@ -56,8 +69,16 @@ def test_no_test_data_reaches_training_and_one_shots_are_right(oracle):
 
 
 def test_results_layout_and_json(oracle, tmp_path):
-    res = evaluate(oracle, ["oracle"], n_novel=N_NOVEL, n_splits=2, seed=0, test_trials=1,
-                   progress=False, dataset_label="simulated:16")
+    res = evaluate(
+        oracle,
+        ["oracle"],
+        n_novel=N_NOVEL,
+        n_splits=2,
+        seed=0,
+        test_trials=1,
+        progress=False,
+        dataset_label="simulated:16",
+    )
     text = json.dumps(res)  # plain JSON, no NaN
     back = json.loads(text)
     assert back["dataset"] == "simulated:16" and back["novel"] == N_NOVEL

@@ -105,9 +105,13 @@ def test_whole_trials_held_out_and_one_shot_trial_excluded():
         train = s.train_dataset(ds)
         assert train.class_names == tuple(ds.class_names[c] for c in s.known_classes)
         yk = s.known_labels(ds, s.known_test_idx)
-        assert [train.class_names[j] for j in yk] == [ds.class_names[c] for c in ds.labels[s.known_test_idx]]
+        assert [train.class_names[j] for j in yk] == [
+            ds.class_names[c] for c in ds.labels[s.known_test_idx]
+        ]
         yn = s.novel_labels(ds, s.novel_test_idx)
-        assert [s.novel_names[j] for j in yn] == [ds.class_names[c] for c in ds.labels[s.novel_test_idx]]
+        assert [s.novel_names[j] for j in yn] == [
+            ds.class_names[c] for c in ds.labels[s.novel_test_idx]
+        ]
 
 
 def test_deterministic_under_seed():
@@ -120,7 +124,8 @@ def test_deterministic_under_seed():
         assert np.array_equal(x.known_test_idx, y.known_test_idx)
         assert np.array_equal(x.one_shot_idx, y.one_shot_idx)
     assert any(
-        not np.array_equal(x.novel_classes, y.novel_classes) or not np.array_equal(x.known_test_idx, y.known_test_idx)
+        not np.array_equal(x.novel_classes, y.novel_classes)
+        or not np.array_equal(x.known_test_idx, y.known_test_idx)
         for x, y in zip(a, c, strict=True)
     )
 
@@ -132,7 +137,9 @@ def test_impossible_requests_raise_clear_errors():
     with pytest.raises(SplitError, match="distinct attribute vectors"):
         make_zsl_splits(handmade(attrs=shared), n_novel=6, n_splits=1, seed=0)
     with pytest.raises(SplitError, match="distinct attribute vectors"):  # only 6..9 unique
-        make_zsl_splits(handmade(attrs=shared), n_novel=5, n_splits=1, seed=0, distinct_from_known=True)
+        make_zsl_splits(
+            handmade(attrs=shared), n_novel=5, n_splits=1, seed=0, distinct_from_known=True
+        )
     with pytest.raises(SplitError, match="distinct valid splits"):
         make_zsl_splits(ds, n_novel=1, n_splits=50, seed=0, max_draws=2000)  # at most 9 sets
     with pytest.raises(SplitError, match="trials"):

@@ -53,7 +53,10 @@ def test_generator_output_lives_in_the_encoders_feature_space(input_shape):
 def test_generator_uses_the_papers_deconvolutions_for_256x6():
     g = build_generator(19, (256, 6))
     deconvs = [m for m in g.modules() if isinstance(m, torch.nn.ConvTranspose1d)]
-    assert [(d.out_channels, d.kernel_size[0], d.stride[0]) for d in deconvs] == [(96, 4, 2), (256, 3, 1)]
+    assert [(d.out_channels, d.kernel_size[0], d.stride[0]) for d in deconvs] == [
+        (96, 4, 2),
+        (256, 3, 1),
+    ]
 
 
 def test_grouped_conv_by_matmul_equals_torchs_convolution():

@@ -56,4 +56,6 @@ def test_direct_log_likelihood_equals_scikit_learns(cov):
     x = rng.normal(size=(200, 12)) * rng.uniform(0.5, 3, size=12)
     det = GMMNoveltyDetector(n_components=3, covariance_type=cov, pca_dims=6).fit(x)
     probe = np.concatenate([x[:20], x[:20] * 4])
-    np.testing.assert_allclose(det.log_likelihood(probe), det.sklearn_log_likelihood(probe), rtol=1e-9)
+    np.testing.assert_allclose(
+        det.log_likelihood(probe), det.sklearn_log_likelihood(probe), rtol=1e-9
+    )

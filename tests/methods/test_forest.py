@@ -42,7 +42,11 @@ def test_inputs_at_the_thresholds_go_where_sklearn_sends_them(data):
     rows = []
     for f, t in zip(flat.feature[internal][:200], flat.threshold[internal][:200], strict=True):
         t32 = np.float32(t)
-        for v in (t32, np.nextafter(t32, np.float32(-np.inf)), np.nextafter(t32, np.float32(np.inf))):
+        for v in (
+            t32,
+            np.nextafter(t32, np.float32(-np.inf)),
+            np.nextafter(t32, np.float32(np.inf)),
+        ):
             row = x[len(rows) % len(x)].copy()
             row[f] = v
             rows.append(row)
