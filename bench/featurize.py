@@ -4,11 +4,12 @@
 
 On the real pilot recordings (74 trials, ~4,100–11,100 frames, two fingers each): a model
 (``best``) is fitted on every trial, then each trial's JSON body is parsed (orjson) and
-validated (``parse_trial``), as is the same trial sent as HDF5, featurized into the paper's tactile images
-(``TactileImageFeaturizer.transform``, one image per finger) and recognised from both
-fingers (``recognize_batch`` with groups); the store's encoding of a trial (``.npz``) is
-timed too. Printed: the median per trial of each step and its share of the whole, so the
-figures compare across machines as ratios; absolute times are this machine's only.
+validated (``parse_trial``), as is the same trial sent as HDF5, featurized into the
+paper's tactile images (``TactileImageFeaturizer.transform``, one image per finger) and
+recognised from both fingers (``recognize_batch`` with groups); the store's encoding of a
+trial (``.npz``) is timed too. Printed: the median per trial of each step and its share of
+the whole, so the figures compare across machines as ratios; absolute times are this
+machine's only.
 """
 
 from __future__ import annotations

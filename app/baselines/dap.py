@@ -148,7 +148,8 @@ class DAPRecognizer(ForestBaseline):
     val_fraction : float, default 0.1
         Share of the known objects in each set of validation objects (at least 2).
         In (0, 1).
-    n_estimators, max_features, min_samples_leaf, novelty_val_fraction, novelty_holdout_trials, seed, n_jobs
+    n_estimators, max_features, min_samples_leaf, novelty_val_fraction,
+    novelty_holdout_trials, seed, n_jobs
         The known-class forest and the novelty tuning, with ``ForestBaseline``'s
         meanings and defaults.
     featurizer_params

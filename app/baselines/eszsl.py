@@ -1,4 +1,5 @@
-"""ESZSL: "An embarrassingly simple approach to zero-shot learning" (Romera-Paredes and Torr, ICML 2015).
+"""ESZSL: "An embarrassingly simple approach to zero-shot learning" (Romera-Paredes and
+Torr, ICML 2015).
 
 A bilinear compatibility x^T V s between a sample x (robust-scaled flat inputs,
 d features) and a class signature s (its attribute vector, M entries), with the
@@ -12,8 +13,8 @@ training data. The signature normalisation (raw 0/1 vectors, centred on the
 known classes' mean vector, unit length, or both; a common ZSL preprocessing),
 γ and λ are picked from a grid by mean zero-shot accuracy on validation objects
 carved from the known set (``validation_folds``: the split rules, several
-folds), never on test data, then V is refitted on every known class. Known classes, novelty and one-shot: extra-trees and nearest class mean, as
-in ``common``.
+folds), never on test data, then V is refitted on every known class. Known classes,
+novelty and one-shot: extra-trees and nearest class mean, as in ``common``.
 """
 
 from __future__ import annotations
@@ -118,7 +119,8 @@ class ESZSLRecognizer(ForestBaseline):
     val_fraction : float, default 0.1
         Share of the known objects in each set of validation objects (at least 2).
         In (0, 1).
-    n_estimators, max_features, min_samples_leaf, novelty_val_fraction, novelty_holdout_trials, seed, n_jobs
+    n_estimators, max_features, min_samples_leaf, novelty_val_fraction,
+    novelty_holdout_trials, seed, n_jobs
         The known-class forest and the novelty tuning, with ``ForestBaseline``'s
         meanings and defaults.
     featurizer_params

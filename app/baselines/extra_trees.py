@@ -25,7 +25,8 @@ class ExtraTreesRecognizer(DAPRecognizer):
         Attribute probabilities, and the attribute prior, are clipped to
         [clip, 1 - clip], so that no single attribute classifier can veto a novel
         class alone. In (0, 0.5).
-    n_estimators, max_features, min_samples_leaf, novelty_val_fraction, novelty_holdout_trials, seed, n_jobs
+    n_estimators, max_features, min_samples_leaf, novelty_val_fraction,
+    novelty_holdout_trials, seed, n_jobs
         The known-class forest and the novelty tuning, with ``ForestBaseline``'s
         meanings and defaults.
     featurizer_params

@@ -117,7 +117,10 @@ def answer_lines(model_file: Path, lines: Iterable[str], out: TextIO, top_k: int
             model, fresh = source.load()
             warning = None if fresh else warning
         except (ValueError, OSError) as exc:
-            warning = f"the model file changed and cannot be read ({exc}); answering with the one read before"
+            warning = (
+                f"the model file changed and cannot be read ({exc}); "
+                "answering with the one read before"
+            )
         try:
             results = answers(model, _from_json(line, "the line"), top_k)
             answer = {"method": model.method, "results": results.records()}

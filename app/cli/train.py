@@ -41,7 +41,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="method hyper-parameter, e.g. --param encoder_epochs=30 (repeatable; value parsed as JSON)",
+        help="method hyper-parameter, e.g. --param encoder_epochs=30 "
+        "(repeatable; value parsed as JSON)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(handler=run)

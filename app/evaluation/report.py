@@ -62,7 +62,8 @@ PAPER_SOURCE: dict[str, str] = {
     "osl": "Table VIII (12: Table IX)",
 }
 DESCRIPTIONS: dict[str, str] = {
-    "known_acc": "accuracy on held-out trials of known objects (argmax of the known-class classifier)",
+    "known_acc": "accuracy on held-out trials of known objects "
+    "(argmax of the known-class classifier)",
     "nd_known_kept": "novelty tuning: held-out known trials called known, at the tuned threshold",
     "nd_val_novel": "novelty tuning: validation-novel objects called novel, at the tuned threshold",
     "nd_novel_detected": "test novel objects' samples called novel",
@@ -110,7 +111,8 @@ def markdown(results: dict[str, Any], images: dict[str, list[str]] | None = None
         "",
         f"Known objects' test data: {results.get('test_trials', '?')} held-out trials per object; "
         "novel objects: one trial gives the one-shot sample, the others are the test set "
-        "(shared by ZSL, OSL and the mixed known/novel test). Means over splits ± standard deviation.",
+        "(shared by ZSL, OSL and the mixed known/novel test). "
+        "Means over splits ± standard deviation.",
         "",
         "## Mean figures beside the paper",
         "",

@@ -95,7 +95,8 @@ def train_adversarially(
         order = torch.randperm(len(f_real), generator=gen)
         for b in range(n_batches):
             real_idx = order[b * batch_size : (b + 1) * batch_size]
-            # class attributes paired with the real batch's labels keep classes balanced with the data
+            # class attributes paired with the real batch's labels keep classes balanced
+            # with the data
             y = y_real[real_idx]
             a = noisy(a_all[y], noise_std, gen)
             phase_steps += 1

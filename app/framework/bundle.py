@@ -308,7 +308,8 @@ def _unzip(data: bytes) -> tuple[dict[str, Any], bytes]:
     version = manifest.get("format_version")
     if version != FORMAT_VERSION:
         raise BundleError(
-            f"bundle format version {version!r} is not supported (this build reads {FORMAT_VERSION}); "
+            f"bundle format version {version!r} is not supported "
+            f"(this build reads {FORMAT_VERSION}); "
             "retrain the model with this version"
         )
     return manifest, npz_bytes

@@ -14,7 +14,8 @@ class NonFiniteInputError(FrameworkError):
 
 
 class AttributeVectorError(FrameworkError):
-    """An attribute vector has the wrong length, values other than 0/1, or names an unknown attribute."""
+    """An attribute vector has the wrong length, values other than 0/1, or names an unknown
+    attribute."""
 
 
 class DuplicateClassError(FrameworkError):

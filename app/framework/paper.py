@@ -252,7 +252,8 @@ class PaperRecognizer(TactileRecognizer):
 
     # ----------------------------------------------------------------- fitting
     def _fit(self, dataset: TactileDataset, progress: bool) -> None:
-        configure_torch()  # torch gets the process's threads (it may have loaded after they were chosen)
+        # torch gets the process's threads (it may have loaded after they were chosen)
+        configure_torch()
         t0 = time.perf_counter()
         timings: dict[str, float] = {}
         self._build(dataset.n_classes, dataset.n_attributes)

@@ -718,7 +718,8 @@ class TactileRecognizer(ABC):
             if self.featurizer_ is not None:
                 raise InputKindError(f"{self._takes_trials()}; got samples of shape {x.shape}")
             raise InputShapeError(
-                f"expected samples of shape (N, {', '.join(map(str, self.input_shape))}), got {x.shape}"
+                f"expected samples of shape (N, {', '.join(map(str, self.input_shape))}), "
+                f"got {x.shape}"
             )
         if len(x) == 0:
             raise InputShapeError("expected at least one sample, got an empty batch")

@@ -322,7 +322,8 @@ def _offsets(
 
 
 class KnownModel:
-    """ForestCues and fixed cue weights: ``known_proba`` and the novelty score of the best method."""
+    """ForestCues and fixed cue weights: ``known_proba`` and the novelty score of the best
+    method."""
 
     def __init__(self, cues: ForestCues, weights: np.ndarray) -> None:
         self.cues_model = cues

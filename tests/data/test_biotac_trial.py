@@ -81,7 +81,8 @@ def test_misnamed_channel():
 @pytest.mark.parametrize(
     ("channel", "value", "expected"),
     [
-        ("pac", np.zeros((800, 21)).tolist(), "expected 22 columns per frame (shape (T, 22)), got 21"),
+        ("pac", np.zeros((800, 21)).tolist(),
+         "expected 22 columns per frame (shape (T, 22)), got 21"),
         ("electrodes", np.zeros((800, 18)).tolist(), "expected 19 columns per frame"),
         ("electrodes", np.zeros(800).tolist(), "got shape (800,)"),
         ("pdc", np.zeros((800, 1)).tolist(), "expected one value per frame (shape (T,))"),
@@ -311,7 +312,8 @@ def _write_raw(path, mutate):
     [
         (lambda g: g.__delitem__("pac"), "pac", "missing channel"),
         (lambda g: g.move("tdc", "tdc_raw"), "tdc_raw", "unknown channel (did you mean 'tdc'?)"),
-        (lambda g: (g.__delitem__("electrodes"), g.create_dataset("electrodes", data=np.zeros((800, 18)))),
+        (lambda g: (g.__delitem__("electrodes"),
+                    g.create_dataset("electrodes", data=np.zeros((800, 18)))),
          "electrodes", "expected 19 columns"),
         (lambda g: (g.__delitem__("tac"), g.create_dataset("tac", data=np.zeros(10))), "tac",
          "has 10 frames"),

@@ -36,8 +36,13 @@ def test_check_folder_with_graded_values(tmp_path, capsys):
     write_folder(graded_dataset(), tmp_path)
     code, summary, _ = run(capsys, "check", f"folder:{tmp_path}")
     assert code == 0 and summary["trials"] == 4 and summary["input_shape"] == [4, 5]
-    assert summary["attributes"] == {"count": 3, "names": ["hard", "soft", "rough"],
-                                     "binary": False, "graded_values": 3, "not_known_values": 2}  # fmt: skip
+    assert summary["attributes"] == {
+        "count": 3,
+        "names": ["hard", "soft", "rough"],
+        "binary": False,
+        "graded_values": 3,
+        "not_known_values": 2,
+    }
 
 
 def test_check_biotac_lists_raw_channels_and_pressures(tmp_path, capsys):
@@ -123,14 +128,20 @@ def test_bad_biotac_exits_2_naming_file_group_finger_and_channel(
     _break_channel(tmp_path / "foam.h5", "foam_pdc100_1cm_02", 1, channel, data)
     code, _, err = run(capsys, "check", f"biotac:{tmp_path}")
     assert code == 2
-    prefix = f"tactile-zsl dataset: error: {tmp_path / 'foam.h5'}, group 'foam_pdc100_1cm_02', finger 1, "
+    prefix = (
+        f"tactile-zsl dataset: error: {tmp_path / 'foam.h5'}, "
+        "group 'foam_pdc100_1cm_02', finger 1, "
+    )
     assert err.strip().startswith(prefix + words), err
 
 
 def test_bad_specs_exit_2(capsys, tmp_path):
-    for spec, words in [("folder:", "'folder' needs a folder"), ("biotac:", "'biotac' needs a folder"),
-                        (f"folder:{tmp_path / 'absent'}", "dataset folder not found"),
-                        ("hdf5:x", "unknown dataset kind 'hdf5'")]:  # fmt: skip
+    for spec, words in [
+        ("folder:", "'folder' needs a folder"),
+        ("biotac:", "'biotac' needs a folder"),
+        (f"folder:{tmp_path / 'absent'}", "dataset folder not found"),
+        ("hdf5:x", "unknown dataset kind 'hdf5'"),
+    ]:
         code, _, err = run(capsys, "check", spec)
         assert code == 2 and words in err
 
@@ -138,8 +149,12 @@ def test_bad_specs_exit_2(capsys, tmp_path):
 def test_console_script_exit_status(tmp_path):
     write_folder(graded_dataset(), tmp_path)
     (tmp_path / "samples.csv").write_text("object,trial\nbrick,x\n")
-    done = subprocess.run([sys.executable, "-m", "app.cli", "dataset", "check", f"folder:{tmp_path}"],
-                          capture_output=True, text=True, timeout=120)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-m", "app.cli", "dataset", "check", f"folder:{tmp_path}"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert done.returncode == 2 and done.stdout == ""
     assert (
         f"{tmp_path / 'samples.csv'}, row 2, field 'trial': trial 'x' is not an integer"

@@ -134,10 +134,12 @@ TRACES = {
     "slippery: low slide shear": (
         lambda d: -_sig(d, "slide", "e1")[:, 10:].mean(axis=1), ["slippery"], None),
     "thick: aperture offset": (
-        lambda d: d.samples[:, [channel(p, "e2") for p in ("squeeze", "hold", "slide")]].mean(axis=(1, 2)),
+        lambda d: d.samples[:, [channel(p, "e2") for p in ("squeeze", "hold", "slide")]]
+        .mean(axis=(1, 2)),
         ["thick"], None),
     "absorbent/porous: pressure relaxation": (
-        lambda d: _sig(d, "hold", "pdc")[:, :5].mean(axis=1) - _sig(d, "hold", "pdc")[:, -5:].mean(axis=1),
+        lambda d: _sig(d, "hold", "pdc")[:, :5].mean(axis=1)
+        - _sig(d, "hold", "pdc")[:, -5:].mean(axis=1),
         ["absorbent", "porous"], None),
     "fuzzy/hairy: broadband vibration in hold": (
         lambda d: (_sig(d, "hold", "pac") ** 2).mean(axis=1), ["fuzzy", "hairy"], None),

@@ -24,7 +24,8 @@ from threadpoolctl import threadpool_info
 from app.framework import runtime
 def seen():
     return {"chosen": runtime._threads, "torch": torch.get_num_threads(),
-            "blas": sorted({p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"}),
+            "blas": sorted({p["num_threads"] for p in threadpool_info()
+                            if p["user_api"] == "blas"}),
             "openblas_env": os.environ.get("OPENBLAS_NUM_THREADS")}
 """
 

@@ -1,4 +1,5 @@
-"""FlatForest: the same probabilities and leaves as scikit-learn, plain arrays only, checked state."""
+"""FlatForest: the same probabilities and leaves as scikit-learn, plain arrays only, checked
+state."""
 
 from __future__ import annotations
 

@@ -34,9 +34,10 @@ async def describe(
     model's attribute classifiers. For an object the robot found novel that nobody has
     registered: a person checks the `suggested` attributes and registers the object with
     them; with `same_object`, several touches of the object give one description too. Takes
-    the samples (or raw trials: one description per trial) as `POST /v1/recognize` does. Only methods that predict
-    attributes from a sample answer (`best` does; otherwise 409). On objects the model was
-    never trained on these predictions are far from certain: docs/RESULTS.md measures them."""
+    the samples (or raw trials: one description per trial) as `POST /v1/recognize` does.
+    Only methods that predict attributes from a sample answer (`best` does; otherwise 409).
+    On objects the model was never trained on these predictions are far from certain:
+    docs/RESULTS.md measures them."""
     model, service = recognizing
     rec = model.recognizer
     body = await read_body(request, rec.input_shape, service.batch_limit)
