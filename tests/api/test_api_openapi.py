@@ -16,7 +16,8 @@ import pytest
 
 # model bundles (zip) become the generator's File type. The .npy and HDF5 request bodies stay
 # outside the generated client (README): a required body of two media types makes
-# openapi-python-client 0.29 write code that does not import (its issue 1451).
+# openapi-python-client 0.29 write code that does not import (its bug report
+# github.com/openapi-generators/openapi-python-client/issues/1451).
 GENERATOR_CONFIG = """\
 content_type_overrides:
   application/zip: application/octet-stream
