@@ -1,19 +1,22 @@
 """Side by side in one run, on one machine: the service, the framework's floor, a first
 scikit-learn service, and the model's own in-process speed.
 
-    .venv/bin/python -m bench.side_by_side [--seconds 10] [--clients 32]
+    .venv/bin/python -m bench.side_by_side [--seconds 10] [--clients 32] [--rounds 3]
 
-Three servers on the same stack (uvicorn, uvloop, httptools; no access log), each hammered
-in turn by the lean keep-alive client of ``bench/load.py`` (``--clients`` connections, one
-JSON body ``{"samples": [[...32 rows of 30 floats...]]}``, the simulator's first sample):
+Three servers on the same stack (uvicorn, uvloop, httptools; no access log), all started
+first, then hammered one at a time by the lean keep-alive client of ``bench/load.py``
+(``--clients`` connections, one JSON body ``{"samples": [[...32 rows of 30 floats...]]}``,
+the simulator's first sample), in ``--rounds`` interleaved rounds whose medians are
+reported (a neighbour's burst on a shared machine then falls on every server, not on one):
 
 - the service: ``tactile-zsl serve --processes 1`` on the embedded default (the simulator,
   method ``best``, embedded worker) in a fresh temporary data dir (the first start trains
-  the base model), then ``--processes 2`` on the same store; the rate limit is off
+  the base model), and ``--processes 2`` on the same store; the rate limit is off
   (``TACTILE_RATE_LIMIT=0``, as ``bench/load.py`` runs it), so capacity is measured;
 - the floor: a bare FastAPI app (``floor_app`` below) whose ``POST /v1/recognize`` parses
   the body into a float32 array (orjson + numpy) and answers a fixed small JSON, on one
-  uvicorn process and on two (uvicorn's ``workers=2``);
+  uvicorn process, and on two that share the port through SO_REUSEPORT as the service's
+  processes do;
 - a first scikit-learn service (``sklearn_app``): the same parsing, and
   ``ExtraTreesClassifier(n_estimators=100).predict_proba`` of a forest fitted at start-up on
   the simulator's dataset (flattened samples), on one uvicorn process.
@@ -22,13 +25,14 @@ Then batch throughput over HTTP (``.npy`` bodies of ``--batch`` samples,
 ``Content-Type: application/x-npy``, 4 clients as ``bench/load.py``) against the model's own
 in-process throughput (``BestRecognizer.recognize_batch`` on the same batch, in this
 process, on the model the service trained, read from its store through
-``GET /v1/models/active/bundle``, one BLAS thread as the service runs it), and the
-in-process cost of ``recognize_batch`` on one sample against its batch-amortised cost per
-sample.
+``GET /v1/models/active/bundle``, one BLAS thread as the service runs it, once every server
+has stopped), and the in-process cost of ``recognize_batch`` on one sample against its
+batch-amortised cost per sample.
 
 It prints JSON: the ratios first, then the targets they are compared with, then the
-absolute figures of this machine and the machine. Every process it starts is stopped
-before it exits, also on error or SIGTERM. Only 127.0.0.1 is ever targeted.
+absolute figures of this machine (each load phase with the cores each server process, the
+load generator and everything else on the machine used) and the machine. Every process it
+starts is stopped before it exits, also on error or SIGTERM. Only 127.0.0.1 is targeted.
 """
 
 from __future__ import annotations
@@ -41,9 +45,12 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import multiprocessing
+import multiprocessing.connection
 import os
 import platform
 import signal
+import socket
 import statistics
 import subprocess
 import sys
@@ -59,7 +66,8 @@ ROOT = Path(__file__).resolve().parents[1]
 HOST = "127.0.0.1"
 STACK = {"loop": "uvloop", "http": "httptools", "access_log": False, "log_level": "warning"}
 START_TIMEOUT_S = 420  # the service's first start trains the base model
-WARMUP_S = 2.0
+WARMUP_S = 2.0  # each server and request kind, once, before the first round
+ROUND_WARMUP_S = 0.5  # before each measured phase: its connections opened, loop settled
 BATCH_CLIENTS = 4  # as bench/load.py's batch phase
 
 FLOOR_ANSWER = orjson.dumps(
@@ -182,10 +190,11 @@ def tail(log, n: int = 2000) -> str:
 
 
 @contextlib.contextmanager
-def service(data_dir: Path, processes: int):
+def service(data_dir: Path, processes: int, database_url: str = ""):
     """``tactile-zsl serve --processes N`` (embedded worker) on the embedded default, through
-    the test harness's ``Cluster``; yields (url, pid). Its polling intervals, lease and
-    version count are put back to the service's defaults (the harness shortens them)."""
+    the test harness's ``Cluster``, on a fresh store in ``data_dir`` or on ``database_url``;
+    yields (url, pid, its store's URL). Its polling intervals, lease and version count are
+    put back to the service's defaults (the harness shortens them)."""
     from app.config import Settings
     from app.framework.registry import DEFAULT_METHOD
     from tests.reliability.harness import Cluster
@@ -203,12 +212,18 @@ def service(data_dir: Path, processes: int):
         "TACTILE_RATE_LIMIT": "0",
     }
     cluster = Cluster(
-        data_dir, n_api=1, n_workers=0, embedded_worker=True, processes=processes, extra_env=env
+        data_dir,
+        database_url,
+        n_api=1,
+        n_workers=0,
+        embedded_worker=True,
+        processes=processes,
+        extra_env=env,
     )
     try:
         cluster.start()
         cluster.wait_ready(START_TIMEOUT_S)
-        yield cluster.urls[0], cluster.apis[0].popen.pid
+        yield cluster.urls[0], cluster.apis[0].popen.pid, cluster.sqlalchemy_url
     finally:
         cluster.stop()
 
@@ -217,7 +232,7 @@ def service(data_dir: Path, processes: int):
 
 
 def load_phase(url: str, pid: int, seconds: float, clients: int, request: bytes) -> dict:
-    """``bench/load.py``'s ``hammer`` after a warm-up, on a fresh uvloop loop; with
+    """``bench/load.py``'s ``hammer`` after a short warm-up, on a fresh uvloop loop; with
     ``cores_used``: the cores each server process, the load generator and everything else
     on the machine (other users of a shared machine) kept busy meanwhile."""
     import uvloop
@@ -225,7 +240,7 @@ def load_phase(url: str, pid: int, seconds: float, clients: int, request: bytes)
     from bench.load import hammer
 
     async def go() -> dict:
-        await hammer([url], WARMUP_S, clients, request)
+        await hammer([url], ROUND_WARMUP_S, clients, request)
         before = cpu_snapshot(pid)
         out = await hammer([url], seconds, clients, request, pids={"server": pid})
         out["cores_used"] = cores_used(before, cpu_snapshot(pid))
@@ -405,7 +420,11 @@ def targets(q: dict) -> dict:
     return out
 
 
-def run(seconds: float, clients: int, batch_size: int) -> dict:
+def run(seconds: float, clients: int, batch_size: int, rounds: int) -> dict:
+    """Every server started, then ``rounds`` rounds, each measuring every server in turn
+    for ``seconds / rounds`` (the order reversed every other round), so that a neighbour's
+    burst on a shared machine falls on all of them rather than on one; each figure is the
+    median over the rounds. Then the in-process figures, once every server has stopped."""
     from app.data.simulator import simulate_dataset
     from bench.load import Connection
 
@@ -420,48 +439,108 @@ def run(seconds: float, clients: int, batch_size: int) -> dict:
     buf = io.BytesIO()
     np.save(buf, batch)
     npy = Connection.prepare("POST", "/v1/recognize", buf.getvalue(), "application/x-npy")
+    each = seconds / rounds
 
-    r: dict = {"single": {}, "batch_http": {}, "loadavg_at_start": loadavg()}
-    with tempfile.TemporaryDirectory(prefix="side-by-side-") as tmp:
+    r: dict = {"loadavg_at_start": loadavg(), "start_s": {}}
+    with tempfile.TemporaryDirectory(prefix="side-by-side-") as tmp, contextlib.ExitStack() as up:
         tmp = Path(tmp)
+        servers: dict[str, tuple[str, int]] = {}
         for kind, workers, name in (
             ("floor", 1, "floor_1_process"),
             ("floor", 2, "floor_2_processes"),
             ("sklearn", 1, "sklearn_1_process"),
         ):
-            with app_server(kind, workers, tmp) as (url, pid):
-                r["single"][name] = load_phase(url, pid, seconds, clients, single)
-            print(f"{name}: {r['single'][name]['rps']} requests/s", file=sys.stderr)
-        bundle = b""
+            t = time.monotonic()
+            servers[name] = up.enter_context(app_server(kind, workers, tmp))
+            r["start_s"][name] = round(time.monotonic() - t, 1)
+        store = ""  # the second service serves the store the first one bootstrapped
         for n, name in ((1, "service_1_process"), (2, "service_2_processes")):
             t = time.monotonic()
-            with service(tmp / "service", n) as (url, pid):
-                started = round(time.monotonic() - t, 1)
-                r["single"][name] = load_phase(url, pid, seconds, clients, single)
-                b = load_phase(url, pid, seconds, BATCH_CLIENTS, npy)
-                b["samples_per_s"] = round(b["rps"] * batch_size, 1)
-                r["batch_http"][name] = b
-                bundle = bundle or fetch_bundle(url)
-            r["single"][name]["start_s"] = started  # the first start trains the base model
-            print(f"{name}: {r['single'][name]['rps']} requests/s", file=sys.stderr)
+            url, pid, store = up.enter_context(service(tmp / name, n, store))
+            servers[name] = url, pid
+            r["start_s"][name] = round(time.monotonic() - t, 1)  # the first trains the model
+        bundle = fetch_bundle(servers["service_1_process"][0])
+        phases = [(name, "single", clients, single) for name in servers] + [
+            (name, "batch_http", BATCH_CLIENTS, npy)
+            for name in ("service_1_process", "service_2_processes")
+        ]
+        for name, _, n_clients, request in phases:  # warm-up: first answers, caches
+            warm(servers[name][0], WARMUP_S, n_clients, request)
+        measured: dict[tuple[str, str], list[dict]] = {(n, k): [] for n, k, _, _ in phases}
+        for i in range(rounds):
+            for name, kind, n_clients, request in phases if i % 2 == 0 else phases[::-1]:
+                url, pid = servers[name]
+                measured[name, kind].append(load_phase(url, pid, each, n_clients, request))
+            print(f"round {i + 1}/{rounds} done", file=sys.stderr)
+    for (name, kind), runs in measured.items():
+        r.setdefault(kind, {})[name] = summarise(runs, batch_size if kind == "batch_http" else 0)
     # after every server has stopped: nothing else of ours on the CPU
     r["in_process"] = in_process(bundle, batch, seconds)
     r["loadavg_at_end"] = loadavg()
     return r
 
 
+def summarise(runs: list[dict], batch: int) -> dict:
+    """The median over the rounds of each figure, and each round's own."""
+
+    def med(key: str) -> float:
+        return round(statistics.median(run[key] for run in runs), 2)
+
+    out = {
+        "rps": med("rps"),
+        "p50_ms": med("p50_ms"),
+        "p99_ms": med("p99_ms"),
+        "requests": sum(run["requests"] for run in runs),
+        "errors": sum(run["errors"] for run in runs),
+    }
+    if batch:
+        out["samples_per_s"] = round(out["rps"] * batch, 1)
+    out["rounds"] = [
+        {k: run[k] for k in ("rps", "p99_ms", "cpu_us_per_request", "cores_used", "cpu_steal_pct")}
+        for run in runs
+    ]
+    return out
+
+
+def warm(url: str, seconds: float, clients: int, request: bytes) -> None:
+    import uvloop
+
+    from bench.load import hammer
+
+    uvloop.run(hammer([url], seconds, clients, request))
+
+
 def serve(kind: str, port: int, workers: int) -> int:
+    """``workers`` processes each with its own SO_REUSEPORT socket on ``port``, as
+    ``tactile-zsl serve --processes N`` spreads connections over its API processes (with
+    uvicorn's ``workers``, one inherited socket, one process could accept all of them)."""
+    if workers == 1:
+        serve_one(kind, port)
+        return 0
+    context = multiprocessing.get_context("spawn")
+    procs = [context.Process(target=serve_one, args=(kind, port)) for _ in range(workers)]
+    for proc in procs:
+        proc.start()
+    # the process group's SIGTERM reaches the workers too: wait for them to finish
+    signal.signal(signal.SIGTERM, lambda *_: None)
+    multiprocessing.connection.wait([proc.sentinel for proc in procs])
+    status = 0 if all(proc.exitcode in (0, None) for proc in procs) else 1
+    for proc in procs:  # one failed or stopped: the others go too
+        if proc.is_alive():
+            proc.terminate()
+        proc.join()
+    return status
+
+
+def serve_one(kind: str, port: int) -> None:
     import uvicorn
 
-    uvicorn.run(
-        f"bench.side_by_side:{APPS[kind]}",
-        factory=True,
-        host=HOST,
-        port=port,
-        workers=workers,
-        **STACK,
-    )
-    return 0
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
+    sock.bind((HOST, port))
+    config = uvicorn.Config(f"bench.side_by_side:{APPS[kind]}", factory=True, **STACK)
+    uvicorn.Server(config).run(sockets=[sock])
 
 
 def git(*args: str) -> str:
@@ -471,7 +550,16 @@ def git(*args: str) -> str:
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--seconds", type=float, default=10, help="length of each measured phase")
+    p.add_argument(
+        "--seconds",
+        type=float,
+        default=10,
+        help="measured seconds of each phase (one server, one kind of request), split over "
+        "the rounds",
+    )
+    p.add_argument(
+        "--rounds", type=int, default=3, help="interleaved rounds over every server (default 3)"
+    )
     p.add_argument("--clients", type=int, default=32, help="concurrent single-sample clients")
     p.add_argument("--batch", type=int, default=1024, help="samples per .npy batch")
     p.add_argument("--serve", choices=sorted(APPS), help=argparse.SUPPRESS)
@@ -480,14 +568,14 @@ def main() -> int:
     args = p.parse_args()
     if args.serve:
         return serve(args.serve, args.port, args.workers)
-    if args.seconds <= 0 or args.seconds > 600 or not 1 <= args.clients <= 1024:
-        p.error("--seconds must be in (0, 600] and --clients in [1, 1024]")
+    if not 0 < args.seconds <= 600 or not 1 <= args.clients <= 1024 or not 1 <= args.rounds <= 20:
+        p.error("--seconds must be in (0, 600], --clients in [1, 1024], --rounds in [1, 20]")
     # SIGTERM unwinds like Ctrl-C, so that every server this run started is stopped
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     commit = git("rev-parse", "--short", "HEAD").strip()
     # the servers run the working tree: code changed since the commit is named with it
     changed = git("status", "--porcelain", "--", "app", "worker", "migrations").splitlines()
-    absolute = run(args.seconds, args.clients, args.batch)
+    absolute = run(args.seconds, args.clients, args.batch, args.rounds)
     q = ratios(absolute)
     report = {
         "ratios": q,
@@ -496,10 +584,12 @@ def main() -> int:
         "machine": machine(),
         "settings": {
             "seconds": args.seconds,
+            "rounds": args.rounds,
             "clients": args.clients,
             "batch": args.batch,
             "batch_clients": BATCH_CLIENTS,
             "warmup_s": WARMUP_S,
+            "round_warmup_s": ROUND_WARMUP_S,
             "server_stack": "uvicorn + uvloop + httptools (the service: its coalescing "
             "httptools protocol), no access log, 127.0.0.1",
             "commit": commit,
