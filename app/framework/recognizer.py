@@ -537,15 +537,16 @@ class TactileRecognizer(ABC):
         # Route, then rank top-k for each classifier's rows at once.
         # Without novel classes a novel sample can only be answered from the known ones.
         use_novel = novel & (novel_p is not None)
-        top_index = np.full((n, k), -1, np.int64)
-        top_p = np.full((n, k), np.nan)
-        for probs, offset, rows in ((known_p, 0, ~use_novel), (novel_p, n_known, use_novel)):
-            if not rows.any():
-                continue
-            p = probs[rows]
-            order = np.argsort(-p, axis=1)[:, :k]
-            top_index[rows, : order.shape[1]] = order + offset
-            top_p[rows, : order.shape[1]] = np.take_along_axis(p, order, axis=1)
+        n_novel = int(np.count_nonzero(use_novel))
+        if n_novel in (0, n):
+            # one classifier answers every row (always so for one sample): no masked copies
+            probs, offset = (known_p, 0) if n_novel == 0 else (novel_p, n_known)
+            top_index, top_p = _top_k(probs, k, offset)
+        else:
+            top_index = np.full((n, k), -1, np.int64)
+            top_p = np.full((n, k), np.nan)
+            for probs, offset, rows in ((known_p, 0, ~use_novel), (novel_p, n_known, use_novel)):
+                top_index[rows], top_p[rows] = _top_k(probs[rows], k, offset)
         return RecognitionBatch(
             tuple(reg.all_names), n_known, top_index, top_p, novel, scores.astype(np.float64)
         )
@@ -769,6 +770,18 @@ class TactileRecognizer(ABC):
     @abstractmethod
     def set_state(self, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
         """Restore what ``get_state`` returned."""
+
+
+def _top_k(p: np.ndarray, k: int, offset: int) -> tuple[np.ndarray, np.ndarray]:
+    """Class index (plus ``offset``) and probability of each row's k largest, best first; a
+    row of fewer than k classes is padded with index -1 and probability NaN."""
+    order = np.argsort(-p, axis=1)[:, :k]
+    index, value = order + offset, p[np.arange(len(p))[:, None], order]
+    missing = k - order.shape[1]
+    if missing > 0:
+        index = np.concatenate([index, np.full((len(p), missing), -1, np.int64)], axis=1)
+        value = np.concatenate([value, np.full((len(p), missing), np.nan)], axis=1)
+    return index, value
 
 
 def _looks_like_trials(samples: Any) -> bool:

@@ -59,6 +59,7 @@ from app.methods.attributes import (
     softmax,
 )
 from app.methods.known import CUES, KnownModel, relabelled
+from app.methods.small_batch import SmallBatchScorer
 
 
 def signatures(known_proba: np.ndarray) -> np.ndarray:
@@ -139,6 +140,10 @@ class BestRecognizer(TactileRecognizer):
     novel_part_separable = True  # enrolments never touch the forest or the attribute models
     learns_classes_from_samples = True  # one-shot signatures need no attribute
     _featurizer_defaults = {"n_offsets": 1}  # see featurizer_params
+    #: batches of at most this many samples take ``SmallBatchScorer`` (the same bits with a
+    #: fraction of the per-call overhead, which dominates for a few samples); 0 forces the
+    #: general path everywhere
+    small_batch_max = 32
 
     _parameter_constraints = {
         "n_estimators": integer(1),
@@ -293,6 +298,7 @@ class BestRecognizer(TactileRecognizer):
         n_known = len(self.registry.known_names)
         self.shot_prototypes_ = np.zeros((0, n_known), np.float64)
         self.shot_has_ = np.zeros(0, bool)
+        self._small_batch = None  # its constants describe the novel part: built again on use
 
     # --------------------------------------------------------------- inference
     def _known_proba(self, samples: np.ndarray) -> np.ndarray:
@@ -339,6 +345,10 @@ class BestRecognizer(TactileRecognizer):
         return self.attributes_.predict_proba(self.known_.cues_model.scaled(flatten(samples)))
 
     def _all_scores(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        if len(samples) <= self.small_batch_max:
+            if getattr(self, "_small_batch", None) is None:
+                self._small_batch = SmallBatchScorer(self)
+            return self._small_batch.scores(flatten(samples))
         z, known, novelty = self.known_.scores(flatten(samples))
         novel = self._novel_from(z, known) if self.registry.novel_names else None
         return novelty, known, novel
@@ -359,6 +369,7 @@ class BestRecognizer(TactileRecognizer):
                 protos[i] = mean / max(float(np.linalg.norm(mean)), 1e-12)
                 has[i] = True
         self.shot_prototypes_, self.shot_has_ = protos, has
+        self._small_batch = None
 
     # ------------------------------------------------------------ persistence
     def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:

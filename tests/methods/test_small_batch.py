@@ -1,0 +1,182 @@
+"""``best``'s small-batch path (``app.methods.small_batch``) gives the general path's answers
+bit for bit: every output of ``recognize_batch`` and ``attribute_proba``, for single samples,
+small batches and a large one, on models with and without novel classes, one-shot samples,
+the semantic autoencoder, subspace or exact distances, and attributes."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from app.data.dataset import TactileDataset
+from app.data.simulator import simulate_dataset
+from app.framework.recognizer import RecognitionBatch
+from app.framework.registry import make_method
+
+FIELDS = ("top_index", "top_probability", "is_novel", "novelty_score")
+SIZES = (1, 2, 7)
+LARGE = 150
+
+
+def general(model):
+    """``model`` forced onto the general path (the reference)."""
+    out = copy.copy(model)
+    out.small_batch_max = 0
+    return out
+
+
+def small(model, most: int = 10_000):
+    """``model`` taking the small-batch path up to ``most`` samples."""
+    out = copy.copy(model)
+    out.small_batch_max = most
+    return out
+
+
+def reference_batch(model, scores, known_p, novel_p, top_k) -> RecognitionBatch:
+    """``TactileRecognizer._batch`` as it was before the one-classifier shortcut (commit
+    1ab2f22): every classifier's rows ranked from a masked copy."""
+    novel = scores > model.novelty_threshold
+    reg = model.registry
+    n, k, n_known = len(scores), max(1, top_k), len(reg.known_names)
+    use_novel = novel & (novel_p is not None)
+    top_index = np.full((n, k), -1, np.int64)
+    top_p = np.full((n, k), np.nan)
+    for probs, offset, rows in ((known_p, 0, ~use_novel), (novel_p, n_known, use_novel)):
+        if not rows.any():
+            continue
+        p = probs[rows]
+        order = np.argsort(-p, axis=1)[:, :k]
+        top_index[rows, : order.shape[1]] = order + offset
+        top_p[rows, : order.shape[1]] = np.take_along_axis(p, order, axis=1)
+    return RecognitionBatch(
+        tuple(reg.all_names), n_known, top_index, top_p, novel, scores.astype(np.float64)
+    )
+
+
+def assert_same_bits(a: RecognitionBatch, b: RecognitionBatch) -> None:
+    for field in FIELDS:
+        x, y = getattr(a, field), getattr(b, field)
+        assert x.dtype == y.dtype and x.shape == y.shape, field
+        assert x.tobytes() == y.tobytes(), field
+
+
+@pytest.fixture(scope="module")
+def data():
+    """16 simulated objects: 12 known, 4 held out as novel (distinct attribute vectors)."""
+    ds = simulate_dataset(n_objects=16, trials_per_object=5, seed=3)
+    _, first = np.unique(ds.class_attributes, axis=0, return_index=True)
+    novel = np.sort(first)[-4:]
+    known = np.setdiff1d(np.arange(ds.n_classes), novel)
+    return ds, ds.select_classes(known), novel
+
+
+def queries(ds, seed: int = 0) -> np.ndarray:
+    """Samples of every object, some far from any (scaled and noisy): both routes taken."""
+    rng = np.random.default_rng(seed)
+    x = ds.samples[rng.permutation(len(ds))[:LARGE]].copy()
+    x[::3] *= rng.uniform(0.3, 3.0, (len(x[::3]), 1, 1)).astype(np.float32)
+    x[1::4] += rng.normal(0, 0.5, x[1::4].shape).astype(np.float32)
+    return x
+
+
+def grown(model, ds, novel, shots: int):
+    names = [f"new-{i}" for i in range(len(novel))]
+    model = model.add_novel_classes(names, ds.class_attributes[novel])
+    for name, c in list(zip(names, novel, strict=True))[:shots]:
+        model = model.add_one_shot(name, ds.samples[ds.labels == c][:1])
+    return model
+
+
+@pytest.fixture(
+    scope="module",
+    params=[
+        pytest.param(dict(distance_components=8), id="subspace"),
+        pytest.param(dict(distance_components=0, sae_lambda=0.0), id="exact-no-sae"),
+    ],
+)
+def models(request, data):
+    ds, train, novel = data
+    base = make_method("best", n_estimators=30, tuning_rounds=1, seed=1, **request.param).fit(train)
+    return {
+        "base": base,
+        "zero-shot": grown(base, ds, novel, shots=0),
+        "one-shot": grown(base, ds, novel, shots=2),
+        "all-shot": grown(base, ds, novel, shots=len(novel)),
+    }
+
+
+@pytest.mark.parametrize("which", ["base", "zero-shot", "one-shot", "all-shot"])
+def test_small_batches_match_the_general_path(models, data, which):
+    model, x = models[which], queries(data[0])
+    ref, fast = general(model), small(model, most=max(SIZES))
+    for n in SIZES:
+        for start in range(0, 3 * n, n):
+            for top_k in (1, 3, 40):  # 40: more than the classes, padded
+                batch = x[start : start + n]
+                assert_same_bits(
+                    fast.recognize_batch(batch, top_k), ref.recognize_batch(batch, top_k)
+                )
+                assert fast.attribute_proba(batch).tobytes() == ref.attribute_proba(batch).tobytes()
+
+
+@pytest.mark.parametrize("which", ["base", "one-shot"])
+def test_a_large_batch_on_the_small_path_matches_too(models, data, which):
+    model, x = models[which], queries(data[0], seed=1)
+    answer = small(model).recognize_batch(x, 5)
+    assert answer.is_novel.any() and not answer.is_novel.all()  # both routes in one batch
+    assert_same_bits(answer, general(model).recognize_batch(x, 5))
+    groups = np.arange(len(x)) // 2
+    assert_same_bits(
+        small(model).recognize_batch(x, 3, groups=groups),
+        general(model).recognize_batch(x, 3, groups=groups),
+    )
+
+
+@pytest.mark.parametrize("which", ["base", "zero-shot", "one-shot"])
+def test_ranking_matches_the_masked_copies_it_replaced(models, data, which):
+    model, x = models[which], queries(data[0], seed=2)
+    for n in (*SIZES, LARGE):
+        scores, known_p, novel_p = general(model)._all_scores(x[:n])
+        for top_k in (1, 3, 40):
+            assert_same_bits(
+                model._batch(scores, known_p, novel_p, top_k),
+                reference_batch(model, scores, known_p, novel_p, top_k),
+            )
+
+
+def test_default_threshold_sends_one_sample_down_the_small_path(models, data):
+    model = models["one-shot"]
+    assert 1 <= model.small_batch_max
+    x = queries(data[0])[:1]
+    assert_same_bits(model.recognize_batch(x), general(model).recognize_batch(x))
+    assert model._small_batch is not None
+    # enrolment builds the next model's constants afresh, and leaves this one's alone
+    bigger = model.add_one_shot("new-3", x)
+    assert bigger._small_batch is None
+    assert_same_bits(bigger.recognize_batch(x), general(bigger).recognize_batch(x))
+    assert_same_bits(model.recognize_batch(x), general(model).recognize_batch(x))
+
+
+def test_without_attributes_classes_from_samples_match(data):
+    ds, train, novel = data
+    bare = TactileDataset(
+        samples=train.samples,
+        labels=train.labels,
+        trials=train.trials,
+        class_attributes=np.zeros((train.n_classes, 0), np.float32),
+        attribute_names=(),
+        class_names=train.class_names,
+        name="no-attributes",
+    )
+    model = make_method("best", n_estimators=30, tuning_rounds=1).fit(bare)
+    x = queries(ds, seed=3)
+    for m in (
+        model,
+        model.add_novel_classes_from_samples(
+            {f"new-{i}": ds.samples[ds.labels == c][:2] for i, c in enumerate(novel)}
+        ),
+    ):
+        for n in (*SIZES, LARGE):
+            assert_same_bits(small(m).recognize_batch(x[:n]), general(m).recognize_batch(x[:n]))
