@@ -8,7 +8,9 @@ arrays, each paying its call overhead, plus constants recomputed on every call. 
   novel part): DAP's prior term, the unit attribute vectors, the one-shot prototypes, the
   attribute model's fixed columns;
 - fuses the exact element-wise steps (+ - * /, min, max, sqrt, copysign: IEEE gives the
-  same bits in any order of elements) and the forest walk into compiled kernels;
+  same bits in any order of elements) and the forest walk into compiled kernels; one
+  sample walks a block of trees at once (``_walk_trees``: independent load chains, as
+  ``forest._walk`` gets from a block of samples) and sums the leaves in tree order;
 - leaves to numpy exactly what the general path does with numpy: every transcendental
   function (log, log1p, exp, tanh: numpy's SIMD versions need not round like libm), every
   sum along an axis (numpy sums pairwise) and every matrix product (BLAS), called on arrays
@@ -25,7 +27,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from app.methods.forest import _walk
 from app.methods.known import _EPS, _KNN, CUES, _nearest
 
 if TYPE_CHECKING:
@@ -33,6 +34,7 @@ if TYPE_CHECKING:
 
 _add = np.add.reduce
 _ENTROPY = CUES.index("entropy")
+_TREES = 8  # trees one sample takes down together (as forest._BLOCK samples)
 
 
 class SmallBatchScorer:
@@ -153,21 +155,19 @@ class _NovelConstants:
         p, minus_p = _attribute_clip(
             np.tanh(half), self.fixed, self.fixed_values, self.dap_clip, 1 - self.dap_clip
         )
-        scores = np.log(p) @ self.present_t + np.log1p(minus_p) @ self.absent_t
-        cosine = (
-            _unit((z @ self.sae_t).astype(np.float64)) @ self.unit_vectors_t
-            if self.sae is not None  # cosine_scores
-            else None
-        )
-        p_zsl = _softmax_of_shifted(
-            _zsl_shifted(scores, self.log_prior, cosine, self.sae_temperature)
-        )
+        present, absent = np.log(p) @ self.present_t, np.log1p(minus_p) @ self.absent_t
+        cosine = None
+        if self.sae is not None:  # cosine_scores
+            projected, squares = _widened_and_squared(z @ self.sae_t)
+            cosine = _divide_by_norm(projected, _add(squares, axis=1)) @ self.unit_vectors_t
+        shifted = _zsl_shifted(present, absent, self.log_prior, cosine, self.sae_temperature)
+        p_zsl = _softmax_of_shifted(shifted)
         if not self.any_shot:
             return p_zsl
         sim = _signatures(known_p) @ self.prototypes.T
-        p_shot = _softmax_of_shifted(_shifted(sim, self.shot_temperature))
+        e_shot = np.exp(_shifted(sim, self.shot_temperature))
         rest = _add(p_zsl[:, self.zsl_columns], axis=1)
-        return _mix_shots(p_zsl, rest, p_shot, self.shot_columns)
+        return _mix_shots(p_zsl, rest, e_shot, _add(e_shot, axis=1), self.shot_columns)
 
 
 def _unit(m: np.ndarray) -> np.ndarray:
@@ -221,9 +221,9 @@ def _scale_and_walk(
             z[i, j] = v
             q[i, j] = v * feature_weights[j] - dist_center[j]
     p = np.zeros((n, n_classes))
-    no_leaves = np.zeros((0, 0), np.int32)
     thresholds = nodes.view(np.float32)
-    _walk(z, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, no_leaves, p)
+    for i in range(n):
+        _walk_trees(z[i], nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, p[i])
     n_trees = np.float64(roots.shape[0])
     top = np.empty((n, 2))  # largest, second largest
     best = np.empty(n, np.int64)  # the first class with the largest
@@ -238,6 +238,31 @@ def _scale_and_walk(
                 second = v
         top[i, 0], top[i, 1], best[i] = first, second, arg
     return z, q, p, top, best
+
+
+@njit(cache=True, nogil=True)
+def _walk_trees(x, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, proba):
+    """forest._walk for one sample: it takes a block of trees down together instead of a
+    block of samples (independent load chains again), then adds the leaves' distributions
+    in tree order, as _walk does, so the sums have the same bits."""
+    at = np.empty(_TREES, np.int32)
+    for lo in range(0, roots.shape[0], _TREES):
+        hi = min(lo + _TREES, roots.shape[0])
+        for k in range(hi - lo):
+            at[k] = roots[lo + k]
+        descending = True
+        while descending:
+            descending = False
+            for k in range(hi - lo):
+                node = at[k]
+                f = nodes[node, 0]
+                if f >= 0:
+                    at[k] = nodes[node, 2 + (x[f] > thresholds[node, 1])]
+                    descending = True
+        for k in range(hi - lo):
+            leaf = nodes[at[k], 2]
+            for j in range(leaf_ptr[leaf], leaf_ptr[leaf + 1]):
+                proba[leaf_class[j]] += leaf_value[j]
 
 
 @njit(cache=True, nogil=True)
@@ -310,13 +335,26 @@ def _attribute_clip(tanh_half, fixed, fixed_values, lo, hi):
 
 
 @njit(cache=True, nogil=True)
-def _zsl_shifted(log_like, log_prior, cosine, temperature):
-    """DAP's log scores less the prior term, plus the autoencoder's weighted cosine, less
-    each row's maximum (softmax's shift)."""
-    out = np.empty_like(log_like)
+def _widened_and_squared(m):
+    """float32 ``m`` as float64, and its squares."""
+    wide = np.empty((m.shape[0], m.shape[1]))
+    squares = np.empty_like(wide)
+    for i in range(m.shape[0]):
+        for j in range(m.shape[1]):
+            v = np.float64(m[i, j])
+            wide[i, j] = v
+            squares[i, j] = v * v
+    return wide, squares
+
+
+@njit(cache=True, nogil=True)
+def _zsl_shifted(present, absent, log_prior, cosine, temperature):
+    """DAP's log scores (its two products) less the prior term, plus the autoencoder's
+    weighted cosine, less each row's maximum (softmax's shift)."""
+    out = np.empty_like(present)
     for i in range(out.shape[0]):
         for j in range(out.shape[1]):
-            v = log_like[i, j] - log_prior[0, j]
+            v = (present[i, j] + absent[i, j]) - log_prior[0, j]
             if cosine is not None:
                 v = v + temperature * cosine[i, j]
             out[i, j] = v
@@ -345,10 +383,11 @@ def _shift_rows(x):
 
 
 @njit(cache=True, nogil=True)
-def _mix_shots(p_zsl, rest, p_shot, shot_columns):
-    """Classes with one-shot samples share what the zero-shot-only classes leave."""
+def _mix_shots(p_zsl, rest, e_shot, e_sum, shot_columns):
+    """Classes with one-shot samples share what the zero-shot-only classes leave, by their
+    softmax (exponentials ``e_shot`` over their row sums ``e_sum``)."""
     out = p_zsl.copy()
     for i in range(out.shape[0]):
         for s in range(shot_columns.shape[0]):
-            out[i, shot_columns[s]] = (1.0 - rest[i]) * p_shot[i, s]
+            out[i, shot_columns[s]] = (1.0 - rest[i]) * (e_shot[i, s] / e_sum[i])
     return out
