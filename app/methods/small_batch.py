@@ -137,13 +137,12 @@ class _NovelConstants:
         self.present_t, self.absent_t = a.T, (1 - a).T
         q = np.clip(model.prior_, clip, 1 - clip)
         self.log_prior = (np.log(q) @ a.T + np.log1p(-q) @ (1 - a).T)[None, :]
-        self.sae, self.sae_temperature = None, 0.0
+        self.sae_t, self.sae_temperature = None, 0.0
         if model.sae_ is not None:
             self.sae_t = np.asarray(model.sae_, np.float32).T
             vectors = np.asarray(reg.novel_attributes, np.float64)
             self.unit_vectors_t = _unit(vectors).T
             self.sae_temperature = float(model.sae_temperature)
-            self.sae = True
 
     def proba(self, z: np.ndarray, known_p: np.ndarray) -> np.ndarray:
         """``BestRecognizer._novel_from(z, known_p)``."""
@@ -157,7 +156,7 @@ class _NovelConstants:
         )
         present, absent = np.log(p) @ self.present_t, np.log1p(minus_p) @ self.absent_t
         cosine = None
-        if self.sae is not None:  # cosine_scores
+        if self.sae_t is not None:  # cosine_scores
             projected, squares = _widened_and_squared(z @ self.sae_t)
             cosine = _divide_by_norm(projected, _add(squares, axis=1)) @ self.unit_vectors_t
         shifted = _zsl_shifted(present, absent, self.log_prior, cosine, self.sae_temperature)

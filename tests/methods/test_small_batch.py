@@ -180,3 +180,15 @@ def test_without_attributes_classes_from_samples_match(data):
     ):
         for n in (*SIZES, LARGE):
             assert_same_bits(small(m).recognize_batch(x[:n]), general(m).recognize_batch(x[:n]))
+
+
+def test_a_weighted_entropy_cue_is_computed_as_the_general_path_does(models, data):
+    """``best`` weighs the entropy cue 0, so the small path skips it; with a weight it is
+    computed, with the same bits."""
+    model = copy.deepcopy(models["one-shot"])
+    model.known_.weights = model.known_.weights + np.r_[0.0, 0.3, 0.0, 0.0, 0.0, 0.0]
+    model._small_batch = None
+    x, fast = queries(data[0], seed=4), small(model)
+    for n in SIZES:
+        assert_same_bits(fast.recognize_batch(x[:n]), general(model).recognize_batch(x[:n]))
+    assert fast._small_batch.entropy_used
