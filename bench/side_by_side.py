@@ -1,13 +1,15 @@
 """Side by side in one run, on one machine: the service, the framework's floor, a first
 scikit-learn service, and the model's own in-process speed.
 
-    .venv/bin/python -m bench.side_by_side [--seconds 10] [--clients 32] [--rounds 3]
+    .venv/bin/python -m bench.side_by_side [--seconds 10] [--clients 32] [--rounds 5]
 
 Three servers on the same stack (uvicorn, uvloop, httptools; no access log), all started
 first, then hammered one at a time by the lean keep-alive client of ``bench/load.py``
 (``--clients`` connections, one JSON body ``{"samples": [[...32 rows of 30 floats...]]}``,
-the simulator's first sample), in ``--rounds`` interleaved rounds whose medians are
-reported (a neighbour's burst on a shared machine then falls on every server, not on one):
+the simulator's first sample), in ``--rounds`` rounds that each give every phase
+``--seconds / --rounds``. Each ratio is taken within a round, between phases run one after
+the other, and reported as the median over the rounds (a neighbour's burst on a shared
+machine then spoils one round's pair, not the result); absolute figures are medians too:
 
 - the service: ``tactile-zsl serve --processes 1`` on the embedded default (the simulator,
   method ``best``, embedded worker) in a fresh temporary data dir (the first start trains
@@ -25,9 +27,9 @@ Then batch throughput over HTTP (``.npy`` bodies of ``--batch`` samples,
 ``Content-Type: application/x-npy``, 4 clients as ``bench/load.py``) against the model's own
 in-process throughput (``BestRecognizer.recognize_batch`` on the same batch, in this
 process, on the model the service trained, read from its store through
-``GET /v1/models/active/bundle``, one BLAS thread as the service runs it, once every server
-has stopped), and the in-process cost of ``recognize_batch`` on one sample against its
-batch-amortised cost per sample.
+``GET /v1/models/active/bundle``, one BLAS thread as the service runs it, measured in each
+round between the two HTTP batch phases while the servers idle), and the in-process cost of
+``recognize_batch`` on one sample against its batch-amortised cost per sample.
 
 It prints JSON: the ratios first, then the targets they are compared with, then the
 absolute figures of this machine (each load phase with the cores each server process, the
@@ -298,37 +300,44 @@ def fetch_bundle(url: str) -> bytes:
     return r.content
 
 
-def in_process(bundle: bytes, batch: np.ndarray, seconds: float) -> dict:
-    """``recognize_batch`` on the whole batch and on its first sample, each repeated for
-    ``seconds`` (at least 5 calls) after one warm-up call, in this process."""
+def load_model(bundle: bytes):
+    """The service's model in this process, on one BLAS thread as every serve process runs
+    by default (TACTILE_TORCH_THREADS)."""
     from app.framework import bundle as bundles
     from app.framework.runtime import configure_threads
 
-    configure_threads(1)  # as every serve process does by default (TACTILE_TORCH_THREADS)
-    model = bundles.from_bytes(bundle)
+    configure_threads(1)
+    return bundles.from_bytes(bundle)
+
+
+def in_process(model, batch: np.ndarray, seconds: float) -> dict:
+    """``recognize_batch`` on the whole batch, then on its first sample, each repeated for
+    ``seconds / 2`` (at least 5 calls) after one warm-up call, in this process."""
 
     def timed(x: np.ndarray) -> list[float]:
         model.recognize_batch(x)
-        times, deadline = [], time.monotonic() + seconds
+        times, deadline = [], time.monotonic() + seconds / 2
         while len(times) < 5 or time.monotonic() < deadline:
             t = time.perf_counter()
             model.recognize_batch(x)
             times.append(time.perf_counter() - t)
         return times
 
+    before = cpu_snapshot(os.getpid())
     batch_times = timed(batch)
     single_times = timed(batch[:1])
+    used = cores_used(before, cpu_snapshot(os.getpid()))
     batch_median = statistics.median(batch_times)
     return {
-        "method": model.method,
-        "batch": len(batch),
         "batch_samples_per_s": round(len(batch) * len(batch_times) / sum(batch_times), 1),
-        "batch_calls": len(batch_times),
         "batch_median_ms": round(1000 * batch_median, 3),
         "batch_amortised_us_per_sample": round(1e6 * batch_median / len(batch), 2),
         "single_median_us": round(1e6 * statistics.median(single_times), 1),
         "single_p99_us": round(1e6 * float(np.percentile(single_times, 99)), 1),
+        "batch_calls": len(batch_times),
         "single_calls": len(single_times),
+        # this process is both the "server" and the "load generator" here
+        "cores_used": used and {"this_process": used["load_generator"], "others": used["others"]},
     }
 
 
@@ -360,11 +369,18 @@ def ratio(a: float, b: float, digits: int = 3) -> float | None:
 
 
 def ratios(r: dict) -> dict:
-    """The ratios the targets are stated in, from the absolute figures ``r``."""
+    """The ratios the targets are stated in, from one round's figures ``r``."""
     s = r["single"]
     floor1, floor2, sk = s["floor_1_process"], s["floor_2_processes"], s["sklearn_1_process"]
     svc1, svc2 = s["service_1_process"], s["service_2_processes"]
     ip = r["in_process"]
+    ip_cores = (ip.get("cores_used") or {}).get("this_process")
+    ip_per_cpu_s = ip["batch_samples_per_s"] / ip_cores if ip_cores else None
+
+    def per_cpu_s(phase: dict) -> float | None:  # samples per CPU second of the server
+        us = (phase.get("cpu_us_per_request") or {}).get("server")
+        return phase["samples_per_s"] / phase["rps"] * 1e6 / us if us and phase["rps"] else None
+
     return {
         "service_over_floor_1_process": {
             "rps": ratio(svc1["rps"], floor1["rps"]),
@@ -390,6 +406,12 @@ def ratios(r: dict) -> dict:
                 r["batch_http"]["service_2_processes"]["samples_per_s"],
                 ip["batch_samples_per_s"],
             ),
+        },
+        # the service's process overlaps requests on threads and can keep more than one core
+        # busy, this process calls recognize_batch on one: the same per CPU second spent
+        "http_batch_over_in_process_batch_per_cpu_second": {
+            n: ratio(per_cpu_s(r["batch_http"][f"service_{n}"]), ip_per_cpu_s)
+            for n in ("1_process", "2_processes")
         },
         "single_in_process_over_batch_amortised_per_sample": ratio(
             ip["single_median_us"], ip["batch_amortised_us_per_sample"], 1
@@ -420,11 +442,13 @@ def targets(q: dict) -> dict:
     return out
 
 
-def run(seconds: float, clients: int, batch_size: int, rounds: int) -> dict:
-    """Every server started, then ``rounds`` rounds, each measuring every server in turn
-    for ``seconds / rounds`` (the order reversed every other round), so that a neighbour's
-    burst on a shared machine falls on all of them rather than on one; each figure is the
-    median over the rounds. Then the in-process figures, once every server has stopped."""
+def run(seconds: float, clients: int, batch_size: int, rounds: int) -> tuple[dict, list[dict]]:
+    """Every server started, then ``rounds`` rounds, each measuring every server in turn for
+    ``seconds / rounds``, and the model in this process, the order reversed every other
+    round. Each ratio is taken within a round, between phases measured one after the other
+    (a neighbour's burst on a shared machine then spoils a round's pair, not the run), and
+    reported as the median over the rounds; the absolute figures as their medians too.
+    Returns (absolute figures, each round's figures)."""
     from app.data.simulator import simulate_dataset
     from bench.load import Connection
 
@@ -459,42 +483,68 @@ def run(seconds: float, clients: int, batch_size: int, rounds: int) -> dict:
             url, pid, store = up.enter_context(service(tmp / name, n, store))
             servers[name] = url, pid
             r["start_s"][name] = round(time.monotonic() - t, 1)  # the first trains the model
-        bundle = fetch_bundle(servers["service_1_process"][0])
-        phases = [(name, "single", clients, single) for name in servers] + [
-            (name, "batch_http", BATCH_CLIENTS, npy)
-            for name in ("service_1_process", "service_2_processes")
+        model = load_model(fetch_bundle(servers["service_1_process"][0]))
+        r["in_process_method"] = model.method
+        # the pairs of each ratio side by side in the order
+        phases = [
+            ("floor_1_process", "single"),
+            ("service_1_process", "single"),
+            ("floor_2_processes", "single"),
+            ("service_2_processes", "single"),
+            ("sklearn_1_process", "single"),
+            ("service_1_process", "batch_http"),
+            ("model", "in_process"),
+            ("service_2_processes", "batch_http"),
         ]
-        for name, _, n_clients, request in phases:  # warm-up: first answers, caches
-            warm(servers[name][0], WARMUP_S, n_clients, request)
-        measured: dict[tuple[str, str], list[dict]] = {(n, k): [] for n, k, _, _ in phases}
+        requests = {"single": (clients, single), "batch_http": (BATCH_CLIENTS, npy)}
+        for name, kind in phases:  # warm-up: first answers, caches, compiled kernels
+            if kind == "in_process":
+                in_process(model, batch, 0)
+            else:
+                warm(servers[name][0], WARMUP_S, *requests[kind])
+        by_round: list[dict] = []
         for i in range(rounds):
-            for name, kind, n_clients, request in phases if i % 2 == 0 else phases[::-1]:
+            this: dict = {"single": {}, "batch_http": {}}
+            for name, kind in phases if i % 2 == 0 else phases[::-1]:
+                if kind == "in_process":
+                    this["in_process"] = in_process(model, batch, each)
+                    continue
                 url, pid = servers[name]
-                measured[name, kind].append(load_phase(url, pid, each, n_clients, request))
+                this[kind][name] = load_phase(url, pid, each, *requests[kind])
+                if kind == "batch_http":
+                    this[kind][name]["samples_per_s"] = round(this[kind][name]["rps"] * batch_size)
+            by_round.append(this)
             print(f"round {i + 1}/{rounds} done", file=sys.stderr)
-    for (name, kind), runs in measured.items():
-        r.setdefault(kind, {})[name] = summarise(runs, batch_size if kind == "batch_http" else 0)
-    # after every server has stopped: nothing else of ours on the CPU
-    r["in_process"] = in_process(bundle, batch, seconds)
+    for kind in ("single", "batch_http"):
+        r[kind] = {name: summarise([x[kind][name] for x in by_round]) for name in by_round[0][kind]}
+    r["in_process"] = median_leaves([x["in_process"] for x in by_round])
+    r["in_process"]["batch"] = batch_size
     r["loadavg_at_end"] = loadavg()
-    return r
+    return r, by_round
 
 
-def summarise(runs: list[dict], batch: int) -> dict:
-    """The median over the rounds of each figure, and each round's own."""
+def median_leaves(items: list):
+    """The element-wise median of equally shaped nested dicts (None where none has one)."""
+    first = items[0]
+    if isinstance(first, dict):
+        return {k: median_leaves([item[k] for item in items if item is not None]) for k in first}
+    if isinstance(first, list):  # e.g. the cores of each server process: kept per round
+        return items
+    values = [v for v in items if v is not None]
+    return round(statistics.median(values), 4) if values else None
+
+
+def summarise(runs: list[dict]) -> dict:
+    """The median over the rounds of a phase's figures, and each round's own."""
 
     def med(key: str) -> float:
         return round(statistics.median(run[key] for run in runs), 2)
 
-    out = {
-        "rps": med("rps"),
-        "p50_ms": med("p50_ms"),
-        "p99_ms": med("p99_ms"),
-        "requests": sum(run["requests"] for run in runs),
-        "errors": sum(run["errors"] for run in runs),
-    }
-    if batch:
-        out["samples_per_s"] = round(out["rps"] * batch, 1)
+    out = {key: med(key) for key in ("rps", "p50_ms", "p99_ms")}
+    if "samples_per_s" in runs[0]:
+        out["samples_per_s"] = med("samples_per_s")
+    out["requests"] = sum(run["requests"] for run in runs)
+    out["errors"] = sum(run["errors"] for run in runs)
     out["rounds"] = [
         {k: run[k] for k in ("rps", "p99_ms", "cpu_us_per_request", "cores_used", "cpu_steal_pct")}
         for run in runs
@@ -543,6 +593,9 @@ def serve_one(kind: str, port: int) -> None:
     uvicorn.Server(config).run(sockets=[sock])
 
 
+CODE = ("app", "worker", "migrations")
+
+
 def git(*args: str) -> str:
     done = subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True)
     return done.stdout
@@ -558,7 +611,7 @@ def main() -> int:
         "the rounds",
     )
     p.add_argument(
-        "--rounds", type=int, default=3, help="interleaved rounds over every server (default 3)"
+        "--rounds", type=int, default=5, help="interleaved rounds over every server (default 5)"
     )
     p.add_argument("--clients", type=int, default=32, help="concurrent single-sample clients")
     p.add_argument("--batch", type=int, default=1024, help="samples per .npy batch")
@@ -574,12 +627,14 @@ def main() -> int:
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     commit = git("rev-parse", "--short", "HEAD").strip()
     # the servers run the working tree: code changed since the commit is named with it
-    changed = git("status", "--porcelain", "--", "app", "worker", "migrations").splitlines()
-    absolute = run(args.seconds, args.clients, args.batch, args.rounds)
-    q = ratios(absolute)
+    changed = git("status", "--porcelain", "--", *CODE).splitlines()
+    absolute, by_round = run(args.seconds, args.clients, args.batch, args.rounds)
+    per_round = [ratios(r) for r in by_round]
+    q = median_leaves(per_round)
     report = {
         "ratios": q,
         "targets": targets(q),
+        "ratios_by_round": per_round,
         "on_this_machine": absolute,
         "machine": machine(),
         "settings": {
@@ -594,6 +649,9 @@ def main() -> int:
             "httptools protocol), no access log, 127.0.0.1",
             "commit": commit,
             "uncommitted_code_changes": [line[3:] for line in changed],
+            # the servers import the code at their start, this process at the end
+            "code_changed_during_run": git("rev-parse", "--short", "HEAD").strip() != commit
+            or git("status", "--porcelain", "--", *CODE).splitlines() != changed,
             "date": time.strftime("%Y-%m-%d"),
         },
     }

@@ -44,12 +44,21 @@ def test_ratios_and_targets_shape() -> None:
             "service_1_process": phase(3600, 11),
             "service_2_processes": phase(3000, 12),
         },
-        "batch_http": {
-            "service_1_process": {"samples_per_s": 30000},
-            "service_2_processes": {"samples_per_s": 45000},
+        "batch_http": {  # 1,024 samples a request
+            "service_1_process": {
+                "samples_per_s": 30720,
+                "rps": 30,
+                "cpu_us_per_request": {"server": 40960},
+            },
+            "service_2_processes": {
+                "samples_per_s": 46080,
+                "rps": 45,
+                "cpu_us_per_request": {"server": 51200},
+            },
         },
         "in_process": {
-            "batch_samples_per_s": 40000,
+            "cores_used": {"this_process": 1.0, "others": 0.0},
+            "batch_samples_per_s": 40960,
             "batch_amortised_us_per_sample": 25,
             "single_median_us": 100,
         },
@@ -60,6 +69,8 @@ def test_ratios_and_targets_shape() -> None:
     assert q["service_over_floor_2_processes"] == {"rps": 0.6, "p99": 1.5}
     assert q["sklearn_over_floor_1_process"]["rps"] == 0.025
     assert q["http_batch_over_in_process_batch"] == {"1_process": 0.75, "2_processes": 1.125}
+    per_cpu = q["http_batch_over_in_process_batch_per_cpu_second"]
+    assert per_cpu == {"1_process": 0.61, "2_processes": 0.488}
     assert q["single_in_process_over_batch_amortised_per_sample"] == 4.0
     met = {name: t["met"] for name, t in sbs.targets(q).items()}
     assert met == {
@@ -70,3 +81,9 @@ def test_ratios_and_targets_shape() -> None:
         "http_batch_over_in_process_1_process": False,
         "single_over_batch_amortised": False,
     }
+
+
+def test_median_over_rounds() -> None:
+    rounds = [{"a": {"rps": 1.0, "p99": None}, "b": 3}, {"a": {"rps": 3.0, "p99": 2.0}, "b": 1}]
+    rounds.append({"a": {"rps": 2.0, "p99": 4.0}, "b": 2})
+    assert sbs.median_leaves(rounds) == {"a": {"rps": 2.0, "p99": 3.0}, "b": 2}
