@@ -165,3 +165,20 @@ def test_bad_npy_bodies(client, dataset):
     problem(client.post("/v1/recognize", content=strings, headers=NPY), 422, "body")
     obj = npy(np.array([{"a": 1}], dtype=object))  # pickled: never loaded
     problem(client.post("/v1/recognize", content=obj, headers=NPY), 422, "body")
+
+
+def test_touches_of_one_object_get_one_fused_answer(client, dataset):
+    x = dataset.samples[dataset.labels == 2][:3].tolist()
+    each = client.post("/v1/recognize", json={"samples": x}).json()["results"]
+    one = client.post("/v1/recognize?same_object=1", json={"samples": x}).json()["results"]
+    assert len(each) == 3 and len(one) == 1
+    scores = [r["novelty_score"] for r in each]
+    assert np.isclose(one[0]["novelty_score"], np.mean(scores))  # the mean of their evidence
+    single = client.post("/v1/recognize?same_object=true", json={"samples": x[:1]}).json()
+    (alone,) = single["results"]  # a group of one is that sample's answer
+    assert alone["class_name"] == each[0]["class_name"]
+    assert np.isclose(alone["novelty_score"], each[0]["novelty_score"])  # torch: batch-size bits
+    bad = problem(client.post("/v1/recognize?same_object=maybe", json={"samples": x}), 422)
+    assert bad["errors"] == [{"field": "same_object", "reason": bad["detail"]}]
+    spec = client.get("/openapi.json").json()["paths"]["/v1/recognize"]["post"]
+    assert [p["name"] for p in spec["parameters"]] == ["same_object"]
