@@ -42,6 +42,11 @@ from app.framework.recognizer import ClassRegistry, NoveltyTuning, TactileRecogn
 from app.framework.registry import UnknownMethodError, method_class
 
 FORMAT_VERSION = 1
+# a bundle whose model takes raw trials (it carries a featurizer) is written as version 2:
+# a build older than the featurizer refuses it clearly instead of serving it as a model of
+# samples; bundles without one stay version 1, which every build reads
+RAW_TRIALS_FORMAT_VERSION = 2
+READS = (FORMAT_VERSION, RAW_TRIALS_FORMAT_VERSION)
 _MANIFEST = "manifest.json"
 _ARRAYS = "arrays.npz"
 _REG = "registry/"  # prefix of the registry's arrays inside arrays.npz
@@ -146,6 +151,7 @@ def _contents(model: TactileRecognizer) -> tuple[dict[str, Any], dict[str, np.nd
     if model.featurizer is not None:
         featurizer_meta, featurizer_arrays = model.featurizer.get_state()
         manifest["featurizer"] = featurizer_meta
+        manifest["format_version"] = RAW_TRIALS_FORMAT_VERSION
         for name, value in featurizer_arrays.items():
             all_arrays[_FEATURIZER + name] = value
     all_arrays[_REG + "known_attributes"] = reg.known_attributes
@@ -306,10 +312,10 @@ def _unzip(data: bytes) -> tuple[dict[str, Any], bytes]:
     except (zipfile.BadZipFile, KeyError, json.JSONDecodeError, OSError, EOFError) as exc:
         raise BundleError(f"not a readable model bundle: {exc}") from None
     version = manifest.get("format_version")
-    if version != FORMAT_VERSION:
+    if version not in READS:
         raise BundleError(
             f"bundle format version {version!r} is not supported "
-            f"(this build reads {FORMAT_VERSION}); "
+            f"(this build reads {', '.join(map(str, READS))}); "
             "retrain the model with this version"
         )
     return manifest, npz_bytes
