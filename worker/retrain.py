@@ -108,6 +108,19 @@ def make_plan(
         live_samples.add(sid)
     for row in repo.samples_by_id(s, live_samples):
         plan.samples.setdefault(row.class_id, []).append(row)
+    for job in claimed:  # a class without a description is learnt from its samples alone
+        cls = by_id.get(job.class_id)
+        if (
+            job.kind == JobKind.REGISTER_CLASS
+            and job.id not in plan.rejected
+            and cls is not None
+            and not cls.attribute_key
+            and not plan.samples.get(cls.id)
+        ):
+            plan.rejected[job.id] = (
+                f"class '{cls.name}' has no description and no live sample to learn it from"
+            )
+            live_classes.discard(cls.id)
 
     reg = model.registry
     in_base = set(base.sample_ids)

@@ -280,3 +280,17 @@ def test_a_robot_recognises_trials_online_and_from_its_model_file(raw_service, p
     ]
     one = away.recognize_trials(trials[:2], same_object=True)
     assert len(one["results"]) == 1
+
+
+def test_a_class_whose_only_trials_were_withdrawn_fails_to_register(raw_service, raw_worker, pilot):
+    """Nothing to learn it from: its registration fails and says why, rather than succeeding
+    with the class left out of the model."""
+    client, _ = raw_service
+    r = client.post("/v1/classes", json={"name": "bar", "trials": [pilot[3].trials[0].to_dict()]})
+    class_id = r.json()["class"]["id"]
+    (sample,) = client.get(f"/v1/classes/{class_id}/samples").json()["samples"]
+    assert client.delete(f"/v1/classes/{class_id}/samples/{sample['id']}").status_code == 202
+    raw_worker.run_once()
+    job = client.get(f"/v1/jobs/{r.json()['job']['id']}").json()
+    assert job["status"] == "failed" and "no live sample" in job["error"], job
+    assert not client.get(f"/v1/classes/{class_id}").json()["in_active_model"]
