@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -210,6 +211,22 @@ class TactileDataset:
             trials=self.trials[idx],
             class_attributes=self.attribute_values,
             attribute_names=self.attribute_names,
+            class_names=self.class_names,
+            object_ids=self.object_ids,
+            name=self.name,
+        )
+
+    def with_attributes(
+        self, attribute_names: Sequence[str], class_attributes: np.ndarray
+    ) -> TactileDataset:
+        """The same samples and classes described by other attributes: (K, M') values in
+        [0, 1] or NaN (not known) for ``attribute_names``."""
+        return TactileDataset(
+            samples=self.samples,
+            labels=self.labels,
+            trials=self.trials,
+            class_attributes=class_attributes,
+            attribute_names=tuple(attribute_names),
             class_names=self.class_names,
             object_ids=self.object_ids,
             name=self.name,

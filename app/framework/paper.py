@@ -14,6 +14,7 @@ from tqdm.auto import tqdm
 
 from app.data.dataset import TactileDataset
 from app.framework.adversarial import train_adversarially, train_generator_through_classifier
+from app.framework.attribute_values import attribute_prior, impute
 from app.framework.classifiers import FullyConnectedClassifier, fit_classifier
 from app.framework.discriminator import build_discriminator
 from app.framework.encoder import build_encoder
@@ -34,6 +35,10 @@ NOVELTY_SPACES = ("input", "features")
 
 class PaperRecognizer(TactileRecognizer):
     """The paper's framework (Fig. 1), trained as Sect. IV describes.
+
+    Attribute values may be graded or not known (``graded_attributes``): G is given graded
+    values as they are and, for a value not known, the attribute's prior over the known
+    classes (``app.framework.attribute_values``).
 
     ``fit`` trains CONV_XF + FC_Y on the known objects (step 1, Fig. 2), fits the GMM
     of ND(x) and tunes σ_nov by Sect. VI-B, then trains G by Algorithm 1 and
@@ -145,6 +150,7 @@ class PaperRecognizer(TactileRecognizer):
     """
 
     method = "paper"
+    graded_attributes = True  # G is given imputed vectors (_generator_input)
 
     _parameter_constraints = {
         "synthesis": one_of(SYNTHESIS),
@@ -307,7 +313,7 @@ class PaperRecognizer(TactileRecognizer):
         alg1 = train_generator_through_classifier(
             self.generator_,
             self.fc_y_,
-            dataset.class_attributes,
+            self._generator_input(self.registry.known_attributes),
             self.alg1_epochs,
             self.noise_std,
             self.batch_size,
@@ -319,7 +325,7 @@ class PaperRecognizer(TactileRecognizer):
             self.generator_,
             self.discriminator_,
             self.fc_y_,
-            dataset.class_attributes,
+            self._generator_input(self.registry.known_attributes),
             self.real_features_,
             y,
             self.alg2_epochs,
@@ -425,7 +431,7 @@ class PaperRecognizer(TactileRecognizer):
         g = self.generator_ if generator == "adversarial" else self.generator_alg1_
         feats, labels = generate_features(
             g,
-            reg.novel_attributes,
+            self._generator_input(reg.novel_attributes),
             self.samples_per_class,
             self.noise_std,
             seed=self.seed + len(reg.novel_names),
@@ -451,6 +457,12 @@ class PaperRecognizer(TactileRecognizer):
             seed=self.seed,
         )
 
+    def _generator_input(self, vectors: np.ndarray) -> np.ndarray:
+        """What G is given for attribute vectors: graded values as they are, a value not
+        known replaced by the attribute's prior over the known classes (G needs every
+        input; 0/1 vectors come back unchanged)."""
+        return impute(vectors, attribute_prior(self.registry.known_attributes))
+
     def _one_shot_features(self) -> tuple[np.ndarray, np.ndarray]:
         reg = self.registry
         feats, labels = [], []
@@ -474,13 +486,10 @@ class PaperRecognizer(TactileRecognizer):
         targets, attrs = [], []
         for name, samples in fresh.items():
             targets.append(torch.as_tensor(self._features(self.scaler_.transform(samples))))
-            attrs.append(
-                torch.as_tensor(reg.novel_attributes[reg.novel_names.index(name)]).expand(
-                    len(samples), -1
-                )
-            )
+            vector = self._generator_input(reg.novel_attributes)[reg.novel_names.index(name)]
+            attrs.append(torch.as_tensor(vector).expand(len(samples), -1))
         f_t, a_t = torch.cat(targets), torch.cat(attrs)
-        a_known = torch.as_tensor(reg.known_attributes)
+        a_known = torch.as_tensor(self._generator_input(reg.known_attributes))
         y_known = torch.arange(len(a_known))
         opt = torch.optim.Adam(self.generator_.parameters(), lr=self.lr * 0.2)
         ce = nn.CrossEntropyLoss()

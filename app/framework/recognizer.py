@@ -244,6 +244,14 @@ class TactileRecognizer(ABC):
     #: True where a novel class can be recognised from its real samples alone, with no
     #: attribute (``add_novel_classes_from_samples``, on a model fitted without attributes)
     learns_classes_from_samples: ClassVar[bool] = False
+    #: True where attribute values may be graded (in [0, 1]: "somewhat soft" is 0.5) or not
+    #: known (NaN), in the training classes' vectors and in zero-shot enrolments; False where
+    #: the method learns 0/1 attributes only
+    graded_attributes: ClassVar[bool] = False
+    #: True where the parts that learn attributes can be fitted again alone, on the same
+    #: training samples (``with_attributes``): a grown vocabulary or a class's new values
+    #: then need no full retrain
+    attributes_separable: ClassVar[bool] = False
     #: the method's own defaults for featurizer options its ``featurizer_params`` leaves
     #: out (the featurizer's defaults for the rest); documented with that parameter
     _featurizer_defaults: ClassVar[dict[str, Any]] = {}
@@ -328,7 +336,8 @@ class TactileRecognizer(ABC):
         1 takes each finger once), and the model keeps the featurizer. Pass the training
         trials only: an evaluation splits its trials first.
 
-        The classes need 0/1 attributes (``class_attributes``) or none at all (M = 0): a
+        The classes need 0/1 attributes (``class_attributes``), or values in [0, 1] and NaN
+        (not known) where the method has ``graded_attributes``, or none at all (M = 0): a
         model without attributes recognises its known classes, and novel classes only from
         their samples.
         """
@@ -347,13 +356,7 @@ class TactileRecognizer(ABC):
         if len(dataset) == 0:
             raise NotFittedError("cannot fit on an empty dataset")
         ensure_threads_configured()  # the default thread limits, where no entry point chose them
-        # no attribute at all is allowed (known classes only); graded or not-known values
-        # still stop here, as reading class_attributes says
-        attributes = (
-            dataset.class_attributes.copy()
-            if dataset.n_attributes
-            else np.zeros((dataset.n_classes, 0), np.float32)
-        )
+        attributes = self._training_attributes(dataset)
         self.input_shape = dataset.input_shape
         self.featurizer_ = featurizer
         self.registry = ClassRegistry(
@@ -365,6 +368,61 @@ class TactileRecognizer(ABC):
         )
         self._fit(dataset, progress)
         return self
+
+    def _training_attributes(self, dataset: TactileDataset) -> np.ndarray:
+        """(K, M) the training classes' vectors as this method learns them. No attribute at
+        all is allowed (known classes only); graded or not-known values stop here, as
+        reading ``class_attributes`` says, unless the method has ``graded_attributes``."""
+        if not dataset.n_attributes:
+            return np.zeros((dataset.n_classes, 0), np.float32)
+        if self.graded_attributes:
+            return dataset.attribute_values.copy()
+        return dataset.class_attributes.copy()
+
+    def with_attributes(
+        self,
+        dataset: TactileDataset | BioTacDataset,
+        novel_attributes: Mapping[str, np.ndarray] | None = None,
+    ) -> Self:
+        """A new recognizer that describes classes by ``dataset``'s attributes: its
+        vocabulary and its classes' values. ``dataset`` holds the same known classes and
+        training samples (or raw trials) as ``fit`` was given, and may differ only in its
+        attributes. Only the parts that learn attributes are fitted again (methods with
+        ``attributes_separable``); the novel classes are dropped, and those named in
+        ``novel_attributes`` (class name -> vector in the new vocabulary) are added back by
+        ``add_novel_classes`` (their one-shot samples go back with ``add_one_shot``).
+
+        Elsewhere UnsupportedOperationError says to fit the method again."""
+        self._require_fitted()
+        if not self.attributes_separable:
+            raise UnsupportedOperationError(
+                f"method '{self.method}' learns attributes with the rest of the model; fit it "
+                "again on the new attributes instead"
+            )
+        if isinstance(dataset, BioTacDataset):
+            from app.framework.tactile_image import featurize_dataset
+
+            # the featurizer fit made, on the same trials: the same training images
+            dataset = featurize_dataset(dataset, self.featurizer_, augment=True)
+        if list(dataset.class_names) != list(self.registry.known_names):
+            raise FrameworkError(
+                "with_attributes takes the known classes the model was fitted on, in their "
+                f"order; got {len(dataset.class_names)} classes for "
+                f"{len(self.registry.known_names)}"
+            )
+        new = self.without_novel_classes()
+        new.registry.attribute_names = dataset.attribute_names
+        new.registry.known_attributes = new._training_attributes(dataset)
+        new.registry.novel_attributes = np.zeros((0, dataset.n_attributes), np.float32)
+        new._refit_attributes(dataset)
+        if novel_attributes:
+            new = new.add_novel_classes(list(novel_attributes), list(novel_attributes.values()))
+        return new
+
+    def _refit_attributes(self, dataset: TactileDataset) -> None:
+        """Fit the parts that learn attributes again; methods with ``attributes_separable``
+        override it."""
+        raise UnsupportedOperationError(f"method '{self.method}' cannot refit its attributes")
 
     # ------------------------------------------------------------ input kinds
     @property
@@ -596,13 +654,13 @@ class TactileRecognizer(ABC):
                 raise DuplicateClassError("a class name must not be empty")
             if name in existing or names.count(name) > 1:
                 raise DuplicateClassError(f"class '{name}' already exists")
-            same = np.flatnonzero((all_vectors == vectors[i]).all(axis=1))
+            same = np.flatnonzero(same_vectors(all_vectors, vectors[i]))
             if len(same):
                 other = existing_names[same[0]]
                 raise DuplicateClassError(
                     f"class '{name}' has the same attribute vector as existing class '{other}'"
                 )
-            same_new = [names[j] for j in range(i) if (vectors[j] == vectors[i]).all()]
+            same_new = [names[j] for j in range(i) if same_vectors(vectors[j][None], vectors[i])[0]]
             if same_new:
                 raise DuplicateClassError(
                     f"classes '{same_new[0]}' and '{name}' have the same attribute vector"
@@ -741,10 +799,22 @@ class TactileRecognizer(ABC):
             raise AttributeVectorError(
                 f"expected attribute vectors of length {m}, got shape {v.shape}"
             )
-        if not np.isin(v, (0.0, 1.0)).all():
-            raise AttributeVectorError("attribute vectors must contain only 0 and 1")
-        if (v.sum(axis=1) == 0).any():
-            raise AttributeVectorError("an attribute vector must have at least one attribute set")
+        if self.graded_attributes:
+            known = ~np.isnan(v)
+            if not ((v[known] >= 0) & (v[known] <= 1)).all():
+                raise AttributeVectorError(
+                    "attribute values must lie in [0, 1] (NaN: not known), got "
+                    f"{float(v[known][(v[known] < 0) | (v[known] > 1)][0])}"
+                )
+        elif not np.isin(v, (0.0, 1.0)).all():
+            raise AttributeVectorError(
+                f"attribute vectors must contain only 0 and 1 (method '{self.method}' learns "
+                "0/1 attributes; method 'best' takes graded and not-known values)"
+            )
+        if (np.nan_to_num(v).sum(axis=1) == 0).any():
+            raise AttributeVectorError(
+                "an attribute vector must have at least one attribute set (a value above 0)"
+            )
         return v
 
     def attribute_vector(self, attribute_names: Sequence[str]) -> np.ndarray:
@@ -770,6 +840,13 @@ class TactileRecognizer(ABC):
     @abstractmethod
     def set_state(self, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
         """Restore what ``get_state`` returned."""
+
+
+def same_vectors(vectors: np.ndarray, vector: np.ndarray) -> np.ndarray:
+    """(L,) bool: which rows of ``vectors`` equal ``vector``, a value not known (NaN) equal
+    only to another value not known."""
+    vectors, vector = np.asarray(vectors), np.asarray(vector)
+    return ((vectors == vector) | (np.isnan(vectors) & np.isnan(vector))).all(axis=1)
 
 
 def _top_k(p: np.ndarray, k: int, offset: int) -> tuple[np.ndarray, np.ndarray]:

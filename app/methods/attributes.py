@@ -7,24 +7,45 @@ DAP (Lampert et al.): a novel class z with attribute vector a^z scores
 with p(a_m | x) from one L2-regularised logistic regression per attribute,
 clipped to [clip, 1 - clip] so that one confident classifier cannot veto a class
 alone, and the prior p(a_m = 1) the mean of the known classes' vectors.
+
+Attribute values may be graded (0.5: "somewhat soft") or not known (NaN). A graded value
+a is a soft target: the class's term is a log p + (1 - a) log(1 - p), and the attribute's
+classifier learns from each sample twice, as present with weight a and as absent with
+weight 1 - a (the cross-entropy against a soft label). A value not known leaves the
+attribute out: out of that class's product (p(a_m) / p(a_m) marginalised to 1), out of the
+classifier's training samples, out of the prior's mean. Vectors of only 0 and 1 give the
+same numbers as before graded values existed.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from app.framework.attribute_values import attribute_prior, impute
+
+__all__ = ["attribute_prior", "impute"]  # re-exported: the methods read them from here
+
 
 # The DAP baseline (app/baselines/dap.py) scores with these too: one DAP rule for both.
 def dap_log_scores(
     attr_proba: np.ndarray, class_attributes: np.ndarray, prior: np.ndarray, clip: float
 ) -> np.ndarray:
-    """(N, L) log ∏_m p(a_m = a^z_m | x) / p(a_m = a^z_m) for L class vectors."""
+    """(N, L) log ∏_m p(a_m = a^z_m | x) / p(a_m = a^z_m) for L class vectors (graded
+    values as soft targets, values not known left out)."""
     p = np.clip(attr_proba, clip, 1 - clip)
     q = np.clip(prior, clip, 1 - clip)
-    a = (np.asarray(class_attributes) > 0.5).astype(np.float64)
-    log_like = np.log(p) @ a.T + np.log1p(-p) @ (1 - a).T
-    log_prior = np.log(q) @ a.T + np.log1p(-q) @ (1 - a).T
+    present, absent = dap_class_terms(class_attributes)
+    log_like = np.log(p) @ present.T + np.log1p(-p) @ absent.T
+    log_prior = np.log(q) @ present.T + np.log1p(-q) @ absent.T
     return log_like - log_prior[None, :]
+
+
+def dap_class_terms(class_attributes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(L, M) weights of log p and of log(1 - p) in each class's DAP product: a and 1 - a,
+    0 and 0 where the value is not known (NaN)."""
+    a = np.asarray(class_attributes, np.float64)
+    known = ~np.isnan(a)
+    return np.where(known, a, 0.0), np.where(known, 1.0 - a, 0.0)
 
 
 def softmax(logits: np.ndarray) -> np.ndarray:
@@ -52,21 +73,47 @@ class LinearAttributeModel:
     def fit(
         cls, z: np.ndarray, targets: np.ndarray, C: float, max_iter: int = 1000
     ) -> LinearAttributeModel:
-        from sklearn.linear_model import LogisticRegression  # fitting only: loading stays light
-
-        targets = (np.asarray(targets) > 0.5).astype(np.int64)
+        """One classifier per column of ``targets`` (N, M): each sample's class's values in
+        [0, 1], NaN where not known. An attribute learns from the samples whose value is
+        known; with no such sample, or one value for all of them, it is that constant (0.5
+        where nothing is known)."""
         m = targets.shape[1]
         weights = np.zeros((m, z.shape[1]))
         bias = np.zeros(m)
         constant = np.full(m, np.nan)
         for j in range(m):
-            values = np.unique(targets[:, j])
-            if len(values) == 1:
-                constant[j] = float(values[0])
-                continue
-            lr = LogisticRegression(C=C, max_iter=max_iter).fit(z, targets[:, j])
-            weights[j], bias[j] = lr.coef_[0], lr.intercept_[0]
+            fitted = cls.fit_one(z, targets[:, j], C, max_iter)
+            if isinstance(fitted, float):
+                constant[j] = fitted
+            else:
+                weights[j], bias[j] = fitted
         return cls(weights, bias, constant)
+
+    @staticmethod
+    def fit_one(
+        z: np.ndarray, target: np.ndarray, C: float, max_iter: int = 1000
+    ) -> float | tuple[np.ndarray, float]:
+        """The constant probability of one attribute, or its classifier's (weights, bias)."""
+        from sklearn.linear_model import LogisticRegression  # fitting only: loading stays light
+
+        target = np.asarray(target, np.float64)
+        known = ~np.isnan(target)
+        values = np.unique(target[known])
+        if len(values) == 0:
+            return 0.5
+        if len(values) == 1:
+            return float(values[0])
+        lr = LogisticRegression(C=C, max_iter=max_iter)
+        if np.isin(values, (0.0, 1.0)).all():
+            lr.fit(z[known], target[known].astype(np.int64))
+        else:  # a soft label: each sample present with weight a and absent with 1 - a
+            x, a = z[known], target[known]
+            lr.fit(
+                np.concatenate([x, x]),
+                np.r_[np.ones(len(a), np.int64), np.zeros(len(a), np.int64)],
+                sample_weight=np.r_[a, 1.0 - a],
+            )
+        return lr.coef_[0], float(lr.intercept_[0])
 
     def predict_proba(self, z: np.ndarray) -> np.ndarray:
         """(N, M) probabilities that each attribute is present."""

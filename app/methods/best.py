@@ -53,8 +53,10 @@ from app.framework.runtime import ensure_threads_configured
 from app.framework.scaling import flatten
 from app.methods.attributes import (
     LinearAttributeModel,
+    attribute_prior,
     cosine_scores,
     dap_log_scores,
+    impute,
     semantic_autoencoder,
     softmax,
 )
@@ -138,6 +140,8 @@ class BestRecognizer(TactileRecognizer):
 
     method = "best"
     novel_part_separable = True  # enrolments never touch the forest or the attribute models
+    graded_attributes = True  # soft targets for DAP, imputed values for the autoencoder
+    attributes_separable = True  # a new vocabulary refits the attribute models, not the forest
     learns_classes_from_samples = True  # one-shot signatures need no attribute
     _featurizer_defaults = {"n_offsets": 1}  # see featurizer_params
     #: batches of at most this many samples take ``SmallBatchScorer`` (the same bits with a
@@ -269,16 +273,7 @@ class BestRecognizer(TactileRecognizer):
         z = self.known_.cues_model.scaled(flatten(dataset.samples))
         timings["known_model_s"] = time.perf_counter() - t
         t = time.perf_counter()
-        # (K, M) 0/1 attributes, or (K, 0) without any: then the attribute model predicts
-        # nothing and zero-shot enrolment is refused
-        attrs = self.registry.known_attributes
-        self.attributes_ = LinearAttributeModel.fit(z, attrs[y], float(self.attribute_C))
-        self.prior_ = attrs.mean(axis=0).astype(np.float64)
-        self.sae_ = (
-            semantic_autoencoder(z, attrs[y], float(self.sae_lambda)).astype(np.float32)
-            if self.sae_lambda > 0 and self.has_attributes
-            else None
-        )
+        self._fit_attributes(z, y)
         timings["attributes_s"] = time.perf_counter() - t
         self._reset_novel()
         timings["total_s"] = time.perf_counter() - t0
@@ -293,6 +288,28 @@ class BestRecognizer(TactileRecognizer):
             "timings": timings,
             "params": self.get_params(),
         }
+
+    def _fit_attributes(self, z: np.ndarray, y: np.ndarray) -> None:
+        """The parts that learn attributes, from the scaled training inputs ``z`` and their
+        class indices ``y``: the attribute classifiers, the prior and the autoencoder."""
+        # (K, M) values in [0, 1] or NaN (not known), or (K, 0) without any attribute: then
+        # the attribute model predicts nothing and zero-shot enrolment is refused
+        attrs = self.registry.known_attributes
+        self.attributes_ = LinearAttributeModel.fit(z, attrs[y], float(self.attribute_C))
+        self.prior_ = attribute_prior(attrs)
+        self.sae_ = (
+            semantic_autoencoder(z, impute(attrs, self.prior_)[y], float(self.sae_lambda)).astype(
+                np.float32
+            )
+            if self.sae_lambda > 0 and self.has_attributes
+            else None
+        )
+
+    def _refit_attributes(self, dataset: TactileDataset) -> None:
+        self._fit_attributes(
+            self.known_.cues_model.scaled(flatten(dataset.samples)), dataset.labels
+        )
+        self.metrics = {**self.metrics, "n_attributes": len(self.registry.attribute_names)}
 
     def _reset_novel(self) -> None:
         n_known = len(self.registry.known_names)
@@ -328,7 +345,7 @@ class BestRecognizer(TactileRecognizer):
         )
         if self.sae_ is not None:
             scores = scores + float(self.sae_temperature) * cosine_scores(
-                z, self.sae_, reg.novel_attributes
+                z, self.sae_, impute(reg.novel_attributes, self.prior_)
             )
         p_zsl = softmax(scores)
         has = self.shot_has_

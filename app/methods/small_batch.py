@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from app.methods.attributes import dap_class_terms, impute
 from app.methods.known import _EPS, _KNN, CUES, _nearest
 
 if TYPE_CHECKING:
@@ -133,14 +134,14 @@ class _NovelConstants:
         # dap_log_scores' class-vector terms and prior term, as it computes them
         clip = float(model.dap_clip)
         self.dap_clip = clip
-        a = (np.asarray(reg.novel_attributes) > 0.5).astype(np.float64)
-        self.present_t, self.absent_t = a.T, (1 - a).T
+        present, absent = dap_class_terms(reg.novel_attributes)
+        self.present_t, self.absent_t = present.T, absent.T
         q = np.clip(model.prior_, clip, 1 - clip)
-        self.log_prior = (np.log(q) @ a.T + np.log1p(-q) @ (1 - a).T)[None, :]
+        self.log_prior = (np.log(q) @ present.T + np.log1p(-q) @ absent.T)[None, :]
         self.sae_t, self.sae_temperature = None, 0.0
         if model.sae_ is not None:
             self.sae_t = np.asarray(model.sae_, np.float32).T
-            vectors = np.asarray(reg.novel_attributes, np.float64)
+            vectors = np.asarray(impute(reg.novel_attributes, model.prior_), np.float64)
             self.unit_vectors_t = _unit(vectors).T
             self.sae_temperature = float(model.sae_temperature)
 

@@ -61,11 +61,20 @@ def test_attribute_vector_of_wrong_length(fitted):
         fitted.add_novel_classes(["thing"], [[1, 0, 1]])
 
 
-def test_attribute_vector_with_values_other_than_0_1(fitted):
+def test_attribute_vector_with_values_outside_0_1(fitted):
     v = np.zeros(19)
-    v[0] = 0.5
-    with pytest.raises(AttributeVectorError, match="only 0 and 1"):
+    v[0] = 1.5
+    with pytest.raises(AttributeVectorError, match=r"in \[0, 1\].*1.5"):
         fitted.add_novel_classes(["thing"], [v])
+
+
+def test_a_method_of_0_1_attributes_refuses_graded_values():
+    from app.baselines.dap import DAPRecognizer
+
+    model = DAPRecognizer()
+    model.registry.attribute_names = ("hard", "soft")
+    with pytest.raises(AttributeVectorError, match="only 0 and 1.*'dap'"):
+        model.validate_attribute_vectors([[0.5, 1.0]])
 
 
 def test_all_zero_attribute_vector(fitted):

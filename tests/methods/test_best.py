@@ -189,7 +189,9 @@ def test_bad_input_raises_framework_errors(fitted, enrolled, data):
     with pytest.raises(AttributeVectorError):
         fitted.add_novel_classes(["z"], [[1, 0]])
     with pytest.raises(AttributeVectorError):
-        fitted.add_novel_classes(["z"], [np.full(train.n_attributes, 0.5)])
+        fitted.add_novel_classes(["z"], [np.full(train.n_attributes, 1.5)])  # beyond [0, 1]
+    with pytest.raises(AttributeVectorError):
+        fitted.add_novel_classes(["z"], [np.full(train.n_attributes, np.nan)])  # nothing known
     with pytest.raises(DuplicateClassError):
         fitted.add_novel_classes([train.class_names[0] + "-twin"], train.class_attributes[:1])
     with pytest.raises(DuplicateClassError):

@@ -104,10 +104,22 @@ def models(request, data):
         "zero-shot": grown(base, ds, novel, shots=0),
         "one-shot": grown(base, ds, novel, shots=2),
         "all-shot": grown(base, ds, novel, shots=len(novel)),
+        "graded": graded(base, ds, novel),
     }
 
 
-@pytest.mark.parametrize("which", ["base", "zero-shot", "one-shot", "all-shot"])
+def graded(model, ds, novel):
+    """Novel classes described by graded values and values not known, one with a shot."""
+    vectors = ds.class_attributes[novel].copy()
+    vectors[0, :3] = np.nan
+    vectors[1, 0] = 0.5
+    vectors[2, -1] = 0.3
+    names = [f"new-{i}" for i in range(len(novel))]
+    model = model.add_novel_classes(names, vectors)
+    return model.add_one_shot(names[3], ds.samples[ds.labels == novel[3]][:1])
+
+
+@pytest.mark.parametrize("which", ["base", "zero-shot", "one-shot", "all-shot", "graded"])
 def test_small_batches_match_the_general_path(models, data, which):
     model, x = models[which], queries(data[0])
     ref, fast = general(model), small(model, most=max(SIZES))
