@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+import os
 import sys
 from pathlib import Path
 
@@ -27,6 +29,14 @@ def _positive(value: str) -> int:
     return n
 
 
+def default_jobs() -> int:
+    """The cores this process may run on (its CPU affinity), at least 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # no sched_getaffinity on this platform
+        return max(1, os.cpu_count() or 1)
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     from app.framework.registry import DEFAULT_METHOD, METHODS
 
@@ -41,7 +51,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "Sect. VI-B on validation objects carved from the known set), AUROC, zero-shot and "
             "one-shot accuracy on the novel objects, and the full pipeline on known and novel "
             "test trials mixed (gzsl_seen, gzsl_unseen, gzsl_h). Writes the figures per split "
-            "and their means as JSON. A 'biotac:DIR' dataset of raw BioTac trials is measured "
+            "and their means as JSON, each mean with its 95% confidence interval over splits "
+            "(Student's t over the per-split values, clipped to [0, 1]); with several "
+            "--methods, also each method's paired difference from the first one on the same "
+            "splits, with its 95% t interval and the splits won and lost. --ceilings adds "
+            "measured limits on the same splits: novelty detection at the threshold chosen "
+            "on the test samples themselves, and gzsl_h under perfect routing. Splits run in "
+            "--jobs processes side by side, with the same figures as in one. A 'biotac:DIR' "
+            "dataset of raw BioTac trials is measured "
             "by the raw-trial protocol instead: known-object accuracy over --splits "
             "trial-disjoint splits (--test-trials whole trials per object held out), each "
             "model fitted on raw training trials (its tactile-image featurizer too) and "
@@ -138,7 +155,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=0,
         help="seed of the simulated dataset, ignored for PHAC-2 (default: %(default)s)",
     )
-    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    p.add_argument(
+        "--jobs",
+        type=_positive,
+        default=None,
+        metavar="N",
+        help="worker processes that run splits side by side; every split gets the same seeds "
+        "as with --jobs 1, so the figures are the same (default: the number of cores, "
+        f"{default_jobs()} here; the raw-trial protocol runs in one process)",
+    )
+    p.add_argument(
+        "--ceilings",
+        action="store_true",
+        help="also measure limits on the same splits: nd_test_kept and nd_balance (known test "
+        "trials kept at the tuned threshold; the smaller of that and nd_novel_detected), "
+        "ceil_nd_* at the best threshold chosen on the test samples themselves, and "
+        "ceil_gzsl_seen / ceil_gzsl_unseen / ceil_gzsl_h under perfect routing (known test "
+        "trials to the known-class classifier, novel ones to the zero-shot classifier)",
+    )
+    p.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="hide the progress bar and the line printed on stderr per finished split",
+    )
     p.set_defaults(handler=run)
 
 
@@ -175,6 +214,8 @@ def run(args: argparse.Namespace) -> int:
     params = method_params(args.param, methods)
     dataset = open_dataset(args.dataset, seed=args.data_seed)
     if isinstance(dataset, BioTacDataset):
+        if args.ceilings:
+            raise ValueError("--ceilings applies to known/novel splits, not to raw BioTac trials")
         results = evaluate_raw(
             dataset,
             methods,
@@ -199,6 +240,8 @@ def run(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
             dataset_label=args.dataset,
             distinct_from_known=args.distinct_from_known,
+            jobs=args.jobs or default_jobs(),
+            ceilings=args.ceilings,
         )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=1))
@@ -212,8 +255,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def summary_table(results: dict) -> str:
-    """Mean figures per method as a plain-text table (for raw-trial results, with each
-    figure's 95 % confidence interval)."""
+    """Mean figures per method, each with its 95 % confidence interval over splits, as a
+    plain-text table; with several methods, a second table of each method's paired
+    difference from the first one (its 95 % interval, splits won / lost)."""
     from app.evaluation.raw import PROTOCOL
     from app.evaluation.report import ORDER
 
@@ -221,20 +265,59 @@ def summary_table(results: dict) -> str:
         return raw_summary_table(results)
     methods = list(results["methods"])
     present = {f for m in methods for f in results["methods"][m]["mean"]}
-    rows = [f for f in ORDER if f in present]
+    rows = [f for f in ORDER if f in present] + sorted(
+        present - set(ORDER), key=lambda f: (f.startswith("ceil_"), f)
+    )
     width = max(len(m) for m in methods + ["figure"]) + 2
-    lines = ["figure".ljust(18) + "".join(m.rjust(width) for m in methods)]
+    if any("ci95" in results["methods"][m] for m in methods):
+        width = max(width, 23)
+    lines = ["figure".ljust(24) + "".join(m.rjust(width) for m in methods)]
     for f in rows:
         cells = []
         for m in methods:
-            v = results["methods"][m]["mean"].get(f)
-            cells.append(("—" if v is None else f"{v:.3f}").rjust(width))
-        lines.append(f.ljust(18) + "".join(cells))
+            e = results["methods"][m]
+            cells.append(_cell(e["mean"].get(f), (e.get("ci95") or {}).get(f)).rjust(width))
+        lines.append(f.ljust(24) + "".join(cells))
     lines.append(
-        "seconds".ljust(18)
+        "seconds".ljust(24)
         + "".join(f"{results['methods'][m]['elapsed_s']:.0f}".rjust(width) for m in methods)
     )
+    n = results.get("splits")
+    lines.append(f"mean [95% CI]: Student's t over the {n} splits' values, clipped to [0, 1]")
+    paired = results.get("paired")
+    if paired and paired.get("methods"):
+        ref = paired["reference"]
+        others = list(paired["methods"])
+        pw = 31
+        lines += [
+            "",
+            f"paired difference from {ref} on the same splits: mean [95% CI] won/lost",
+            "figure".ljust(24) + "".join(f"{m} - {ref}".rjust(pw) for m in others),
+        ]
+        for f in rows:
+            if not any(f in paired["methods"][m]["mean"] for m in others):
+                continue
+            cells = []
+            for m in others:
+                p = paired["methods"][m]
+                if f not in p["mean"]:
+                    cells.append("—".rjust(pw))
+                    continue
+                cell = _cell(p["mean"][f], p["ci95"].get(f), signed=True)
+                cells.append(f"{cell} {p['won'][f]}/{p['lost'][f]}".rjust(pw))
+            lines.append(f.ljust(24) + "".join(cells))
     return "\n".join(lines)
+
+
+def _cell(mean, ci=None, signed: bool = False) -> str:
+    """``0.612 [0.590, 0.634]``; ``—`` for a figure not measured."""
+    if mean is None or (isinstance(mean, float) and math.isnan(mean)):
+        return "—"
+    fmt = "{:+.3f}" if signed else "{:.3f}"
+    lo, hi = ci if ci else (None, None)
+    if lo is None or hi is None or math.isnan(lo) or math.isnan(hi):
+        return fmt.format(mean)
+    return f"{fmt.format(mean)} [{fmt.format(lo)}, {fmt.format(hi)}]"
 
 
 def raw_summary_table(results: dict) -> str:

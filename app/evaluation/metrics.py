@@ -147,3 +147,39 @@ def wilson_interval(fraction: float, n: int, level: float = 0.95) -> tuple[float
     centre = (fraction + z * z / (2 * n)) / (1 + z * z / n)
     half = z / (1 + z * z / n) * np.sqrt(fraction * (1 - fraction) / n + z * z / (4 * n * n))
     return max(0.0, float(centre - half)), min(1.0, float(centre + half))
+
+
+def paired_differences(values: Sequence[float], reference: Sequence[float]) -> list[float]:
+    """``values[i] - reference[i]`` per split (the same splits, in the same order); NaN
+    where either is not finite."""
+    a = np.asarray(values, dtype=np.float64)
+    b = np.asarray(reference, dtype=np.float64)
+    if a.shape != b.shape:
+        raise ValueError(f"paired values differ in length: {a.shape} and {b.shape}")
+    d = a - b
+    d[~(np.isfinite(a) & np.isfinite(b))] = np.nan
+    return d.tolist()
+
+
+def oracle_threshold(
+    known_scores: Sequence[float], novel_scores: Sequence[float]
+) -> tuple[float, float, float]:
+    """The best threshold for telling these novel samples from these known ones, chosen on
+    the samples themselves: (threshold, known kept, novel detected) at the threshold that
+    maximises min(share of known scores at or below it, share of novel scores above it),
+    ties broken by the larger sum of the two, then by the lower threshold. No threshold
+    tuned without the samples can do better on both at once: a measured upper bound on
+    novelty detection by this score."""
+    k = np.sort(np.asarray(known_scores, dtype=np.float64))
+    n = np.sort(np.asarray(novel_scores, dtype=np.float64))
+    if k.size == 0 or n.size == 0:
+        raise ValueError("the oracle threshold needs at least one known and one novel score")
+    # every distinct score, and one below them all (every sample called novel)
+    candidates = np.unique(np.concatenate([k, n]))
+    candidates = np.concatenate([[np.nextafter(candidates[0], -np.inf)], candidates])
+    kept = np.searchsorted(k, candidates, side="right") / k.size
+    detected = 1.0 - np.searchsorted(n, candidates, side="right") / n.size
+    balance = np.minimum(kept, detected)
+    best = np.flatnonzero(balance == balance.max())
+    i = int(best[np.argmax((kept + detected)[best])])  # argmax: the first (lowest) of ties
+    return float(candidates[i]), float(kept[i]), float(detected[i])

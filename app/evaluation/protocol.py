@@ -24,15 +24,41 @@ Methods listed in ``ZSL_VARIANTS`` also report extra ZSL figures obtained by
 ``add_novel_classes`` options (the paper's GEN-F, NEIGHB-F and no-GAN variants,
 Tables V-VI). All figures are fractions in [0, 1]; NaN (``null`` in JSON) marks a
 figure a method cannot produce.
+
+With ``ceilings=True`` every method also reports measured limits on the same split
+(``CEILING_FIGURES``): novelty detection at the best threshold for its score, chosen on
+the test samples themselves (``metrics.oracle_threshold``), beside its tuned threshold
+measured the same way (``nd_test_kept``, ``nd_balance``); and the mixed known + novel
+figures under perfect routing (every known test trial to the known-class classifier,
+every novel test sample to the zero-shot classifier), so ``ceil_gzsl_seen`` is
+``known_acc``, ``ceil_gzsl_unseen`` is ``zsl`` and ``ceil_gzsl_h`` their harmonic mean.
+Routing can only lose answers, so ``ceil_gzsl_*`` ≥ ``gzsl_*`` and ``ceil_nd_balance`` ≥
+``nd_balance`` on every split.
+
+Summaries over splits (``summarize_entry``): the mean, the standard deviation (ddof 0, the
+``std`` key kept from the first layout) and ``ci95``, the 95 % confidence interval of the
+mean from Student's t with n - 1 degrees of freedom and the sample standard deviation
+(``metrics.mean_interval``), clipped to [0, 1]. With several methods, ``paired`` holds each
+method's per-split difference from the first method (the reference) on the same splits,
+its mean, its t interval (clipped to [-1, 1]) and the splits won and lost. Repeated
+random splits share objects and trials, so these intervals are narrower than the
+uncertainty about new objects would be; they say whether a difference is larger than the
+split-to-split noise.
+
+Splits are independent: ``jobs`` > 1 runs them in that many worker processes, each split's
+methods in order with the same seeds as in one process, so the figures are the same.
 """
 
 from __future__ import annotations
 
 import inspect
 import math
+import multiprocessing
 import platform
+import sys
 import time
 from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
 import numpy as np
@@ -58,6 +84,25 @@ FIGURES: tuple[str, ...] = (
     "gzsl_h",
 )
 
+# Measured limits on the same split (``evaluate(..., ceilings=True)``).
+CEILING_FIGURES: tuple[str, ...] = (
+    "nd_test_kept",  # held-out known test trials called known at the tuned threshold
+    "nd_balance",  # min(nd_test_kept, nd_novel_detected)
+    "ceil_nd_test_kept",  # the same two at the oracle threshold (chosen on the test samples)
+    "ceil_nd_novel_detected",
+    "ceil_nd_balance",  # max over thresholds of min(known test kept, novel detected)
+    "ceil_gzsl_seen",  # perfect routing: = known_acc
+    "ceil_gzsl_unseen",  # perfect routing: = zsl
+    "ceil_gzsl_h",
+)
+INTERVALS = (
+    "95% confidence interval of the mean over splits: Student's t with n - 1 degrees of "
+    "freedom and the sample standard deviation, clipped to [0, 1]; paired differences: the "
+    "same over the per-split differences from the reference method on the same splits, "
+    "clipped to [-1, 1]. Splits share objects and trials, so the intervals understate the "
+    "uncertainty about new objects."
+)
+
 # Extra ZSL figures per method: figure -> add_novel_classes options, or None for
 # "the same as ``zsl``" (the method's default enrolment).
 ZSL_VARIANTS: dict[str, dict[str, dict[str, Any] | None]] = {
@@ -72,8 +117,9 @@ ZSL_VARIANTS: dict[str, dict[str, dict[str, Any] | None]] = {
 _CURVE_POINTS = 200
 
 
-def method_figures(method: str) -> tuple[str, ...]:
-    return FIGURES + tuple(ZSL_VARIANTS.get(method, {}))
+def method_figures(method: str, ceilings: bool = False) -> tuple[str, ...]:
+    extra = CEILING_FIGURES if ceilings else ()
+    return FIGURES + tuple(ZSL_VARIANTS.get(method, {})) + extra
 
 
 def make_recognizer(method: str, params: dict[str, Any] | None, seed: int) -> TactileRecognizer:
@@ -96,8 +142,10 @@ def evaluate_split(
     method: str,
     params: dict[str, Any] | None = None,
     seed: int = 0,
+    ceilings: bool = False,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(figures, details) of one method on one split; details hold matrices, curve, timings."""
+    """(figures, details) of one method on one split; details hold matrices, curve, timings.
+    ``ceilings``: also the measured limits of ``CEILING_FIGURES``."""
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     train = split.train_dataset(dataset)
@@ -168,6 +216,21 @@ def evaluate_split(
     details["gzsl_routed_novel_known"] = float(routed_novel[is_known].mean())
     details["gzsl_routed_novel_novel"] = float(routed_novel[~is_known].mean())
 
+    if ceilings:
+        kept = float(np.mean(score_known <= model.novelty_threshold))
+        figures["nd_test_kept"] = kept
+        figures["nd_balance"] = min(kept, figures["nd_novel_detected"])
+        threshold, oracle_kept, oracle_detected = metrics.oracle_threshold(score_known, score_novel)
+        figures["ceil_nd_test_kept"] = oracle_kept
+        figures["ceil_nd_novel_detected"] = oracle_detected
+        figures["ceil_nd_balance"] = min(oracle_kept, oracle_detected)
+        details["oracle_threshold"] = threshold
+        # perfect routing: known test trials answered by the known-class classifier (as in
+        # known_acc), novel test samples by the zero-shot one (as in zsl)
+        figures["ceil_gzsl_seen"] = figures["known_acc"]
+        figures["ceil_gzsl_unseen"] = figures["zsl"]
+        figures["ceil_gzsl_h"] = metrics.harmonic_mean(figures["known_acc"], figures["zsl"])
+
     timings["total_s"] = time.perf_counter() - t0
     details["timings"] = timings
     details["model_metrics"] = jsonable(getattr(model, "metrics", {}) or {})
@@ -200,12 +263,21 @@ def evaluate(
     progress: bool = True,
     dataset_label: str | None = None,
     distinct_from_known: bool = False,
+    jobs: int = 1,
+    ceilings: bool = False,
 ) -> dict[str, Any]:
     """Every method on the same ``n_splits`` splits; a JSON-ready results dict.
 
-    Layout: {"dataset", "novel", "seed", "splits", "test_trials", "config",
-    "split_definitions", "methods": {name: {"splits": [per-split figures],
-    "mean": {...}, "std": {...}, "elapsed_s": ..., "details": [per split]}}}.
+    Layout: {"dataset", "novel", "seed", "splits", "test_trials", "config", "jobs",
+    "ceilings", "intervals", "split_definitions", "methods": {name: {"splits": [per-split
+    figures], "mean": {...}, "std": {...}, "ci95": {figure: [low, high]}, "elapsed_s": ...,
+    "details": [per split]}}, "paired": {"reference": first method, "methods": {other:
+    {"mean", "ci95", "won", "lost", "splits"}}}}; ``paired`` only with several methods.
+
+    ``jobs``: worker processes running splits side by side (1: this process). Each split
+    runs every method in order with method seed ``seed``, whichever process runs it, so the
+    figures do not depend on ``jobs``; ``progress`` prints a line per finished split to
+    stderr below the bar. ``ceilings``: also the figures of ``CEILING_FIGURES``.
     """
     methods = list(dict.fromkeys(methods))
     if not methods:
@@ -240,26 +312,155 @@ def evaluate(
         "split_definitions": [s.describe(dataset) for s in splits],
         "methods": {m: {"splits": [], "details": [], "elapsed_s": 0.0} for m in methods},
     }
+    if not isinstance(jobs, int | np.integer) or jobs < 1:
+        raise ValueError(f"jobs must be a positive integer, got {jobs!r}")
+    jobs = min(int(jobs), len(splits))
+    results["jobs"] = jobs
+    results["ceilings"] = bool(ceilings)
+    results["intervals"] = INTERVALS
     started = time.perf_counter()
     bar = tqdm(total=len(splits) * len(methods), desc="evaluate", unit="fit", disable=not progress)
+    per_split: dict[int, list[tuple[dict, dict, float]]] = {}
+
+    def finished(index: int, outcome: list[tuple[dict, dict, float]]) -> None:
+        per_split[index] = outcome
+        if progress:
+            heads = ", ".join(
+                f"{m} gzsl_h {f['gzsl_h']:.3f}"
+                for m, (f, _, _) in zip(methods, outcome, strict=True)
+            )
+            seconds = sum(t for _, _, t in outcome)
+            bar.write(
+                f"split {index + 1}/{len(splits)} done ({len(per_split)} of {len(splits)}, "
+                f"{seconds:.0f} s): {heads}",
+                file=sys.stderr,
+            )
+
     try:
-        for split in splits:
-            for m in methods:
-                bar.set_postfix_str(f"split {split.index + 1}/{len(splits)} {m}")
-                t = time.perf_counter()
-                figures, details = evaluate_split(dataset, split, m, method_params.get(m), seed)
-                entry = results["methods"][m]
-                entry["elapsed_s"] += time.perf_counter() - t
-                entry["splits"].append(figures)
-                entry["details"].append(details)
-                bar.update(1)
+        if jobs == 1:
+            for split in splits:
+                outcome = []
+                for m in methods:
+                    bar.set_postfix_str(f"split {split.index + 1}/{len(splits)} {m}")
+                    outcome.append(
+                        _run_method(dataset, split, m, method_params.get(m), seed, ceilings)
+                    )
+                    bar.update(1)
+                finished(split.index, outcome)
+        else:
+            # spawn: a fresh interpreter per worker (no forked torch or BLAS thread state)
+            with ProcessPoolExecutor(
+                max_workers=jobs,
+                mp_context=multiprocessing.get_context("spawn"),
+                initializer=_init_worker,
+                initargs=(dataset,),
+            ) as pool:
+                bar.set_postfix_str(f"{jobs} processes")
+                futures = {
+                    pool.submit(_split_task, split, methods, method_params, seed, ceilings): split
+                    for split in splits
+                }
+                for future in as_completed(futures):
+                    finished(futures[future].index, future.result())
+                    bar.update(len(methods))
     finally:
         bar.close()
+    for split in splits:
+        for m, (figures, details, seconds) in zip(methods, per_split[split.index], strict=True):
+            entry = results["methods"][m]
+            entry["elapsed_s"] += seconds
+            entry["splits"].append(figures)
+            entry["details"].append(details)
     for m in methods:
-        entry = results["methods"][m]
-        entry["mean"], entry["std"] = {}, {}
-        for f in method_figures(m):
-            mean, std = metrics.summarize([s[f] for s in entry["splits"]])
-            entry["mean"][f], entry["std"][f] = mean, std
+        summarize_entry(results["methods"][m], method_figures(m, ceilings))
+    if len(methods) > 1:
+        results["paired"] = paired_summary(results["methods"], methods[0])
     results["elapsed_s"] = time.perf_counter() - started
     return jsonable(results)
+
+
+def _run_method(
+    dataset: TactileDataset,
+    split: ZslSplit,
+    method: str,
+    params: dict[str, Any] | None,
+    seed: int,
+    ceilings: bool,
+) -> tuple[dict[str, Any], dict[str, Any], float]:
+    t = time.perf_counter()
+    figures, details = evaluate_split(dataset, split, method, params, seed, ceilings)
+    return figures, details, time.perf_counter() - t
+
+
+_WORKER_DATASET: TactileDataset | None = None
+
+
+def _init_worker(dataset: TactileDataset) -> None:
+    """A worker process's start: the dataset once, and the threads the CLI would choose
+    (``configure_threads``: TACTILE_TORCH_THREADS, else one, as in the parent)."""
+    global _WORKER_DATASET
+    from app.framework.runtime import configure_threads
+
+    configure_threads()
+    _WORKER_DATASET = dataset
+
+
+def _split_task(
+    split: ZslSplit,
+    methods: list[str],
+    method_params: dict[str, dict[str, Any]],
+    seed: int,
+    ceilings: bool,
+) -> list[tuple[dict[str, Any], dict[str, Any], float]]:
+    """Every method on one split, in order (a worker process's task)."""
+    assert _WORKER_DATASET is not None, "worker not initialised"
+    return [
+        _run_method(_WORKER_DATASET, split, m, method_params.get(m), seed, ceilings)
+        for m in methods
+    ]
+
+
+def summarize_entry(entry: dict[str, Any], figures: Sequence[str]) -> None:
+    """A method's ``mean``, ``std`` (ddof 0) and ``ci95`` ([low, high], Student's t over
+    splits, clipped to [0, 1]) of every figure, from its ``splits``."""
+    entry["mean"], entry["std"], entry["ci95"] = {}, {}, {}
+    for f in figures:
+        values = [s.get(f, math.nan) for s in entry["splits"]]
+        entry["mean"][f], entry["std"][f] = metrics.summarize(values)
+        entry["ci95"][f] = list(metrics.mean_interval(values, bounds=(0.0, 1.0)))
+
+
+def paired_summary(entries: dict[str, dict[str, Any]], reference: str) -> dict[str, Any]:
+    """Every method against ``reference`` on the same splits: per figure both report, the
+    per-split differences (method - reference), their mean, their 95 % t interval (clipped
+    to [-1, 1]) and the splits on which the method is above (won) or below (lost) it."""
+    ref = entries[reference]
+    out: dict[str, Any] = {"reference": reference, "methods": {}}
+    for m, entry in entries.items():
+        if m == reference:
+            continue
+        out["methods"][m] = paired_entry(entry, ref)
+    return out
+
+
+def paired_entry(entry: dict[str, Any], reference: dict[str, Any]) -> dict[str, Any]:
+    """One method's paired differences from ``reference`` (see ``paired_summary``)."""
+    if len(entry["splits"]) != len(reference["splits"]):
+        raise ValueError("paired differences need the same splits for both methods")
+    for a, b in zip(entry["splits"], reference["splits"], strict=True):
+        if a.get("split") != b.get("split"):
+            raise ValueError("paired differences need the same splits in the same order")
+    figures = [f for f in reference.get("mean", {}) if f in entry.get("mean", {})]
+    out: dict[str, Any] = {"mean": {}, "ci95": {}, "won": {}, "lost": {}, "splits": {}}
+    for f in figures:
+        d = metrics.paired_differences(
+            [s.get(f, math.nan) for s in entry["splits"]],
+            [s.get(f, math.nan) for s in reference["splits"]],
+        )
+        arr = np.asarray(d)
+        out["splits"][f] = d
+        out["mean"][f] = metrics.summarize(d)[0]
+        out["ci95"][f] = list(metrics.mean_interval(d, bounds=(-1.0, 1.0)))
+        out["won"][f] = int(np.sum(arr > 0))
+        out["lost"][f] = int(np.sum(arr < 0))
+    return out
