@@ -38,8 +38,21 @@ class Enroller:
     withdraws one or describes a class anew, retrying a timed-out or cut request with the
     same Idempotency-Key, round-robin over the APIs."""
 
-    def __init__(self, urls: list[str], seed: int = 0, max_classes: int = 400) -> None:
+    def __init__(
+        self,
+        urls: list[str],
+        seed: int = 0,
+        max_classes: int = 400,
+        headers: dict[str, str] | None = None,
+        retry_pause: float = 0.2,
+    ) -> None:
         self.urls = itertools.cycle(urls)
+        self.headers = headers or {}
+        self.retry_pause = retry_pause
+        # every attempt: (sent, answered, method, path, status or exception name,
+        # content type, Retry-After), monotonic seconds
+        self.log: list[tuple[float, float, str, str, int | str, str, str | None]] = []
+        self.given_up = 0  # requests no API answered with anything but 503 in 200 attempts
         self.rng = random.Random(seed)
         self.vectors = _vectors(max_classes)
         self.samples = quick_dataset().samples
@@ -57,25 +70,41 @@ class Enroller:
     def send(self, method: str, path: str, body: dict | None = None) -> httpx.Response | None:
         key = uuid.uuid4().hex
         for _attempt in range(200):  # a robot keeps retrying until some API answers
+            sent = time.monotonic()
             try:
                 r = httpx.request(
                     method,
                     next(self.urls) + path,
                     json=body,
                     timeout=10,
-                    headers={"Idempotency-Key": key},
+                    headers={**self.headers, "Idempotency-Key": key},
                 )
-            except httpx.TransportError:
+            except httpx.TransportError as exc:
+                self.log.append(
+                    (sent, time.monotonic(), method, path, type(exc).__name__, "", None)
+                )
                 self.retries += 1
                 time.sleep(0.1)
                 continue
+            self.log.append(
+                (
+                    sent,
+                    time.monotonic(),
+                    method,
+                    path,
+                    r.status_code,
+                    r.headers.get("content-type", ""),
+                    r.headers.get("retry-after"),
+                )
+            )
             if r.status_code == 503:  # no model loaded yet, or the store is busy
                 self.retries += 1
-                time.sleep(0.2)
+                time.sleep(self.retry_pause)
                 continue
             self.statuses[r.status_code] = self.statuses.get(r.status_code, 0) + 1
             self.replays += r.headers.get("idempotent-replayed") == "true"
             return r
+        self.given_up += 1
         return None
 
     def step(self) -> None:
@@ -142,15 +171,16 @@ def verify(
     timeout: float,
     withdrawn: list[int] = (),
     described: dict[int, list[int]] | None = None,
+    headers: dict[str, str] | None = None,
 ) -> dict:
     """Every 202'd class and sample is in the store and in the active model, except the
     samples whose withdrawal got a 202, which are in neither; a class described anew has
     its last 202'd vector in both; jobs settled."""
     counts = wait_jobs_settled(cluster.sqlalchemy_url, timeout)
     url = cluster.urls[0]
-    active = httpx.get(f"{url}/v1/models/active", timeout=30).json()
+    active = httpx.get(f"{url}/v1/models/active", timeout=30, headers=headers).json()
     model_names = {c["name"] for c in active["classes"]}
-    with httpx.Client(base_url=url, timeout=30) as client:
+    with httpx.Client(base_url=url, timeout=30, headers=headers) as client:
         stored = {c["id"]: c for c in list_all(client, "/v1/classes", "classes")}
         vocabulary = client.get("/v1/attributes").json()["attributes"]
         served = bundle.from_bytes(client.get("/v1/models/active/bundle").content).registry
@@ -364,3 +394,210 @@ def hot_swap(cluster: Cluster, versions: int = 20, load_threads: int = 4) -> dic
         "integrity_problems": check_store(cluster.sqlalchemy_url),
         "seconds": round(time.monotonic() - started, 1),
     }
+
+
+def _median(values: list[float]) -> float | None:
+    if not values:
+        return None
+    v = sorted(values)
+    mid = len(v) // 2
+    return round(v[mid] if len(v) % 2 else (v[mid - 1] + v[mid]) / 2, 2)
+
+
+def _create_api_key(cluster: Cluster) -> str:
+    """An admin key stored in the store with ``tactile-zsl apikey create``: the API
+    processes read it from there, so during an outage it works only if they kept it."""
+    import subprocess
+
+    from tests.reliability.harness import tactile_zsl
+
+    out = subprocess.run(
+        [*tactile_zsl(), "apikey", "create", "--scope", "admin", "--name", "outage-fleet"],
+        env=cluster.env,
+        cwd=cluster.data_dir,
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=120,
+    )
+    return out.stdout.strip().splitlines()[-1]
+
+
+def pg_outage(
+    cluster: Cluster,
+    server,
+    faults: int,
+    seed: int = 0,
+    gap: tuple[float, float] = (2.0, 5.0),
+    down: tuple[float, float] = (1.0, 3.0),
+    settle_timeout: float = 300,
+) -> dict:
+    """The PostgreSQL server under the service (``server``, a
+    tests/reliability/pgserver.PostgresServer) stopped ``faults`` times at random moments
+    (fast shutdown, immediate shutdown, SIGKILL of the postmaster, in turn in a random
+    order) for a random while and started again, under a load of recognitions,
+    descriptions, enrolments and /readyz probes on every API process; no service process
+    is restarted. Returns every answer's timing, for the caller's checks."""
+    from tests.reliability.pgserver import STOP_MODES
+
+    rng = random.Random(seed)
+    cluster.start()
+    cluster.wait_ready()
+    key = _create_api_key(cluster)
+    headers = {"X-API-Key": key}
+    urls = cluster.urls
+    deadline = time.monotonic() + 60  # every API has read the key from the store
+    while any(httpx.get(f"{u}/v1/attributes", timeout=5).status_code != 401 for u in urls):
+        assert time.monotonic() < deadline, "the API processes never required the new key"
+        time.sleep(0.2)
+    x = quick_dataset().samples[:2].tolist()
+    with httpx.Client(headers=headers, timeout=30) as c:
+        read_paths = ["/v1/recognize"]
+        if c.post(f"{urls[0]}/v1/describe", json={"samples": x}).status_code == 200:
+            read_paths.append("/v1/describe")  # the method predicts attributes
+
+    stop = threading.Event()
+    lock = threading.Lock()
+    reads: list[tuple[float, float, str, int | str, int | None]] = []
+    ready: list[tuple[float, float, int, int | str, str]] = []
+
+    def reader(i: int) -> None:  # recognitions and descriptions, alternately
+        with httpx.Client(base_url=urls[i % len(urls)], headers=headers, timeout=30) as c:
+            for n in itertools.count():
+                if stop.is_set():
+                    return
+                path = read_paths[n % len(read_paths)]
+                sent = time.monotonic()
+                try:
+                    r = c.post(path, json={"samples": x})
+                    status, version = r.status_code, r.json().get("model_version")
+                except httpx.HTTPError as exc:
+                    status, version = type(exc).__name__, None
+                with lock:
+                    reads.append((sent, time.monotonic(), path, status, version))
+                time.sleep(0.02)
+
+    def prober(i: int) -> None:  # /readyz every 0.1 s
+        with httpx.Client(base_url=urls[i], timeout=30) as c:
+            while not stop.is_set():
+                sent = time.monotonic()
+                try:
+                    r = c.get("/readyz")
+                    status, ctype = r.status_code, r.headers.get("content-type", "")
+                    if status == 503 and not r.headers.get("retry-after"):
+                        ctype += "; no Retry-After"
+                except httpx.HTTPError as exc:
+                    status, ctype = type(exc).__name__, ""
+                with lock:
+                    ready.append((sent, time.monotonic(), i, status, ctype))
+                time.sleep(0.1)
+
+    fleet = Enroller(urls, seed, headers=headers, retry_pause=0.1)
+    threads = [threading.Thread(target=fleet.run, daemon=True)]
+    threads += [threading.Thread(target=reader, args=(i,), daemon=True) for i in range(len(urls))]
+    threads += [threading.Thread(target=prober, args=(i,), daemon=True) for i in range(len(urls))]
+    for t in threads:
+        t.start()
+    modes: list[str] = []
+    used: list[str] = []
+    outages: list[tuple[float, float, float]] = []  # (down from, start called, accepting again)
+    started = time.monotonic()
+    try:
+        for _ in range(faults):
+            if not modes:
+                modes = rng.sample(STOP_MODES, len(STOP_MODES))
+            mode = modes.pop()
+            time.sleep(rng.uniform(*gap))
+            server.stop(mode)
+            went_down = time.monotonic()
+            time.sleep(rng.uniform(*down))
+            restart = time.monotonic()
+            server.start()
+            outages.append((went_down, restart, time.monotonic()))
+            used.append(mode)
+        time.sleep(gap[1])  # recovery after the last fault is measured too
+    finally:
+        fleet.stop.set()
+        stop.set()
+        for t in threads:
+            t.join(120)
+    report = verify(
+        cluster,
+        fleet.classes,
+        fleet.sample_ids,
+        settle_timeout,
+        fleet.withdrawn,
+        fleet.described,
+        headers=headers,
+    )
+    report.update(
+        _outage_figures(outages, fleet, reads, ready, len(urls)),
+        modes=used,
+        seconds=round(time.monotonic() - started, 1),
+        read_paths=read_paths,
+        restarts=[p.name for p in cluster.procs if p.starts != 1 or not p.alive],
+        given_up=fleet.given_up,
+        statuses=fleet.statuses,
+        non_202=fleet.bad,
+    )
+    return report
+
+
+def _outage_figures(outages, fleet: Enroller, reads, ready, n_api: int) -> dict:
+    """Answers sorted by whether they were sent and answered while the server was down."""
+
+    def inside(sent: float, answered: float) -> bool:
+        return any(down <= sent and answered <= restart for down, restart, _ in outages)
+
+    def overlaps(sent: float, answered: float) -> bool:
+        return any(sent < up and answered > down for down, _, up in outages)
+
+    writes_in = [e for e in fleet.log if inside(e[0], e[1])]
+    reads_in = [e for e in reads if overlaps(e[0], e[1])]
+    ready_in = [e for e in ready if inside(e[0], e[1])]
+    recovery = []
+    for i, (_down, _restart, up) in enumerate(outages):
+        until = outages[i + 1][0] if i + 1 < len(outages) else float("inf")
+        # every API ready again, and a write accepted, after the server accepts connections
+        firsts = [
+            min((e[1] for e in ready if e[2] == api and e[0] >= up and e[3] == 200), default=None)
+            for api in range(n_api)
+        ]
+        write = min(
+            (e[1] for e in fleet.log if e[0] >= up and e[4] == 202 and e[1] < until), default=None
+        )
+        points = [*firsts, write]
+        recovery.append(
+            None if None in points or max(points) > until else round(max(points) - up, 2)
+        )
+    return {
+        "faults": len(outages),
+        "outage_seconds": [round(r - d, 2) for d, r, _ in outages],
+        "writes_during_outage": len(writes_in),
+        "writes_during_outage_statuses": _count(e[4] for e in writes_in),
+        "writes_during_outage_bad": [
+            e[2:] for e in writes_in if e[4] != 503 or "problem+json" not in e[5] or not e[6]
+        ][:10],
+        "write_seconds_max": round(max((e[1] - e[0] for e in fleet.log), default=0), 2),
+        "write_statuses": _count(e[4] for e in fleet.log),
+        "reads_during_outage": len(reads_in),
+        "reads_during_outage_failed": [e[2:] for e in reads_in if e[3] != 200][:10],
+        "reads": len(reads),
+        "reads_failed": [e[2:] for e in reads if e[3] != 200][:10],
+        "read_versions": sorted({e[4] for e in reads if e[4] is not None}),
+        "readyz_during_outage": len(ready_in),
+        "readyz_ready_during_outage": [e[2:] for e in ready_in if e[3] != 503][:10],
+        "readyz_not_problem": [
+            e[2:] for e in ready_in if "problem+json" not in e[4] or "Retry-After" in e[4]
+        ][:10],
+        "recovery_seconds": recovery,
+        "recovery_median": _median([r for r in recovery if r is not None]),
+        "recovery_max": max((r for r in recovery if r is not None), default=None),
+    }
+
+
+def _count(values) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for v in values:
+        out[str(v)] = out.get(str(v), 0) + 1
+    return out

@@ -4,11 +4,13 @@ on 2 APIs + 2 workers, and zero failed recognitions while 20 versions go live.""
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from tests.reliability import scenarios
 from tests.reliability.harness import KEEP_VERSIONS, Cluster
-from tests.service_fixtures import fresh_postgres_database, postgres_url
+from tests.service_fixtures import BEST_PARAMS, fresh_postgres_database, postgres_url
 
 pytestmark = pytest.mark.slow
 
@@ -97,3 +99,62 @@ def test_hot_swap_drops_no_recognition(tmp_path):
     assert report["versions_stored"] <= KEEP_VERSIONS + 1 and report["integrity_problems"] == [], (
         report
     )
+
+
+CI_OUTAGES = 3  # one of each stop mode; bench/reliability.py pg-outage runs more
+DB_TIMEOUT = 3.0
+
+
+def test_postgres_outage(tmp_path):
+    """A throwaway PostgreSQL server stopped (fast, immediate, SIGKILL) and restarted under
+    2 API processes and 2 workers: recognitions and descriptions keep being answered from
+    the loaded model (with an API key read before the outage), writes get a quick 503
+    problem with Retry-After, /readyz says not ready until the server is back, nothing is
+    restarted, and every 202'd enrolment reaches the served model."""
+    from tests.reliability.pgserver import PostgresServer, missing_reason
+
+    reason = missing_reason()
+    if reason:
+        pytest.skip(reason)
+    server = PostgresServer()
+    try:
+        server.start()
+        cluster = Cluster(
+            tmp_path / "outage",
+            server.url,
+            n_api=2,
+            n_workers=2,
+            extra_env={
+                # best predicts attributes, so POST /v1/describe answers too
+                "TACTILE_METHOD": "best",
+                "TACTILE_METHOD_PARAMS": json.dumps(BEST_PARAMS),
+                "TACTILE_DB_TIMEOUT_SECONDS": str(DB_TIMEOUT),
+                "TACTILE_PROMOTION_THRESHOLD": "1000",
+            },
+        )
+        try:
+            report = scenarios.pg_outage(cluster, server, faults=CI_OUTAGES, seed=3)
+        except BaseException:
+            print(cluster.logs())
+            print(server.logs())
+            raise
+        finally:
+            cluster.stop()
+    finally:
+        server.close()
+    print(report)
+    assert report["read_paths"] == ["/v1/recognize", "/v1/describe"], report
+    assert report["faults"] == CI_OUTAGES and set(report["modes"]) == {"fast", "immediate", "kill"}
+    assert report["restarts"] == [], report
+    # reads: every one answered from the loaded model, outage or not
+    assert report["reads_during_outage"] > 0 and report["reads_failed"] == [], report
+    # writes during the outage: 503 problem+json with Retry-After, none hanging
+    assert report["writes_during_outage"] > 0 and report["writes_during_outage_bad"] == [], report
+    assert set(report["write_statuses"]) <= {"202", "503"}, report
+    assert report["write_seconds_max"] <= DB_TIMEOUT + 1.5, report
+    # readiness follows the store, and comes back without a restart after every fault
+    assert report["readyz_during_outage"] > 0, report
+    assert report["readyz_ready_during_outage"] == report["readyz_not_problem"] == [], report
+    assert None not in report["recovery_seconds"], report
+    assert report["given_up"] == 0 and report["classes_202"] > 0, report
+    assert_nothing_lost(report)
