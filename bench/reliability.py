@@ -3,9 +3,12 @@
     .venv/bin/python -m bench.reliability crash --kills 50 [--postgres URL]
     .venv/bin/python -m bench.reliability concurrency --clients 100 --postgres URL
     .venv/bin/python -m bench.reliability hotswap --versions 20 [--postgres URL]
+    .venv/bin/python -m bench.reliability pg-outage --faults 15
 
 --postgres takes a server URL (e.g. postgresql://postgres@127.0.0.1:5432/test); the run
-gets a fresh database on it, dropped afterwards. Prints one JSON report.
+gets a fresh database on it, dropped afterwards. pg-outage starts a PostgreSQL server of
+its own instead (tests/reliability/pgserver.py), since it stops and crashes it; the
+service runs ``best`` there, so that POST /v1/describe answers too. Prints one JSON report.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ from tests.service_fixtures import fresh_postgres_database
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("scenario", choices=["crash", "concurrency", "hotswap"])
+    p.add_argument("scenario", choices=["crash", "concurrency", "hotswap", "pg-outage"])
     p.add_argument("--postgres", default="", help="PostgreSQL server URL; default SQLite")
     p.add_argument("--kills", type=int, default=50)
     p.add_argument("--clients", type=int, default=100)
@@ -32,7 +35,11 @@ def main() -> int:
     p.add_argument("--apis", type=int, default=2)
     p.add_argument("--workers", type=int, default=None)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--faults", type=int, default=15, help="pg-outage: server stops")
+    p.add_argument("--db-timeout", type=float, default=3.0, help="TACTILE_DB_TIMEOUT_SECONDS")
     args = p.parse_args()
+    if args.scenario == "pg-outage":
+        return pg_outage(args)
     workers = args.workers or (2 if args.scenario == "concurrency" else 1)
     with tempfile.TemporaryDirectory() as tmp, contextlib.ExitStack() as stack:
         url = stack.enter_context(fresh_postgres_database(args.postgres)) if args.postgres else ""
@@ -53,6 +60,43 @@ def main() -> int:
         finally:
             cluster.stop()
     report.update(scenario=args.scenario, store="postgresql" if args.postgres else "sqlite")
+    print(json.dumps(report, indent=2))
+    return 0
+
+
+def pg_outage(args: argparse.Namespace) -> int:
+    from tests.reliability.pgserver import PostgresServer, missing_reason
+    from tests.service_fixtures import BEST_PARAMS
+
+    if reason := missing_reason():
+        print(f"cannot run pg-outage: {reason}", file=sys.stderr)
+        return 2
+    server = PostgresServer()
+    with tempfile.TemporaryDirectory() as tmp:
+        try:
+            server.start()
+            cluster = Cluster(
+                Path(tmp) / "data",
+                server.url,
+                n_api=args.apis,
+                n_workers=args.workers or 2,
+                extra_env={
+                    "TACTILE_METHOD": "best",
+                    "TACTILE_METHOD_PARAMS": json.dumps(BEST_PARAMS),
+                    "TACTILE_DB_TIMEOUT_SECONDS": str(args.db_timeout),
+                    "TACTILE_PROMOTION_THRESHOLD": "1000",
+                },
+            )
+            try:
+                report = scenarios.pg_outage(cluster, server, args.faults, args.seed)
+            except BaseException:
+                print(cluster.logs(), server.logs(), sep="\n", file=sys.stderr)
+                raise
+            finally:
+                cluster.stop()
+        finally:
+            server.close()
+    report.update(scenario="pg-outage", store="postgresql (own server)", db_timeout=args.db_timeout)
     print(json.dumps(report, indent=2))
     return 0
 

@@ -5,23 +5,33 @@ in the middle of a request changes nothing for it; the swap itself is a single
 attribute assignment, which is atomic in Python. A background thread polls the
 active version number (one indexed row) and loads a new bundle off the request
 path, reading only the parts of its bundle this process does not hold yet.
+
+A version whose bundle is damaged (its bytes no longer match their SHA-256) is never
+served: a process that serves a model keeps it, and a process that starts with none
+falls back to the newest intact version before the active one. Either way it logs which
+version it serves and why, and ``degraded`` says so (``/readyz`` shows it); the damaged
+version is tried again every ``DAMAGED_RETRY_SECONDS``, at once when another one goes live.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
+import time
 from dataclasses import dataclass
 
 import numpy as np
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.framework.errors import BundleError
 from app.framework.recognizer import TactileRecognizer
 from app.service.metrics import Metrics
 from app.service.polling import Poller
 from app.store import bundles, repo
 
 log = logging.getLogger(__name__)
+
+DAMAGED_RETRY_SECONDS = 60.0
 
 
 @dataclass(frozen=True)
@@ -47,27 +57,73 @@ class ModelHolder(Poller):
         self._current: LoadedModel | None = None
         self._load_lock = threading.Lock()  # one load at a time; readers never take it
         self._parts = bundles.PartCache()
+        # (version, when it failed, why): the active version whose bundle cannot be loaded
+        self._damaged: tuple[int, float, str] | None = None
+        self.degraded: str | None = None  # why the served version is not the active one
 
     @property
     def current(self) -> LoadedModel | None:
         return self._current
 
     def refresh(self) -> bool:
-        """Load the active version if it is not the one served; True when swapped."""
+        """Load the active version if it is not the one served; True when swapped. When
+        its bundle is damaged, keep the served model, or, with none yet, load the newest
+        intact version before it (BundleError when there is none)."""
         with self._load_lock:
             with self._sessions() as s:
                 version = repo.active_version_number(s)
                 current = self._current
                 if version is None or (current is not None and current.version == version):
                     return False
+                if (
+                    current is not None
+                    and self._damaged is not None
+                    and self._damaged[0] == version
+                    and time.monotonic() - self._damaged[1] < DAMAGED_RETRY_SECONDS
+                ):
+                    return False  # tried a moment ago; its bytes have not healed since
                 row = repo.get_version(s, version)
                 if row is None:  # activated and pruned since the line above; poll again
                     return False
-                # parts the served model shares with the new one are not read again
-                recognizer = bundles.load_model(s, row.bundle_sha256, self._parts)
+                try:
+                    # parts the served model shares with the new one are not read again
+                    recognizer = bundles.load_model(s, row.bundle_sha256, self._parts)
+                except BundleError as exc:
+                    self._damaged = (version, time.monotonic(), str(exc))
+                    if current is not None:
+                        self._degrade(current.version, version, exc)
+                        return False
+                    served, recognizer = self._newest_intact(s, version, exc)
+                    self._degrade(served, version, exc)
+                    version = served
+                else:
+                    self._damaged = None
+                    self.degraded = None
                 class_ids = repo.class_ids_by_name(s)
             self._swap(version, recognizer, class_ids)
         return True
+
+    def _newest_intact(
+        self, s: Session, active: int, why: BundleError
+    ) -> tuple[int, TactileRecognizer]:
+        for row in reversed(repo.list_versions(s, summary=True)):
+            if row.version >= active:  # newer ones were rolled back from: not wanted
+                continue
+            try:
+                return row.version, bundles.load_model(s, row.bundle_sha256, self._parts)
+            except BundleError as exc:
+                log.error("model version %s cannot be loaded either: %s", row.version, exc)
+        raise BundleError(
+            f"the active model version {active} cannot be loaded ({why}) and no earlier "
+            "version is intact: restore the store from a backup"
+        )
+
+    def _degrade(self, served: int, active: int, why: BundleError) -> None:
+        self.degraded = (
+            f"serving model version {served}, not the active version {active}: "
+            f"version {active} cannot be loaded ({why})"
+        )
+        log.error("%s; `tactile-zsl store check` names the damage", self.degraded)
 
     def serve(self, version: int, recognizer: TactileRecognizer) -> bool:
         """Serve a model this process has built (the embedded worker's) as ``version``
@@ -78,6 +134,8 @@ class ModelHolder(Poller):
                 current = repo.active_version_number(s) == version
                 class_ids = repo.class_ids_by_name(s) if current else {}
             if current:
+                self._damaged = None
+                self.degraded = None
                 self._swap(version, recognizer, class_ids)
                 self._parts.keep_only(set())  # the cached parts belong to no served model now
                 return True

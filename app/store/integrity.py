@@ -67,16 +67,27 @@ def _check(engine: Engine, problems: list[str]) -> None:
         rows = conn.execution_options(stream_results=True, yield_per=1).execute(
             text("SELECT sha256, data FROM bundles")
         )
-        for sha, data in rows:
-            if hashlib.sha256(bytes(data)).hexdigest() != sha:
-                problems.append(f"bundle {sha[:12]} does not match its hash")
+        damaged = {sha for sha, data in rows if hashlib.sha256(bytes(data)).hexdigest() != sha}
         stored = set(conn.execute(text("SELECT sha256 FROM bundles")).scalars())
         heads = conn.execution_options(stream_results=True, yield_per=1).execute(
             text(
-                "SELECT v.version, b.data FROM model_versions v "
-                "JOIN bundles b ON b.sha256 = v.bundle_sha256"
+                "SELECT v.version, v.bundle_sha256, b.data FROM model_versions v "
+                "JOIN bundles b ON b.sha256 = v.bundle_sha256 ORDER BY v.version"
             )
         )
-        for version, data in heads:
-            if set(bundle.part_refs(bytes(data)).values()) - stored:
+        users: dict[str, list[str]] = {sha: [] for sha in damaged}  # what each damaged one is
+        for version, head_sha, data in heads:
+            if head_sha in damaged:
+                users[head_sha].append(f"the model of version {version}")
+            try:
+                refs = set(bundle.part_refs(bytes(data)).values())
+            except Exception as exc:  # a damaged head may not even parse
+                problems.append(f"version {version}: its bundle cannot be read ({exc})")
+                continue
+            if refs - stored:
                 problems.append(f"version {version} refers to bundle parts that are not stored")
+            for sha in refs & damaged:
+                users[sha].append(f"a part of version {version}")
+        for sha in sorted(damaged):
+            used = "; ".join(users[sha]) or "used by no version"
+            problems.append(f"bundle {sha[:12]} does not match its hash ({used})")

@@ -570,8 +570,13 @@ def _outage_figures(outages, fleet: Enroller, reads, ready, n_api: int) -> dict:
         recovery.append(
             None if None in points or max(points) > until else round(max(points) - up, 2)
         )
+    # an answer is an HTTP status; the rest is an exception's name (cut, timed out)
+    statuses = [e[4] for e in writes_in] + [e[3] for e in reads_in + ready_in]
     return {
         "faults": len(outages),
+        "requests_during_outage": len(statuses),
+        "answered_during_outage": sum(isinstance(st, int) for st in statuses),
+        "reads_failed_count": sum(e[3] != 200 for e in reads),
         "outage_seconds": [round(r - d, 2) for d, r, _ in outages],
         "writes_during_outage": len(writes_in),
         "writes_during_outage_statuses": _count(e[4] for e in writes_in),

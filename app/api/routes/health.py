@@ -2,6 +2,7 @@ import logging
 
 from fastapi import APIRouter, Request, Response
 from prometheus_client import CONTENT_TYPE_LATEST
+from pydantic import Field
 from sqlalchemy.exc import SQLAlchemyError
 
 from app.api import problems
@@ -22,17 +23,32 @@ async def healthz(holder: HolderDep) -> Health:
     return Health(status="ok", model_version=None if model is None else model.version)
 
 
-@router.get("/readyz", response_model=Health, responses=problems.responses(503))
-def readyz(session: SessionDep, holder: HolderDep) -> Health:
-    """The store answers and a model is loaded."""
+class Readiness(Health):
+    detail: str | None = Field(
+        None,
+        description="Set when the process serves another version than the active one, and "
+        "why: the active version's stored bundle is damaged (`tactile-zsl store check` "
+        "names it), so it serves the newest intact one.",
+    )
+
+
+@router.get(
+    "/readyz",
+    response_model=Readiness,
+    response_model_exclude_none=True,  # detail only when there is something to say
+    responses=problems.responses(503),
+)
+def readyz(session: SessionDep, holder: HolderDep) -> Readiness:
+    """The store answers and a model is loaded (503 with `Retry-After` otherwise)."""
     try:
         ping(session)
-    except SQLAlchemyError:
-        raise Problem(503, "the store is not reachable", "database") from None
+    except SQLAlchemyError as exc:
+        log.warning("readyz: the store is not reachable: %s", getattr(exc, "orig", exc))
+        raise Problem(503, "the store is not reachable", "database", {"Retry-After": "1"}) from None
     model = holder.current
     if model is None:
         raise Problem(503, "no model is loaded yet", "model", {"Retry-After": "5"})
-    return Health(status="ready", model_version=model.version)
+    return Readiness(status="ready", model_version=model.version, detail=holder.degraded)
 
 
 @router.get(
