@@ -151,7 +151,8 @@ class Worker:
             model = self._load(s, base.version, base.bundle_sha256)
             jobs = repo.get_jobs(s, job_ids)
             plan = make_plan(s, base, model, jobs, self.settings.promotion_threshold)
-            known = known_dataset(s, plan) if plan.rebuild is Rebuild.FULL else None
+            refit = plan.rebuild in (Rebuild.FULL, Rebuild.ATTRIBUTES)
+            known = known_dataset(s, plan) if refit else None
         # the session is closed: no transaction stays open while training runs
         if plan.changes_model:
             log.info(
@@ -194,6 +195,7 @@ class Worker:
             bundle_sha256=bundles.store_model(s, split),
             input_shape=list(new.input_shape),
             input_kind=new.input_kind,
+            attribute_names=list(new.registry.attribute_names),
             metrics=repo.jsonable(new.metrics),
             classes=model_classes(new),
             sample_ids=plan.sample_ids,

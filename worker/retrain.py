@@ -13,6 +13,13 @@ have fine-tuned shared parts (the paper's generator): a fresh fit is the one way
 no trace of it. Methods whose novel part is rebuilt from the registry alone
 (``novel_part_separable``, e.g. ``best``) drop their novel classes and add the live
 ones back instead.
+
+When the attribute vocabulary changed (an attribute added or retired) or a known class's
+values did, methods whose attribute parts can be refitted alone (``attributes_separable``,
+``best``) refit only those on the stored samples (``with_attributes``) and add every live
+novel class back; others (the paper's pipeline, whose G takes the vocabulary as its
+input) are fitted again. Class descriptions become vectors over the store's active
+attributes (``app.store.vocabulary``), NaN where a value is not known.
 """
 
 from __future__ import annotations
@@ -31,6 +38,7 @@ from app.framework.registry import make_method
 from app.store import repo
 from app.store.enums import ClassKind, JobKind, JobStatus, Origin, SampleForm, VersionReason
 from app.store.models import Job, ModelVersion, ObjectClass, Sample
+from app.store.vocabulary import Vocabulary, describes
 
 # enrolled samples get trial ids far above any dataset's, one trial per sample
 ENROLLED_TRIAL_OFFSET = 1_000_000_000
@@ -42,11 +50,13 @@ class Rebuild(StrEnum):
     NONE = "none"  # the base model holds everything already: no new version
     INCREMENTAL = "incremental"  # the plan's new classes and samples added to the base
     NOVEL_PART = "novel part"  # the base's novel classes dropped, every live one added anew
+    ATTRIBUTES = "attributes"  # the attribute parts refitted, every live novel class added anew
     FULL = "full"  # fitted again on the stored samples, every live novel class added
 
 
 @dataclass
 class Plan:
+    vocabulary: Vocabulary = field(default_factory=Vocabulary)  # the store's, as planned
     rebuild: Rebuild = Rebuild.NONE
     reason: VersionReason = VersionReason.UPDATE  # the new model version's
     # what an incremental rebuild adds: classes the base lacks, new samples by class name
@@ -72,7 +82,7 @@ class Plan:
 def make_plan(
     s: Session, base: ModelVersion, model: TactileRecognizer, claimed: list[Job], threshold: int
 ) -> Plan:
-    plan = Plan()
+    plan = Plan(vocabulary=repo.vocabulary(s))
     claimed_ids = {j.id for j in claimed}
     classes = repo.list_classes(s)  # withdrawn ones are not among them
     by_id = {c.id: c for c in classes}
@@ -80,12 +90,18 @@ def make_plan(
     live_samples = set()
     redescribed = False  # an operator changed a class's attributes (PATCH)
     for job in claimed:
+        if job.kind in (JobKind.ADD_ATTRIBUTE, JobKind.RETIRE_ATTRIBUTE):
+            continue  # the vocabulary is compared with the base's below
         if (
             job.kind in (JobKind.REGISTER_CLASS, JobKind.ADD_SAMPLE, JobKind.UPDATE_CLASS)
             and job.class_id not in by_id
         ):
             plan.rejected[job.id] = f"class {job.class_id} was withdrawn"
-        elif job.kind == JobKind.UPDATE_CLASS and job.class_id not in live_classes:
+        elif (
+            job.kind == JobKind.UPDATE_CLASS
+            and by_id[job.class_id].origin == Origin.ENROLLED
+            and job.class_id not in live_classes
+        ):
             plan.rejected[job.id] = (
                 f"class '{by_id[job.class_id].name}' is not enrolled: its registration failed"
             )
@@ -114,7 +130,7 @@ def make_plan(
             job.kind == JobKind.REGISTER_CLASS
             and job.id not in plan.rejected
             and cls is not None
-            and not cls.attribute_key
+            and not describes(plan.vocabulary, cls.attribute_key)
             and not plan.samples.get(cls.id)
         ):
             plan.rejected[job.id] = (
@@ -148,11 +164,22 @@ def make_plan(
                 plan.new_classes.append(cls)
             if missing:
                 plan.new_samples[cls.name] = missing
-    known_part, novel_part = _holds_withdrawn(s, reg, in_base - live_samples, in_model)
+    same_vocabulary = plan.vocabulary.active == tuple(reg.attribute_names)
+    known_part, novel_part, known_values = _holds_withdrawn(
+        s, reg, in_base - live_samples, in_model, plan.vocabulary if same_vocabulary else None
+    )
     known_part |= bool(plan.demote)
-    stale = known_part or novel_part  # the base holds what the store withdrew or changed
-    if full or known_part or (novel_part and not model.novel_part_separable):
+    attributes = known_values or not same_vocabulary  # what the attribute parts learnt changed
+    stale = known_part or novel_part or attributes  # the base holds what the store changed
+    if (
+        full
+        or known_part
+        or (novel_part and not model.novel_part_separable)
+        or (attributes and not model.attributes_separable)
+    ):
         plan.rebuild = Rebuild.FULL
+    elif attributes:
+        plan.rebuild = Rebuild.ATTRIBUTES
     elif novel_part:
         plan.rebuild = Rebuild.NOVEL_PART
     elif plan.new_classes or plan.new_samples:
@@ -161,7 +188,7 @@ def make_plan(
     # does; asked for by PATCH, that is an update.
     if plan.promote or (full and not stale):
         plan.reason = VersionReason.PROMOTION
-    elif stale and not redescribed:
+    elif stale and not redescribed and not attributes:
         plan.reason = VersionReason.WITHDRAWAL
     return plan
 
@@ -177,55 +204,74 @@ def _live_registrations(s: Session, claimed_ids: set[int]) -> set[int]:
 
 
 def _holds_withdrawn(
-    s: Session, reg: ClassRegistry, stale_samples: set[int], in_model: list[ObjectClass]
-) -> tuple[bool, bool]:
+    s: Session,
+    reg: ClassRegistry,
+    stale_samples: set[int],
+    in_model: list[ObjectClass],
+    vocabulary: Vocabulary | None,
+) -> tuple[bool, bool, bool]:
     """Whether the base model's known part, and its novel part, hold a withdrawn sample or
-    class, or a class as it was before it was withdrawn and registered again: other
-    attributes, or known where the store now has it novel (promotion only ever goes the
-    other way)."""
+    class, or a class as it was before it was withdrawn and registered again: known where
+    the store now has it novel (promotion only ever goes the other way), or, for a novel
+    class, other attributes; and whether a known class's attributes changed. Descriptions
+    are compared only where the base has the store's ``vocabulary`` (None: it has not, and
+    every description is learnt anew)."""
     live = {c.name: c for c in in_model}
     known, novel = set(reg.known_names), set(reg.novel_names)
     stale_classes = repo.class_names_of_samples(s, stale_samples)
     stale_classes |= set(reg.all_names) - set(live)
-    for names, vectors in (
-        (reg.known_names, reg.known_attributes),
-        (reg.novel_names, reg.novel_attributes),
-    ):
-        for name, vector in zip(names, vectors, strict=True):
-            if name in live and repo.vector_key(vector) != live[name].attribute_key:
-                stale_classes.add(name)
+    known_values = False
+    if vocabulary is not None:
+        for names, vectors in (
+            (reg.known_names, reg.known_attributes),
+            (reg.novel_names, reg.novel_attributes),
+        ):
+            for name, vector in zip(names, vectors, strict=True):
+                if name not in live or not vocabulary.active:
+                    continue
+                if vocabulary.key_of_vector(vector) != live[name].attribute_key:
+                    if name in known:
+                        known_values = True
+                    else:
+                        stale_classes.add(name)
     stale_classes |= {name for name in known if name in live and live[name].kind == ClassKind.NOVEL}
     unplaced = stale_classes - known - novel  # cannot happen; if it does, retrain it all
-    return bool(stale_classes & known or unplaced), bool(stale_classes & novel)
+    return bool(stale_classes & known or unplaced), bool(stale_classes & novel), known_values
 
 
 def build(
     plan: Plan, model: TactileRecognizer, settings: Settings, known: TactileDataset | None = None
 ) -> TactileRecognizer:
     """The new recognizer; the base model is never modified. A full retrain fits a
-    fresh model on ``known`` (from ``known_dataset``) first; a novel-part rebuild starts
-    from the base's known part alone."""
-    if plan.rebuild in (Rebuild.FULL, Rebuild.NOVEL_PART):
+    fresh model on ``known`` (from ``known_dataset``) first; an attribute rebuild refits the
+    base's attribute parts on ``known``; a novel-part rebuild starts from the base's known
+    part alone."""
+    vocabulary = plan.vocabulary
+    if plan.rebuild in (Rebuild.FULL, Rebuild.ATTRIBUTES, Rebuild.NOVEL_PART):
         if plan.rebuild is Rebuild.FULL:
             model = make_method(settings.method, **settings.method_params).fit(known)
+        elif plan.rebuild is Rebuild.ATTRIBUTES:
+            model = model.with_attributes(known)
         else:
             model = model.without_novel_classes()
         new_classes = plan.novel
         new_samples = {c.name: plan.samples[c.id] for c in plan.novel if plan.samples.get(c.id)}
     else:
         new_classes, new_samples = plan.new_classes, dict(plan.new_samples)
-    described = [c for c in new_classes if c.attribute_key]
+    described = [
+        c for c in new_classes if model.has_attributes and describes(vocabulary, c.attribute_key)
+    ]
     if described:
         model = model.add_novel_classes(
             [c.name for c in described],
-            np.stack([repo.key_vector(c.attribute_key) for c in described]),
+            np.stack([vocabulary.vector(c.attribute_key) for c in described]),
         )
     # classes registered without a description (a model without attributes) are learnt
     # from their samples; one whose samples are not in this round waits for them
     learnt = {
         c.name: _samples(model, new_samples.pop(c.name))
         for c in new_classes
-        if not c.attribute_key and c.name in new_samples
+        if c not in described and c.name in new_samples
     }
     if learnt:
         model = model.add_novel_classes_from_samples(learnt)
@@ -251,7 +297,8 @@ def known_dataset(s: Session, plan: Plan) -> TactileDataset | BioTacDataset:
     trials = np.array(
         [r.trial if r.trial is not None else ENROLLED_TRIAL_OFFSET + r.id for r in rows]
     )
-    attributes = np.stack([repo.key_vector(c.attribute_key) for c in known])
+    vocabulary = plan.vocabulary
+    attributes = np.stack([vocabulary.vector(c.attribute_key) for c in known])
     names = [c.name for c in known]
     if rows and rows[0].form == SampleForm.RAW_TRIAL:  # the model fits its featurizer anew
         return BioTacDataset(
@@ -259,7 +306,7 @@ def known_dataset(s: Session, plan: Plan) -> TactileDataset | BioTacDataset:
             labels=labels,
             trial_ids=trials,
             class_names=names,
-            attribute_names=repo.attribute_names(s),
+            attribute_names=vocabulary.active,
             attribute_values=attributes,
             name="store",
         )
@@ -268,7 +315,7 @@ def known_dataset(s: Session, plan: Plan) -> TactileDataset | BioTacDataset:
         labels=labels,
         trials=trials,
         class_attributes=attributes,
-        attribute_names=repo.attribute_names(s),
+        attribute_names=vocabulary.active,
         class_names=names,
         object_ids=[c.id for c in known],
         name="store",

@@ -19,7 +19,15 @@ ClassName = Annotated[
         strip_whitespace=True, min_length=1, max_length=200, pattern=r"^[^\x00-\x1f\x7f]+$"
     ),
 ]
-Bit = Annotated[int, Field(ge=0, le=1)]
+# an attribute's value for a class: 1 has it, 0 has it not, graded in between ("somewhat
+# soft": 0.5); kept to 4 decimals
+AttributeValue = Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
+AttributeName = Annotated[
+    str,
+    StringConstraints(
+        strip_whitespace=True, min_length=1, max_length=100, pattern=r"^[^\x00-\x1f\x7f,]+$"
+    ),
+]
 
 
 class Strict(BaseModel):
@@ -29,19 +37,67 @@ class Strict(BaseModel):
 
 
 # ------------------------------------------------------------------ attributes
+class AttributeOut(BaseModel):
+    model_config = ConfigDict(from_attributes=True)
+
+    name: str
+    origin: Origin = Field(
+        description="`dataset`: the bootstrap dataset's (its values for the dataset's classes "
+        "stay fixed); `enrolled`: added through `POST /v1/attributes`."
+    )
+    created_at: datetime | None
+    retired_at: datetime | None = Field(
+        description="When it was retired (`DELETE /v1/attributes/{name}`): later models leave "
+        "it out; null while it is in use."
+    )
+
+
 class AttributeList(BaseModel):
-    attributes: list[str] = Field(description="The vocabulary, in attribute-vector order.")
+    attributes: list[str] = Field(
+        description="The vocabulary now in use, in attribute-vector order (`attribute_vector` "
+        "and `POST /v1/describe` use it); an attribute added later comes after the others."
+    )
+    vocabulary: list[AttributeOut] = Field(
+        description="Every attribute, retired ones included (names are never reused)."
+    )
+
+
+class AttributeCreate(Strict):
+    """A new attribute, and its value for the classes an operator knows it for."""
+
+    name: AttributeName = Field(examples=["sticky"])
+    values: dict[str, AttributeValue] = Field(
+        default_factory=dict,
+        description="Class name -> value in [0, 1]. Classes given no value are not known for "
+        "the attribute: they are left out of its training, never counted as 0.",
+        examples=[{"tape": 1, "sponge": 0, "rubber band": 0.5}],
+    )
+
+
+class AttributeChanged(BaseModel):
+    attribute: AttributeOut
+    job: JobOut = Field(
+        description="Poll it: the attribute is in the served model when it succeeds."
+    )
 
 
 # --------------------------------------------------------------------- classes
 class ClassDescription(Strict):
-    """How an operator describes an object: by attribute names or by a 0/1 vector."""
+    """How an operator describes an object: by attribute names (a list: these it has, every
+    other it has not), by values (a mapping of names to values in [0, 1], or null for not
+    known; attributes left out are not known, or, in a `PATCH`, keep their value), or by a
+    vector in `GET /v1/attributes` order (null: not known). At least one value above 0."""
 
-    attributes: list[str] | None = Field(
-        None, description="Attribute names that describe the object.", examples=[["hard", "smooth"]]
+    attributes: list[str] | dict[str, AttributeValue | None] | None = Field(
+        None,
+        description="Attribute names the object has, or a mapping of names to values in [0, "
+        "1] (0.5: somewhat; null: not known).",
+        examples=[["hard", "smooth"], {"hard": 1, "smooth": 0.5}],
     )
-    attribute_vector: list[Bit] | None = Field(
-        None, description="0/1 per attribute, in GET /v1/attributes order."
+    attribute_vector: list[AttributeValue | None] | None = Field(
+        None,
+        description="A value in [0, 1] (or null: not known) per attribute, in "
+        "`GET /v1/attributes` order.",
     )
 
     @model_validator(mode="after")
@@ -52,15 +108,15 @@ class ClassDescription(Strict):
 
 
 class ClassCreate(ClassDescription):
-    """A novel class: described by its attributes (zero-shot), or, for a model without
-    attributes, learnt from real samples or raw trials sent with it."""
+    """A novel class: described by its attributes (zero-shot), learnt from real samples or
+    raw trials sent with it, or both."""
 
     name: ClassName
     samples: list[SampleData] | None = Field(
         None,
         min_length=1,
-        description="Real samples of the object, for a model without attributes "
-        "(`GET /v1/attributes` empty): the class is recognised from them alone.",
+        description="Real samples of the object: without a description, the class is "
+        "recognised from them alone (method `best`).",
     )
     trials: list[TrialIn] | None = Field(
         None,
@@ -70,15 +126,12 @@ class ClassCreate(ClassDescription):
 
     @model_validator(mode="after")
     def _one_description(self) -> ClassCreate:
-        given = [
-            f
-            for f in ("attributes", "attribute_vector", "samples", "trials")
-            if getattr(self, f) is not None
-        ]
-        if len(given) != 1:
+        described = [f for f in ("attributes", "attribute_vector") if getattr(self, f) is not None]
+        shown = [f for f in ("samples", "trials") if getattr(self, f) is not None]
+        if len(described) > 1 or len(shown) > 1 or not (described or shown):
             raise ValueError(
-                "give exactly one of 'attributes' or 'attribute_vector' (a description), or "
-                "'samples' or 'trials' (for a model without attributes)"
+                "give one of 'attributes' or 'attribute_vector' (a description), one of "
+                "'samples' or 'trials' (the object's touches), or one of each"
             )
         return self
 
@@ -87,7 +140,11 @@ class ClassOut(BaseModel):
     id: int
     name: str
     kind: ClassKind
-    attributes: list[str]
+    attributes: list[str] = Field(description="The attributes it has (value 0.5 or more).")
+    attribute_values: dict[str, float] = Field(
+        default_factory=dict,
+        description="Every known value, by attribute name; attributes not known are absent.",
+    )
     n_samples: int = Field(description="Real tactile samples stored for the class.")
     created_at: datetime
     in_active_model: bool = Field(description="Whether the model now serving covers the class.")
@@ -110,8 +167,11 @@ class JobOut(BaseModel):
     id: int
     kind: JobKind
     status: JobStatus
-    class_id: int
+    class_id: int | None = Field(description="The class it is about; null for an attribute's.")
     sample_id: int | None
+    attribute_id: int | None = Field(
+        None, description="The attribute it is about (`add_attribute`, `retire_attribute`)."
+    )
     model_version: int | None = Field(
         description="The version that includes the enrollment; for a withdrawal, the first "
         "active version without the class or sample."
@@ -343,6 +403,11 @@ class ModelSummary(BaseModel):
     )
     metrics: dict[str, Any]
     class_count: int = Field(description="Classes the version recognises, known and novel.")
+    attribute_names: list[str] | None = Field(
+        None,
+        description="The attribute vocabulary the version was trained with, in its vectors' "
+        "order: a rollback answers `POST /v1/describe` with it.",
+    )
 
 
 class ModelOut(ModelSummary):
@@ -362,6 +427,7 @@ class Health(BaseModel):
     )
 
 
+AttributeChanged.model_rebuild()
 SampleCreate.model_rebuild()
 SampleDetail.model_rebuild()
 ClassCreate.model_rebuild()

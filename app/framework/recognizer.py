@@ -681,12 +681,13 @@ class TactileRecognizer(ABC):
         least one; for a raw-trial model, e.g. ``trial_samples([trial])[0]``). Later samples
         come with ``add_one_shot`` as for any novel class.
 
-        Only a model without attributes (M = 0) takes them, and only methods that can
-        recognise a class from its samples alone (``best``): elsewhere a novel class is
+        Only methods that can recognise a class from its samples alone (``best``) take
+        them: on a model without attributes (M = 0), or one with ``graded_attributes``, where
+        such a class's vector is not known for every attribute. Elsewhere a novel class is
         described by attributes (``add_novel_classes``) and UnsupportedOperationError says so.
         """
         self._require_fitted()
-        if self.has_attributes:
+        if self.has_attributes and not self.graded_attributes:
             raise UnsupportedOperationError(
                 "this model describes classes by attributes: enrol a class with its attributes "
                 "(add_novel_classes), then add its samples (add_one_shot)"
@@ -709,7 +710,8 @@ class TactileRecognizer(ABC):
             checked[name] = self.validate_samples(x)
         new = copy.deepcopy(self)
         new.registry.novel_names = reg.novel_names + list(checked)
-        new.registry.novel_attributes = np.zeros((len(new.registry.novel_names), 0), np.float32)
+        unknown = np.full((len(checked), len(reg.attribute_names)), np.nan, np.float32)
+        new.registry.novel_attributes = np.concatenate([reg.novel_attributes, unknown])
         new.registry.novel_samples.update(checked)
         new._refit_novel(**options)
         return new
@@ -823,7 +825,7 @@ class TactileRecognizer(ABC):
         unknown = [a for a in attribute_names if a not in vocab]
         if unknown:
             raise AttributeVectorError(
-                f"unknown attribute(s): {'; '.join(map(_suggest(vocab), unknown))}; "
+                f"unknown attribute(s): {'; '.join(map(suggest_attribute(vocab), unknown))}; "
                 f"the attributes are: {', '.join(vocab)}"
             )
         return np.array([1.0 if a in set(attribute_names) else 0.0 for a in vocab], np.float32)
@@ -925,7 +927,7 @@ def fuse_groups(
     )
 
 
-def _suggest(vocabulary: Sequence[str]) -> Callable[[Any], str]:
+def suggest_attribute(vocabulary: Sequence[str]) -> Callable[[Any], str]:
     """An unknown attribute name with the vocabulary's closest ones, for a typo."""
 
     def named(name: Any) -> str:

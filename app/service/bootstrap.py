@@ -23,6 +23,7 @@ from app.framework.recognizer import TactileRecognizer
 from app.framework.registry import make_method
 from app.store import bundles, leases, migrate, repo
 from app.store.enums import ClassKind, Origin, VersionReason
+from app.store.vocabulary import vector_key
 
 LEASE = "bootstrap"
 Dataset = TactileDataset | BioTacDataset
@@ -92,11 +93,9 @@ def store_base_model(s: Session, model: TactileRecognizer, dataset: Dataset) -> 
     model as version 1, active."""
     repo.add_attributes(s, dataset.attribute_names)
     ids = []
-    vectors = np.nan_to_num(dataset.attribute_values)  # not known: stored as absent (0)
-    for name, vector in zip(dataset.class_names, vectors, strict=True):
-        ids.append(
-            repo.add_class(s, name, repo.vector_key(vector), ClassKind.KNOWN, Origin.DATASET).id
-        )
+    # graded values as they are, values not known as not known
+    for name, vector in zip(dataset.class_names, dataset.attribute_values, strict=True):
+        ids.append(repo.add_class(s, name, vector_key(vector), ClassKind.KNOWN, Origin.DATASET).id)
     row = repo.add_version(
         s,
         method=model.method,
@@ -105,6 +104,7 @@ def store_base_model(s: Session, model: TactileRecognizer, dataset: Dataset) -> 
         bundle_sha256=bundles.store_model(s, bundle.split(model)),
         input_shape=list(model.input_shape),
         input_kind=model.input_kind,
+        attribute_names=list(model.registry.attribute_names),
         metrics=repo.jsonable(model.metrics),
         classes=model_classes(model),
         sample_ids=[],

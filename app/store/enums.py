@@ -18,6 +18,8 @@ class JobKind(StrEnum):
     UPDATE_CLASS = "update_class"  # a class described anew (its attributes changed)
     WITHDRAW_CLASS = "withdraw_class"
     WITHDRAW_SAMPLE = "withdraw_sample"
+    ADD_ATTRIBUTE = "add_attribute"  # an attribute added to the vocabulary, with values
+    RETIRE_ATTRIBUTE = "retire_attribute"  # an attribute taken out of later models
 
 
 class JobStatus(StrEnum):

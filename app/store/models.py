@@ -63,13 +63,22 @@ class Base(DeclarativeBase):
 
 
 class Attribute(Base):
-    """The attribute vocabulary; ``position`` is the column in attribute vectors."""
+    """The attribute vocabulary; ``position`` is the attribute's token in class keys
+    (``app.store.vocabulary``). Names are never reused, retired ones included, so a model
+    version's vocabulary keeps its meaning."""
 
     __tablename__ = "attributes"
 
     id: Mapped[int] = mapped_column(primary_key=True)
     position: Mapped[int] = mapped_column(Integer, unique=True)
     name: Mapped[str] = mapped_column(String(200), unique=True)
+    # the bootstrap dataset's (its values for the dataset's classes stay fixed) or enrolled
+    origin: Mapped[str] = mapped_column(
+        String(10), default=Origin.DATASET, server_default=Origin.DATASET.value
+    )
+    created_at: Mapped[datetime | None] = mapped_column(UTCDateTime, default=utcnow)
+    # set when an operator retires it: later models leave it out, older versions keep it
+    retired_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
 
 
 LIVE_ENROLLED = f"origin = '{Origin.ENROLLED}' AND withdrawn_at IS NULL"
@@ -84,8 +93,8 @@ class ObjectClass(Base):
     name: Mapped[str] = mapped_column(String(200), unique=True)
     kind: Mapped[str] = mapped_column(String(10))  # ClassKind
     origin: Mapped[str] = mapped_column(String(10))  # Origin
-    # the 0/1 attribute vector as a string of digits, e.g. "0110..."
-    attribute_key: Mapped[str] = mapped_column(String(1000), index=True)
+    # the description, one token per attribute position: "1,0,0.5,,1" (app.store.vocabulary)
+    attribute_key: Mapped[str] = mapped_column(String(2600), index=True)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     promoted_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
     # set when an operator withdraws a wrongly enrolled class: it leaves every later
@@ -150,6 +159,8 @@ class ModelVersion(Base):
     # input_shape images of them)
     input_kind: Mapped[str] = mapped_column(String(12), default="samples", server_default="samples")
     metrics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    # the attribute vocabulary the version was trained with, in its vectors' order
+    attribute_names: Mapped[list[str] | None] = mapped_column(JSON)
     classes: Mapped[list[dict[str, Any]]] = mapped_column(JSON)  # [{"name", "kind"}]
     sample_ids: Mapped[list[int]] = mapped_column(JSON, default=list)  # enrolled samples inside
     active: Mapped[bool] = mapped_column(Boolean, default=False)
@@ -186,8 +197,10 @@ class Job(Base):
     id: Mapped[int] = mapped_column(primary_key=True)
     kind: Mapped[str] = mapped_column(String(20))  # JobKind
     status: Mapped[str] = mapped_column(String(10), default=JobStatus.QUEUED)  # JobStatus
-    class_id: Mapped[int] = mapped_column(ForeignKey("classes.id"), index=True)
+    # the class the job is about; None for a job about an attribute (attribute_id)
+    class_id: Mapped[int | None] = mapped_column(ForeignKey("classes.id"), index=True)
     sample_id: Mapped[int | None] = mapped_column(ForeignKey("samples.id"))
+    attribute_id: Mapped[int | None] = mapped_column(ForeignKey("attributes.id"))
     model_version: Mapped[int | None] = mapped_column(Integer)
     error: Mapped[str | None] = mapped_column(Text)
     # the principal that queued it: key:<id>, env:<hash prefix> or addr:<ip> (keys.Principal)

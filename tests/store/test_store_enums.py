@@ -35,6 +35,8 @@ def test_members_are_the_strings_stored_and_sent():
         "update_class",
         "withdraw_class",
         "withdraw_sample",
+        "add_attribute",
+        "retire_attribute",
     ]
 
 

@@ -14,7 +14,7 @@ from app.store import migrate
 from app.store.db import make_engine
 from tests.service_fixtures import fresh_postgres_database, postgres_url, require_postgres
 
-HEAD = "0006"
+HEAD = "0007"
 PG_URL = postgres_url()
 
 TABLES = {

@@ -13,6 +13,7 @@ from app.framework.errors import BundleError
 from app.store import db, leases, repo
 from app.store.enums import ClassKind, JobKind, JobStatus
 from app.store.models import Bundle, Job, ModelVersion
+from app.store.vocabulary import Vocabulary, describes, key_values, vector_key
 
 
 def test_sample_round_trip_is_exact():
@@ -24,8 +25,23 @@ def test_sample_round_trip_is_exact():
 
 def test_vector_key_round_trip():
     v = np.array([0, 1, 1, 0, 1], np.float32)
-    assert repo.vector_key(v) == "01101"
-    assert np.array_equal(repo.key_vector("01101"), v)
+    assert vector_key(v) == "0,1,1,0,1"
+    vocab = Vocabulary(names=("a", "b", "c", "d", "e"))
+    assert np.array_equal(vocab.vector("0,1,1,0,1"), v)
+
+
+def test_keys_hold_graded_and_unknown_values_and_keep_their_meaning_as_attributes_grow():
+    assert vector_key([1, None, 0.5, np.nan, 0.123456, None]) == "1,,0.5,,0.1235"
+    assert key_values("1,,0.5", 5) == [1.0, None, 0.5, None, None]
+    vocab = Vocabulary(names=("hard", "soft", "warm"), retired=frozenset({"soft"}))
+    assert vocab.active == ("hard", "warm")
+    key = vocab.key({"hard": 1.0})
+    assert key == "1"
+    np.testing.assert_array_equal(vocab.vector(key), [1.0, np.nan])
+    assert vocab.values(vocab.key({"warm": 0.25}, base=key)) == {"hard": 1.0, "warm": 0.25}
+    assert vocab.without("1,0,1", "hard") == ",0,1"
+    assert vocab.key_of_vector([np.nan, 0.5]) == ",,0.5"
+    assert not describes(vocab, vocab.key({"hard": 0.0})) and describes(vocab, key)
 
 
 def test_jsonable_makes_strict_json():

@@ -1,6 +1,3 @@
-from collections.abc import Sequence
-
-import numpy as np
 from fastapi import APIRouter, Response
 from sqlalchemy.orm import Session
 
@@ -18,6 +15,7 @@ from app.api.deps import (
     RowId,
     SessionDep,
 )
+from app.api.descriptions import description_key, field_of
 from app.api.problems import Problem, blame, not_found
 from app.api.routes.samples import one_sample
 from app.api.schemas import (
@@ -37,6 +35,7 @@ from app.service.metrics import Metrics
 from app.store import repo
 from app.store.enums import JobKind, Origin
 from app.store.models import Job, ObjectClass
+from app.store.vocabulary import Vocabulary
 
 router = APIRouter(
     prefix="/v1/classes", tags=["classes"], responses=problems.responses(401, 403, 422, 429)
@@ -44,14 +43,16 @@ router = APIRouter(
 
 
 def class_out(
-    cls: ObjectClass, vocabulary: Sequence[str], n_samples: int, model: LoadedModel | None
+    cls: ObjectClass, vocabulary: Vocabulary, n_samples: int, model: LoadedModel | None
 ) -> ClassOut:
     served = model is not None and cls.name in model.recognizer.registry.all_names
+    values = vocabulary.values(cls.attribute_key)
     return ClassOut(
         id=cls.id,
         name=cls.name,
         kind=cls.kind,
-        attributes=repo.attribute_labels(cls.attribute_key, vocabulary),
+        attributes=[n for n, v in values.items() if v >= 0.5],
+        attribute_values=values,
         n_samples=n_samples,
         created_at=cls.created_at,
         in_active_model=served,
@@ -65,7 +66,7 @@ def list_classes(session: SessionDep, model: ModelDep, page: PageDep) -> ClassLi
     rows, next_after = page.cut(
         repo.list_classes(session, page.after, page.limit + 1), lambda c: c.id
     )
-    vocab = repo.attribute_names(session)
+    vocab = repo.vocabulary(session)
     counts = repo.sample_counts(session, [c.id for c in rows])
     return ClassList(
         classes=[class_out(c, vocab, counts.get(c.id, 0), model) for c in rows],
@@ -84,7 +85,7 @@ def get_class(class_id: RowId, session: SessionDep, model: ModelDep) -> ClassOut
     if cls is None:
         raise not_found("class", "class_id", class_id)
     n = repo.sample_counts(session, [class_id]).get(class_id, 0)
-    return class_out(cls, repo.attribute_names(session), n, model)
+    return class_out(cls, repo.vocabulary(session), n, model)
 
 
 @router.post(
@@ -114,16 +115,8 @@ def register_class(
         return _register_from_samples(
             body, session, model, metrics, response, idempotency, principal
         )
-    field = "attributes" if body.attributes is not None else "attribute_vector"
-    if not model.recognizer.has_attributes:  # (an empty description is a 422 otherwise)
-        raise Problem(
-            409,
-            "the served model has no attributes, so a class cannot be described, nor "
-            "recognised zero-shot: send the object's samples or trials with the registration",
-            field,
-        )
-    vector = _attribute_vector(body, model)
-    key = repo.vector_key(vector)
+    field = field_of(body)
+    key = description_key(body, repo.vocabulary(session))
     cls = _failed_registration(session, body.name, key)
     if cls is None:
         _check_unique(session, body.name, key, field)
@@ -163,16 +156,24 @@ def redescribe_class(
     principal: Enroller,
 ) -> ClassCreated:
     """Correct the attributes an enrolled class was described by (say, *hard* where the
-    object is *soft*), keeping the samples robots enrolled for it. Committed before the
-    202; the served model describes the class anew when the job succeeds (the novel
-    classes rebuilt, or a full retrain for a promoted class). The attributes of the
-    training dataset's classes cannot be changed. With an ``Idempotency-Key``, a retry
-    gets the first answer."""
+    object is *soft*), keeping the samples robots enrolled for it: a list of names or a
+    vector replaces the description, a mapping of names to values sets those and keeps the
+    rest. Committed before the 202; the served model describes the class anew when the job
+    succeeds (the novel classes rebuilt, or the attribute classifiers refitted for a known
+    class). A class of the training dataset keeps its values for the dataset's attributes;
+    a mapping sets its values for attributes added since. With an ``Idempotency-Key``, a
+    retry gets the first answer."""
     idempotency.replay(session)
-    cls = _enrolled_class(session, class_id, "described anew")
-    key = repo.vector_key(_attribute_vector(body, model))
-    field = "attributes" if body.attributes is not None else "attribute_vector"
-    _check_unique_vector(session, key, field, other_than=cls.id)
+    cls = repo.get_class(session, class_id)
+    if cls is None:
+        raise not_found("class", "class_id", class_id)
+    vocab = repo.vocabulary(session)
+    field = field_of(body)
+    if cls.origin == Origin.DATASET:
+        _check_dataset_values(cls, body, vocab)
+    key = description_key(body, vocab, base=cls.attribute_key)
+    if cls.origin == Origin.ENROLLED:
+        _check_unique_vector(session, key, field, other_than=cls.id)
     # a concurrent registration of this vector (or a retry with this key) may win
     with idempotency.writing(
         session, recheck=lambda: _check_unique_vector(session, key, field, cls.id)
@@ -198,14 +199,16 @@ def _register_from_samples(
     class, its samples (one ``add_sample`` job each) and its registration in one commit."""
     rec = model.recognizer
     field = "trials" if body.trials is not None else "samples"
-    if rec.has_attributes:
+    described = body.attributes is not None or body.attribute_vector is not None
+    key = description_key(body, repo.vocabulary(session)) if described else ""
+    if rec.has_attributes and not described and not rec.graded_attributes:
         raise Problem(
             409,
             "this model describes classes by attributes: register the class "
             "with 'attributes', then add its samples",
             field,
         )
-    if not rec.learns_classes_from_samples:
+    if not described and not rec.learns_classes_from_samples:
         raise Problem(
             409,
             f"method '{rec.method}' cannot recognise a class from its samples "
@@ -232,14 +235,19 @@ def _register_from_samples(
             x = one_sample(data, rec.input_shape, f"samples[{i}]")
             with blame(f"samples[{i}]"):
                 kept.append(rec.validate_samples(x)[0])
-    if repo.class_by_name(session, body.name) is not None:
-        raise Problem(409, f"a class named '{body.name}' already exists", "name")
-    with idempotency.writing(session, recheck=lambda: _check_name(session, body.name)):
+
+    def check() -> None:
+        _check_name(session, body.name)
+        if key:
+            _check_unique_vector(session, key, field_of(body))
+
+    check()
+    with idempotency.writing(session, recheck=check):
         withdrawn = repo.class_by_name(session, body.name, withdrawn=True)
         cls = (
-            repo.revive_class(session, withdrawn, "")
+            repo.revive_class(session, withdrawn, key)
             if withdrawn is not None
-            else repo.add_class(session, body.name, "")
+            else repo.add_class(session, body.name, key)
         )
         for item in kept:
             row = repo.add_sample(session, cls.id, item)
@@ -261,7 +269,7 @@ def _class_accepted(
 ) -> ClassCreated:
     n = repo.sample_counts(session, [cls.id]).get(cls.id, 0)
     return ClassCreated(
-        class_=class_out(cls, repo.attribute_names(session), n, model),
+        class_=class_out(cls, repo.vocabulary(session), n, model),
         job=JobOut.model_validate(job),
     )
 
@@ -281,13 +289,25 @@ def _enrolled_class(session: Session, class_id: int, done: str) -> ObjectClass:
     return cls
 
 
-def _attribute_vector(body: ClassDescription, model: LoadedModel) -> np.ndarray:
-    rec = model.recognizer
-    if body.attributes is not None:
-        with blame("attributes"):
-            return rec.validate_attribute_vectors(rec.attribute_vector(body.attributes))[0]
-    with blame("attribute_vector"):
-        return rec.validate_attribute_vectors(body.attribute_vector)[0]
+def _check_dataset_values(cls: ObjectClass, body: ClassDescription, vocab: Vocabulary) -> None:
+    """A dataset class's values for the dataset's own attributes stay fixed: only a mapping
+    of attributes added since may set its values."""
+    if not isinstance(body.attributes, dict):
+        raise Problem(
+            409,
+            f"class '{cls.name}' comes from the training dataset: its values for the dataset's "
+            "attributes stay fixed; set its values for attributes added since with a mapping "
+            "of names to values",
+            field_of(body),
+        )
+    fixed = sorted(n for n in body.attributes if n in vocab.fixed)
+    if fixed:
+        raise Problem(
+            409,
+            f"class '{cls.name}' comes from the training dataset: its values for the dataset's "
+            f"attributes stay fixed ({', '.join(fixed)})",
+            f"attributes.{fixed[0]}",
+        )
 
 
 def _failed_registration(session: Session, name: str, key: str) -> ObjectClass | None:

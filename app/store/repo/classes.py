@@ -3,7 +3,7 @@ vocabulary that describes them."""
 
 from __future__ import annotations
 
-from collections.abc import Collection, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -14,16 +14,83 @@ from app.data.biotac import RawTrial
 from app.store.enums import ClassKind, JobKind, Origin
 from app.store.models import Attribute, Job, ObjectClass, Sample, utcnow
 from app.store.repo.encoding import encode
+from app.store.vocabulary import Vocabulary
 
 # ---------------------------------------------------------------- attributes
 
 
+def vocabulary(session: Session) -> Vocabulary:
+    """Every attribute by position, which are retired and which the dataset brought."""
+    rows = session.execute(
+        select(Attribute.name, Attribute.origin, Attribute.retired_at).order_by(Attribute.position)
+    ).all()
+    return Vocabulary(
+        names=tuple(r.name for r in rows),
+        retired=frozenset(r.name for r in rows if r.retired_at is not None),
+        fixed=frozenset(r.name for r in rows if r.origin == Origin.DATASET),
+    )
+
+
 def attribute_names(session: Session) -> list[str]:
-    return list(session.scalars(select(Attribute.name).order_by(Attribute.position)))
+    """The active attributes (not retired), in the order attribute vectors use."""
+    return list(
+        session.scalars(
+            select(Attribute.name)
+            .where(Attribute.retired_at.is_(None))
+            .order_by(Attribute.position)
+        )
+    )
+
+
+def list_attributes(session: Session) -> list[Attribute]:
+    """Every attribute, retired ones included, by position."""
+    return list(session.scalars(select(Attribute).order_by(Attribute.position)))
+
+
+def attribute_by_name(session: Session, name: str) -> Attribute | None:
+    """The attribute of that name, retired or not (names are never reused)."""
+    return session.scalar(select(Attribute).where(Attribute.name == name))
 
 
 def add_attributes(session: Session, names: Sequence[str]) -> None:
-    session.add_all(Attribute(position=i, name=n) for i, n in enumerate(names))
+    """The bootstrap dataset's vocabulary."""
+    session.add_all(
+        Attribute(position=i, name=n, origin=Origin.DATASET) for i, n in enumerate(names)
+    )
+
+
+def add_attribute(session: Session, name: str) -> Attribute:
+    """An attribute added through the API, after every existing one: existing keys keep
+    their meaning (it is not known for them)."""
+    last = session.scalar(select(func.max(Attribute.position)))
+    row = Attribute(position=0 if last is None else last + 1, name=name, origin=Origin.ENROLLED)
+    session.add(row)
+    session.flush()
+    return row
+
+
+def describe(session: Session, keys: Mapping[int, str]) -> None:
+    """New keys for classes, by class id (an attribute's values, or a class's own)."""
+    for class_id, key in keys.items():
+        session.execute(
+            update(ObjectClass).where(ObjectClass.id == class_id).values(attribute_key=key)
+        )
+
+
+def retire_attribute(session: Session, attribute: Attribute, vocab: Vocabulary) -> None:
+    """Later models leave the attribute out; every class's value for it is blanked, so keys
+    compare as the active descriptions they are."""
+    attribute.retired_at = utcnow()
+    rows = session.execute(select(ObjectClass.id, ObjectClass.attribute_key)).all()
+    describe(
+        session,
+        {
+            cid: vocab.without(key, attribute.name)
+            for cid, key in rows
+            if key != vocab.without(key, attribute.name)
+        },
+    )
+    session.flush()
 
 
 # ------------------------------------------------------------------- classes

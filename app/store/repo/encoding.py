@@ -1,4 +1,4 @@
-"""How the store writes values down: attribute vectors as digit strings, samples as
+"""How the store writes values down (attribute keys: ``app.store.vocabulary``): samples as
 float32 bytes with their shape, raw trials as ``.npz``, metrics as strict JSON. No
 queries."""
 
@@ -6,26 +6,13 @@ from __future__ import annotations
 
 import io
 import zipfile
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from app.data.biotac import CHANNELS, RawTrial
 from app.store.enums import SampleForm
-
-
-def vector_key(vector: Iterable[float]) -> str:
-    """A 0/1 attribute vector as a string of digits: comparable and indexable."""
-    return "".join("1" if v >= 0.5 else "0" for v in vector)
-
-
-def key_vector(key: str) -> np.ndarray:
-    return np.array([c == "1" for c in key], dtype=np.float32)
-
-
-def attribute_labels(key: str, vocabulary: Sequence[str]) -> list[str]:
-    return [name for name, bit in zip(vocabulary, key, strict=False) if bit == "1"]
 
 
 def encode_sample(sample: np.ndarray) -> tuple[bytes, list[int]]:

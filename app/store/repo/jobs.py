@@ -15,15 +15,17 @@ from app.store.models import Job, Sample, utcnow
 def add_job(
     session: Session,
     kind: str,
-    class_id: int,
+    class_id: int | None,
     sample_id: int | None = None,
     requested_by: str | None = None,
+    attribute_id: int | None = None,
 ) -> Job:
     job = Job(
         kind=kind,
         status=JobStatus.QUEUED,
         class_id=class_id,
         sample_id=sample_id,
+        attribute_id=attribute_id,
         requested_by=requested_by,
     )
     session.add(job)
