@@ -4,6 +4,7 @@
     .venv/bin/python -m bench.reliability concurrency --clients 100 --postgres URL
     .venv/bin/python -m bench.reliability hotswap --versions 20 [--postgres URL]
     .venv/bin/python -m bench.reliability pg-outage --faults 15
+    .venv/bin/python -m bench.reliability sqlite-faults --faults 30
 
 --postgres takes a server URL (e.g. postgresql://postgres@127.0.0.1:5432/test); the run
 gets a fresh database on it, dropped afterwards. pg-outage starts a PostgreSQL server of
@@ -27,7 +28,9 @@ from tests.service_fixtures import fresh_postgres_database
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("scenario", choices=["crash", "concurrency", "hotswap", "pg-outage"])
+    p.add_argument(
+        "scenario", choices=["crash", "concurrency", "hotswap", "pg-outage", "sqlite-faults"]
+    )
     p.add_argument("--postgres", default="", help="PostgreSQL server URL; default SQLite")
     p.add_argument("--kills", type=int, default=50)
     p.add_argument("--clients", type=int, default=100)
@@ -35,11 +38,17 @@ def main() -> int:
     p.add_argument("--apis", type=int, default=2)
     p.add_argument("--workers", type=int, default=None)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--faults", type=int, default=15, help="pg-outage: server stops")
+    p.add_argument("--faults", type=int, default=15, help="pg-outage / sqlite-faults: faults")
     p.add_argument("--db-timeout", type=float, default=3.0, help="TACTILE_DB_TIMEOUT_SECONDS")
     args = p.parse_args()
     if args.scenario == "pg-outage":
         return pg_outage(args)
+    if args.scenario == "sqlite-faults":  # in process: the fault is made on its engine
+        with tempfile.TemporaryDirectory() as tmp:
+            report = scenarios.sqlite_faults(tmp, args.faults, seed=args.seed)
+        report.update(scenario="sqlite-faults", store="sqlite")
+        print(json.dumps(report, indent=2))
+        return 0
     workers = args.workers or (2 if args.scenario == "concurrency" else 1)
     with tempfile.TemporaryDirectory() as tmp, contextlib.ExitStack() as stack:
         url = stack.enter_context(fresh_postgres_database(args.postgres)) if args.postgres else ""

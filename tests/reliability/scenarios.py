@@ -606,3 +606,120 @@ def _count(values) -> dict[str, int]:
     for v in values:
         out[str(v)] = out.get(str(v), 0) + 1
     return out
+
+
+def sqlite_faults(data_root, faults: int, requests_per_fault: int = 10, seed: int = 0) -> dict:
+    """The real app (in process) and worker on a SQLite store under ``data_root``, through
+    ``faults`` store faults in turn: a real full disk (a small tmpfs filled to the last byte,
+    where this process may mount one), and injected 'database or disk is full' (after the
+    first write of a transaction) and 'attempt to write a readonly database'
+    (tests/reliability/test_sqlite_faults.py). During each: ``requests_per_fault``
+    registrations and as many recognitions; then the fault goes and the same registrations
+    are retried with their Idempotency-Key. Recovery: from the fault's end to the first 202."""
+    import contextlib
+    from pathlib import Path
+
+    from fastapi.testclient import TestClient
+    from sqlalchemy import text
+
+    from app.api.main import create_app
+    from tests.reliability.test_sqlite_faults import (
+        MESSAGES,
+        Fault,
+        fill,
+        store_check,
+        tiny_filesystem,
+    )
+    from tests.service_fixtures import quick_settings, trained_base
+    from worker import Worker
+
+    base = trained_base()
+    vectors = _vectors(faults * requests_per_fault + 1)
+    sample = base[1].samples[:1].tolist()
+    rng = random.Random(seed)
+    root = Path(data_root)
+    kinds: list[str] = []
+    statuses: dict[str, int] = {}
+    reads_failed = answered = sent = 0
+    recovery: list[float] = []
+    accepted: dict[str, str] = {}  # Idempotency-Key -> class name, once 202'd
+    with tiny_filesystem(root / "fs", 64) as mounted:
+        settings = quick_settings((root / "fs" if mounted else root) / "data")
+        app = create_app(settings, trainer=lambda: base)
+        state = app.state.service
+        engine = state.sessions.kw["bind"]
+        cycle = (["disk full, real"] if mounted else []) + ["disk full", "read-only"]
+        with TestClient(app) as client:
+            worker = Worker(settings, state.sessions, on_activate=state.holder.serve)
+            for i in range(faults):
+                kind = cycle[i % len(cycle)]
+                kinds.append(kind)
+                filler = injected = None
+                if kind == "disk full, real":
+                    with engine.connect() as conn:
+                        conn.execute(text("PRAGMA wal_checkpoint(TRUNCATE)"))
+                    filler = fill(root / "fs")
+                else:
+                    injected = Fault(engine, MESSAGES[kind], after_first=kind == "disk full")
+                    injected.on = True
+                pending = []
+                for j in range(requests_per_fault):
+                    name = f"fault-{i}-{j}"
+                    body = {"name": name, "attribute_vector": vectors[i * requests_per_fault + j]}
+                    key = uuid.uuid4().hex
+                    pending.append((key, body))
+                    for path, kw in (
+                        ("/v1/classes", {"json": body, "headers": {"Idempotency-Key": key}}),
+                        ("/v1/recognize", {"json": {"samples": sample}}),
+                    ):
+                        sent += 1
+                        r = client.post(path, **kw)
+                        answered += 1
+                        statuses[f"{path} {r.status_code}"] = (
+                            statuses.get(f"{path} {r.status_code}", 0) + 1
+                        )
+                        if path == "/v1/recognize" and r.status_code != 200:
+                            reads_failed += 1
+                        if path == "/v1/classes" and r.status_code == 202:
+                            accepted[key] = name
+                    time.sleep(rng.uniform(0, 0.05))
+                with contextlib.suppress(Exception):  # the worker's round fails too
+                    worker.run_once()
+                ended = time.monotonic()
+                if filler is not None:
+                    filler.unlink()
+                else:
+                    injected.on = False
+                    injected.remove()
+                first = None
+                for key, body in pending:  # the robots retry with the same key
+                    for _ in range(100):
+                        r = client.post("/v1/classes", json=body, headers={"Idempotency-Key": key})
+                        if r.status_code == 202:
+                            first = first or time.monotonic()
+                            accepted[key] = body["name"]
+                            break
+                        time.sleep(0.05)
+                recovery.append(round(first - ended, 3) if first else None)
+                for _ in range(3):
+                    worker.run_once()
+            served = {c["name"] for c in client.get("/v1/models/active").json()["classes"]}
+            problems = check_store(settings.sqlalchemy_url)
+        code, out = store_check(settings)
+    lost = sorted(n for n in accepted.values() if n not in served)
+    done = [r for r in recovery if r is not None]
+    return {
+        "faults": faults,
+        "kinds": kinds,
+        "requests_during_faults": sent,
+        "answered_during_faults": answered,
+        "statuses_during_faults": statuses,
+        "reads_failed": reads_failed,
+        "registrations_lost": len(lost) + (faults * requests_per_fault - len(accepted)),
+        "recovery_seconds": recovery,
+        "recovery_median": _median(done),
+        "recovery_max": max(done, default=None),
+        "integrity_problems": problems,
+        "store_check_exit": code,
+        "store_check": out.strip().splitlines()[-1:],
+    }
