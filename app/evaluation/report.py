@@ -4,7 +4,9 @@ Works from the results dict alone (``protocol.evaluate`` or a saved results.json
 so a report can be rebuilt without re-running anything:
 
 - ``report.md``: mean (± std over splits) of every figure per method beside the
-  paper's averages; per-split tables; wall times; what each figure means;
+  paper's averages; each mean with its 95 % confidence interval and, with several
+  methods, the paired differences from the first; per-split tables; wall times; what
+  each figure means;
 - ``fig7_novelty_<method>.png``: the novelty-threshold tuning curve of split 1
   (accuracy of keeping held-out known trials known and of calling
   validation-novel objects novel, against the threshold; chosen threshold marked);
@@ -148,6 +150,9 @@ def markdown(results: dict[str, Any], images: dict[str, list[str]] | None = None
         + ". The paper's reference [38] (attribute-based haptic ZSL) averages 0.36 (Table VII)."
         if paper
         else "The paper reports no figures for this number of novel objects.",
+    ]
+    lines += _interval_sections(results, figures)
+    lines += [
         "",
         "## Wall time",
         "",
@@ -191,6 +196,71 @@ def markdown(results: dict[str, Any], images: dict[str, list[str]] | None = None
             lines += [f"![{title}]({name})" for name in files]
             lines.append("")
     return "\n".join(lines) + "\n"
+
+
+def _fmt_ci(mean: Any, ci: Any, signed: bool = False) -> str:
+    """``0.612 [0.590, 0.634]``; ``—`` when not measured; the mean alone without an interval."""
+    if mean is None or (isinstance(mean, float) and not np.isfinite(mean)):
+        return "—"
+    fmt = "{:+.3f}" if signed else "{:.3f}"
+    if not ci or any(v is None or not np.isfinite(v) for v in ci):
+        return fmt.format(mean)
+    return f"{fmt.format(mean)} [{fmt.format(ci[0])}, {fmt.format(ci[1])}]"
+
+
+def _interval_sections(results: dict[str, Any], figures: list[str]) -> list[str]:
+    """Each mean with its 95 % interval, and the paired differences from the reference
+    method, when the results have them (results written before they existed have not)."""
+    methods = list(results["methods"])
+    if not any("ci95" in results["methods"][m] for m in methods):
+        return []
+    lines = [
+        "",
+        "## Means with their 95 % confidence intervals",
+        "",
+        f"{results.get('intervals', 'Student-t 95 % interval of the mean over splits.')}",
+        "",
+        "| figure | " + " | ".join(methods) + " |",
+        "| --- | " + " | ".join("---" for _ in methods) + " |",
+    ]
+    for f in figures:
+        cells = [
+            _fmt_ci(
+                results["methods"][m].get("mean", {}).get(f),
+                results["methods"][m].get("ci95", {}).get(f),
+            )
+            for m in methods
+        ]
+        lines.append(f"| `{f}` | " + " | ".join(cells) + " |")
+    paired = results.get("paired") or {}
+    others = list(paired.get("methods", {}))
+    if others:
+        ref = paired["reference"]
+        lines += [
+            "",
+            f"## Paired differences from `{ref}`",
+            "",
+            f"Each method minus `{ref}` on the same splits: mean [95 % interval], and the "
+            "splits on which it is above / below.",
+            "",
+            "| figure | " + " | ".join(f"{m} − {ref}" for m in others) + " |",
+            "| --- | " + " | ".join("---" for _ in others) + " |",
+        ]
+        for f in figures:
+            if not any(f in paired["methods"][m]["mean"] for m in others):
+                continue
+            cells = []
+            for m in others:
+                p = paired["methods"][m]
+                if f not in p["mean"]:
+                    cells.append("—")
+                    continue
+                cells.append(
+                    f"{_fmt_ci(p['mean'][f], p['ci95'].get(f), signed=True)} "
+                    f"({p['won'][f]} / {p['lost'][f]})"
+                )
+            lines.append(f"| `{f}` | " + " | ".join(cells) + " |")
+    return lines
 
 
 # ---------------------------------------------------------------------- plots

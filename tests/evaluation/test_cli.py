@@ -21,6 +21,8 @@ OPTIONS = [
     "--test-trials",
     "--distinct-from-known",
     "--data-seed",
+    "--jobs",
+    "--ceilings",
     "--no-progress",
 ]
 
