@@ -87,7 +87,10 @@ class Settings(BaseSettings):
         "only they use. 0 keeps every version.",
     )
     dataset: str = Field(
-        "simulated", description="Bootstrap data: simulated, simulated:N or phac2:PATH."
+        "simulated",
+        description="Bootstrap data: simulated, simulated:N, phac2:PATH, folder:DIR, biotac:DIR, "
+        "or none (start without classes or attributes; the first model is trained once "
+        "classes have samples).",
     )
     method: str = Field(DEFAULT_METHOD, description="Recognition method used for training.")
     method_params: dict[str, Any] = Field(

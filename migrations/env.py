@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from alembic import context
+from sqlalchemy import String
 
 from app.store.db import make_engine
 from app.store.models import Base
@@ -12,9 +13,26 @@ config = context.config
 target_metadata = Base.metadata
 
 
+def _compare_type(ctx, inspected, metadata, inspected_type, metadata_type):
+    """SQLite does not enforce a VARCHAR's length, so migrations widen one on PostgreSQL
+    only (0007); a length alone is no difference there. Otherwise Alembic's own check."""
+    if (
+        ctx.dialect.name == "sqlite"
+        and isinstance(inspected_type, String)
+        and isinstance(metadata_type, String)
+    ):
+        return False
+    return None
+
+
 def _configure_and_run(**kwargs) -> None:
     # batch mode: SQLite can only alter tables by copying them
-    context.configure(target_metadata=target_metadata, render_as_batch=True, **kwargs)
+    context.configure(
+        target_metadata=target_metadata,
+        render_as_batch=True,
+        compare_type=_compare_type,
+        **kwargs,
+    )
     with context.begin_transaction():
         context.run_migrations()
 

@@ -22,10 +22,10 @@ from sqlalchemy.orm import Session, sessionmaker
 from app.config import Settings
 from app.framework import bundle
 from app.framework.recognizer import TactileRecognizer
-from app.service.bootstrap import model_classes
+from app.service.bootstrap import first_model_missing, model_classes
 from app.store import bundles, leases, repo, retention
 from app.store.enums import JobStatus
-from worker.retrain import Plan, Rebuild, build, known_dataset, make_plan
+from worker.retrain import Plan, Rebuild, build, known_dataset, make_first_plan, make_plan
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +70,8 @@ class Worker:
                     ttl = timedelta(hours=self.settings.idempotency_ttl_hours)
                     repo.purge_idempotency(s, datetime.now(UTC) - ttl)
                 with self.sessions() as s:
+                    if repo.active_version_number(s) is None and first_model_missing(s):
+                        return 0  # started empty: the jobs wait for the first model's samples
                     jobs = repo.claim_queued_jobs(s, self.id)
                 if jobs:
                     self._process([j.id for j in jobs])
@@ -148,16 +150,19 @@ class Worker:
     def _retrain(self, job_ids: list[int]) -> None:
         with self.sessions() as s:
             base = repo.active_version(s)
-            model = self._load(s, base.version, base.bundle_sha256)
             jobs = repo.get_jobs(s, job_ids)
-            plan = make_plan(s, base, model, jobs, self.settings.promotion_threshold)
+            if base is None:  # a service started empty: its first model
+                model, plan = None, make_first_plan(s, jobs)
+            else:
+                model = self._load(s, base.version, base.bundle_sha256)
+                plan = make_plan(s, base, model, jobs, self.settings.promotion_threshold)
             refit = plan.rebuild in (Rebuild.FULL, Rebuild.ATTRIBUTES)
             known = known_dataset(s, plan) if refit else None
         # the session is closed: no transaction stays open while training runs
         if plan.changes_model:
             log.info(
-                "retraining v%d (%s rebuild, %s): %d new class(es), samples for %d",
-                base.version,
+                "retraining v%s (%s rebuild, %s): %d new class(es), samples for %d",
+                base.version if base else "-",
                 plan.rebuild,
                 plan.reason,
                 len(plan.new_classes),
@@ -172,7 +177,7 @@ class Worker:
             if not plan.changes_model:  # already in the active model (e.g. a re-run)
                 repo.finish_jobs(s, ok, JobStatus.SUCCEEDED, version=base.version)
                 return
-            version = self._commit(s, base.version, new, split, plan, ok)
+            version = self._commit(s, base.version if base else None, new, split, plan, ok)
         self._cache = (version, new)
         log.info("model version %d is active", version)
         if self.on_activate:
@@ -181,7 +186,7 @@ class Worker:
     def _commit(
         self,
         s: Session,
-        base_version: int,
+        base_version: int | None,
         new: TactileRecognizer,
         split: bundles.Split,
         plan: Plan,

@@ -35,6 +35,7 @@ from app.data.biotac import BioTacDataset
 from app.data.dataset import TactileDataset
 from app.framework.recognizer import RAW_TRIALS, ClassRegistry, TactileRecognizer
 from app.framework.registry import make_method
+from app.service.bootstrap import FIRST_MODEL_SAMPLES
 from app.store import repo
 from app.store.enums import ClassKind, JobKind, JobStatus, Origin, SampleForm, VersionReason
 from app.store.models import Job, ModelVersion, ObjectClass, Sample
@@ -193,6 +194,29 @@ def make_plan(
     return plan
 
 
+def make_first_plan(s: Session, claimed: list[Job]) -> Plan:
+    """The first model of a service started without a dataset: every class with
+    ``FIRST_MODEL_SAMPLES`` live samples is a known class (promoted), the other classes
+    with a sample or a description are its novel classes; a class with neither cannot be
+    in it, and its jobs fail."""
+    plan = Plan(vocabulary=repo.vocabulary(s), rebuild=Rebuild.FULL, reason=VersionReason.BOOTSTRAP)
+    live = _live_registrations(s, {j.id for j in claimed})
+    classes = [c for c in repo.list_classes(s) if c.id in live]
+    for row in repo.samples_of(s, [c.id for c in classes]):
+        plan.samples.setdefault(row.class_id, []).append(row)
+    for cls in classes:
+        n = len(plan.samples.get(cls.id, []))
+        if n >= FIRST_MODEL_SAMPLES:
+            plan.promote.append(cls)
+        elif n or describes(plan.vocabulary, cls.attribute_key):
+            plan.novel.append(cls)
+    placed = {c.id for c in plan.promote + plan.novel}
+    for job in claimed:
+        if job.class_id is not None and job.class_id not in placed:
+            plan.rejected[job.id] = f"class {job.class_id} has no live sample and no description"
+    return plan
+
+
 def _live_registrations(s: Session, claimed_ids: set[int]) -> set[int]:
     """Classes whose latest registration succeeded or is being done now. Only the latest
     counts: a withdrawn class registered again must wait for its new registration."""
@@ -240,12 +264,15 @@ def _holds_withdrawn(
 
 
 def build(
-    plan: Plan, model: TactileRecognizer, settings: Settings, known: TactileDataset | None = None
+    plan: Plan,
+    model: TactileRecognizer | None,
+    settings: Settings,
+    known: TactileDataset | None = None,
 ) -> TactileRecognizer:
     """The new recognizer; the base model is never modified. A full retrain fits a
     fresh model on ``known`` (from ``known_dataset``) first; an attribute rebuild refits the
     base's attribute parts on ``known``; a novel-part rebuild starts from the base's known
-    part alone."""
+    part alone. The first model of a service started empty has no base (``model`` None)."""
     vocabulary = plan.vocabulary
     if plan.rebuild in (Rebuild.FULL, Rebuild.ATTRIBUTES, Rebuild.NOVEL_PART):
         if plan.rebuild is Rebuild.FULL:

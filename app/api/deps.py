@@ -20,6 +20,7 @@ from sqlalchemy.orm import Session
 from app.api.problems import Problem
 from app.api.state import ServiceState
 from app.config import Settings
+from app.service.bootstrap import first_model_missing, starts_empty
 from app.service.holder import LoadedModel, ModelHolder
 from app.service.job_watch import JobWatch
 from app.service.keys import Principal, retry_after
@@ -75,14 +76,27 @@ def current_model(request: Request) -> LoadedModel:
     """The snapshot a request works with from start to end, even if a swap happens."""
     model = service(request).holder.current
     if model is None:
-        raise Problem(
-            503, "no model is loaded yet; try again shortly", "model", {"Retry-After": "5"}
-        )
+        raise _no_model(service(request))
     return model
+
+
+def _no_model(state: ServiceState) -> Problem:
+    """409 saying what is missing for a service started empty, else 503 (loading)."""
+    if starts_empty(state.settings):
+        with state.sessions() as s:
+            missing = first_model_missing(s)
+        if missing:
+            return Problem(409, missing, "model")
+    return Problem(503, "no model is loaded yet; try again shortly", "model", {"Retry-After": "5"})
 
 
 async def get_model(request: Request) -> LoadedModel:
     return current_model(request)
+
+
+async def get_optional_model(request: Request) -> LoadedModel | None:
+    """The served model, or None before a service started empty has its first one."""
+    return service(request).holder.current
 
 
 api_key_header = APIKeyHeader(
@@ -323,6 +337,7 @@ ExportsDep = Annotated[ExportCache, Depends(get_exports)]
 JobWatchDep = Annotated[JobWatch, Depends(get_job_watch)]
 RecognizingDep = Annotated[Recognizing, Depends(get_recognizing)]
 ModelDep = Annotated[LoadedModel, Depends(get_model)]
+OptionalModelDep = Annotated[LoadedModel | None, Depends(get_optional_model)]
 # the caller of a write, for the jobs it queues (the same dependency as EnrollAccess: run once)
 Enroller = Annotated[Principal, Depends(require_enroll)]
 ReadAccess = Depends(require_read)

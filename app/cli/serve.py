@@ -22,8 +22,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--dataset",
-        help="bootstrap data: simulated, simulated:N or phac2:PATH "
-        "(TACTILE_DATASET, default simulated)",
+        help="bootstrap data: simulated, simulated:N, phac2:PATH, folder:DIR, biotac:DIR, or "
+        "none to start without classes or attributes (TACTILE_DATASET, default simulated)",
     )
     p.add_argument("--data-dir", help="folder for the SQLite store (TACTILE_DATA_DIR)")
     p.add_argument(

@@ -23,6 +23,7 @@ ACCEPTED_SPECS = (
     "phac2:PATH",
     "biotac:DIR",
     "folder:DIR",
+    "none (serve only: start without classes or attributes)",
 )
 PHAC2_ENV = "TACTILE_PHAC2_PATH"
 _REPO_ROOT = Path(__file__).resolve().parents[2]

@@ -3,6 +3,12 @@
 The base model's classes and *all* its training samples go into the store, so a
 later full retrain (promotion) can be made from the store alone. A lease keeps
 two processes starting at once from both training.
+
+A service started without a dataset (``--dataset none``, ``TACTILE_DATASET=none``) has no
+classes, no attributes and no model: attributes are added through the API, classes are
+registered with their samples, and the worker trains the first model once
+``FIRST_MODEL_CLASSES`` classes have ``FIRST_MODEL_SAMPLES`` samples each
+(``first_model_missing`` says what is missing until then).
 """
 
 from __future__ import annotations
@@ -26,6 +32,12 @@ from app.store.enums import ClassKind, Origin, VersionReason
 from app.store.vocabulary import vector_key
 
 LEASE = "bootstrap"
+#: the dataset spec of a service that starts empty
+NO_DATASET = "none"
+#: the first model of a service started empty: this many classes with this many live samples
+#: each (method ``best`` fits on two classes of two trials; each enrolled sample is a trial)
+FIRST_MODEL_CLASSES = 2
+FIRST_MODEL_SAMPLES = 2
 Dataset = TactileDataset | BioTacDataset
 Trainer = Callable[[], tuple[TactileRecognizer, Dataset]]
 
@@ -48,18 +60,41 @@ def train_base(settings: Settings, progress: bool = True) -> tuple[TactileRecogn
     return model, dataset
 
 
+def starts_empty(settings: Settings) -> bool:
+    return settings.dataset.strip() == NO_DATASET
+
+
+def first_model_missing(s: Session) -> str | None:
+    """What a service started without a dataset still lacks for its first model (None:
+    nothing; the worker trains it at its next round)."""
+    counts = repo.sample_counts(s)
+    ready = sum(1 for n in counts.values() if n >= FIRST_MODEL_SAMPLES)
+    if ready >= FIRST_MODEL_CLASSES:
+        return None
+    return (
+        "the service started without a dataset and has no model yet: the first one is trained "
+        f"once {FIRST_MODEL_CLASSES} classes have at least {FIRST_MODEL_SAMPLES} samples each "
+        f"({ready} so far); register classes with their samples (POST /v1/classes with "
+        "'samples' or 'trials')"
+    )
+
+
 def ensure_ready(
     settings: Settings,
     engine: Engine,
     sessions: sessionmaker[Session],
     trainer: Trainer | None = None,
     progress: bool = True,
-) -> int:
-    """Migrate, bootstrap if needed; returns the active model version."""
+) -> int | None:
+    """Migrate, bootstrap if needed; returns the active model version (None for a service
+    started without a dataset that has no model yet)."""
     from app.framework.runtime import configure_threads
 
     configure_threads(settings.torch_threads)  # every serve and worker process starts here
     migrate.upgrade(engine)
+    if starts_empty(settings):
+        with sessions() as s:
+            return repo.active_version_number(s)
     holder = leases.new_holder_id()
     waited = False
     while True:

@@ -82,43 +82,52 @@ def upgrade() -> None:
 
 def downgrade() -> None:
     bind = op.get_bind()
-    if "origin" not in _columns("attributes"):
-        return  # an earlier attempt got past this revision (see 0005)
+    # SQLite runs DDL outside the migration's transaction: a step further down that refuses
+    # leaves this one's changes made although the revision is still 0007 (see 0005), so
+    # each step below is done only where it is still needed
+    attributes = _columns("attributes")
+    if "origin" in attributes:
+        added = bind.scalar(
+            sa.text(
+                "SELECT COUNT(*) FROM attributes "
+                "WHERE origin <> 'dataset' OR retired_at IS NOT NULL"
+            )
+        )
+        if added:
+            raise RuntimeError(
+                f"cannot downgrade below 0007: {added} attributes were added through the API "
+                "or retired, which the older schema's fixed vocabulary cannot hold"
+            )
     n = bind.scalar(sa.text("SELECT COUNT(*) FROM attributes"))
-    added = bind.scalar(
-        sa.text(
-            "SELECT COUNT(*) FROM attributes WHERE origin <> 'dataset' OR retired_at IS NOT NULL"
-        )
-    )
-    if added:
+    keys = bind.scalars(sa.text("SELECT attribute_key FROM classes WHERE attribute_key <> ''"))
+    # a token other than 0 or 1 is graded or not known; a key shorter than the vocabulary
+    # ends in values not known
+    lossy = [
+        k for k in keys if "," in k and (set(k.split(",")) - {"0", "1"} or len(k.split(",")) < n)
+    ]
+    if lossy:
         raise RuntimeError(
-            f"cannot downgrade below 0007: {added} attributes were added through the API or "
-            "retired, which the older schema's fixed vocabulary cannot hold"
+            f"cannot downgrade below 0007: {len(lossy)} classes have graded values or values "
+            f"not known (e.g. '{lossy[0]}'), which the older schema stores as 0/1 only"
         )
-    keys = bind.scalars(sa.text("SELECT attribute_key FROM classes")).all()
-    unreadable = [k for k in keys if k and k.split(",") != [t for t in k.split(",") if t in "01"]]
-    unreadable += [k for k in keys if k and len(k.split(",")) != n]
-    if unreadable:
-        raise RuntimeError(
-            f"cannot downgrade below 0007: {len(unreadable)} classes have graded values or "
-            f"values not known (e.g. '{unreadable[0]}'), which the older schema stores as 0/1 "
-            "only"
-        )
-    attribute_jobs = bind.scalar(sa.text("SELECT COUNT(*) FROM jobs WHERE class_id IS NULL"))
-    if attribute_jobs:
-        raise RuntimeError(
-            f"cannot downgrade below 0007: {attribute_jobs} jobs are about attributes"
-        )
+    if "attribute_id" in _columns("jobs"):
+        attribute_jobs = bind.scalar(sa.text("SELECT COUNT(*) FROM jobs WHERE class_id IS NULL"))
+        if attribute_jobs:
+            raise RuntimeError(
+                f"cannot downgrade below 0007: {attribute_jobs} jobs are about attributes"
+            )
     _rewrite_keys(lambda key: key.replace(",", ""))
-    op.drop_column("model_versions", "attribute_names")
-    with op.batch_alter_table("jobs") as batch:
-        batch.drop_constraint("fk_jobs_attribute_id_attributes", type_="foreignkey")
-        batch.drop_column("attribute_id")
-        batch.alter_column("class_id", existing_type=sa.Integer(), nullable=False)
+    if "attribute_names" in _columns("model_versions"):
+        op.drop_column("model_versions", "attribute_names")
+    if "attribute_id" in _columns("jobs"):
+        if bind.dialect.name == "sqlite":  # the copy of an attempt whose rename was undone
+            op.execute("DROP TABLE IF EXISTS _alembic_tmp_jobs")
+        with op.batch_alter_table("jobs") as batch:
+            batch.drop_constraint("fk_jobs_attribute_id_attributes", type_="foreignkey")
+            batch.drop_column("attribute_id")
+            batch.alter_column("class_id", existing_type=sa.Integer(), nullable=False)
     if bind.dialect.name == "postgresql":
-        op.alter_column(
-            "classes", "attribute_key", type_=sa.String(1000), existing_nullable=False
-        )
-    op.drop_column("attributes", "retired_at")
-    op.drop_column("attributes", "created_at")
-    op.drop_column("attributes", "origin")
+        op.alter_column("classes", "attribute_key", type_=sa.String(1000), existing_nullable=False)
+    for column in ("retired_at", "created_at", "origin"):
+        if column in attributes:
+            op.drop_column("attributes", column)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import threading
 from collections.abc import Iterator
 
@@ -58,7 +59,7 @@ def test_going_below_0004_is_refused_while_the_store_holds_withdrawals(tmp_path)
         conn.execute(
             text(
                 "INSERT INTO classes (name, kind, origin, attribute_key, created_at, withdrawn_at) "
-                "VALUES ('mug', 'novel', 'enrolled', '01', '2026-11-23', '2026-11-23')"
+                "VALUES ('mug', 'novel', 'enrolled', '', '2026-11-23', '2026-11-23')"
             )
         )
     with pytest.raises(RuntimeError, match="1 withdrawn classes and samples"):
@@ -248,4 +249,76 @@ def test_0006_marks_every_sample_an_array_and_refuses_to_drop_raw_trials(backend
         assert "form" not in _columns(engine, "samples")
         with engine.connect() as conn:
             assert conn.execute(text("SELECT COUNT(*) FROM samples")).scalar() == 1
+        engine.dispose()
+
+
+@pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
+def test_0007_rewrites_keys_lists_each_versions_vocabulary_and_refuses_to_lose_values(
+    backend, tmp_path
+):
+    with _database(backend, tmp_path) as url:
+        engine = make_engine(url)
+        migrate.upgrade(engine, "0006")
+        with engine.begin() as conn:
+            for i, name in enumerate(("hard", "soft", "warm")):
+                conn.execute(
+                    text("INSERT INTO attributes (position, name) VALUES (:p, :n)"),
+                    {"p": i, "n": name},
+                )
+            conn.execute(
+                text(
+                    "INSERT INTO classes (name, kind, origin, attribute_key, created_at) "
+                    "VALUES ('mug', 'known', 'dataset', '101', '2026-11-24')"
+                )
+            )
+            conn.execute(
+                text(
+                    "INSERT INTO bundles (sha256, size, data, created_at) "
+                    "VALUES ('ab', 1, :d, '2026-11-24')"
+                ),
+                {"d": b"x"},
+            )
+            conn.execute(
+                text(
+                    "INSERT INTO model_versions (version, created_at, method, reason, "
+                    "bundle_sha256, input_shape, metrics, classes, sample_ids, active) "
+                    "VALUES (1, '2026-11-24', 'best', 'bootstrap', 'ab', '[2]', '{}', '[]', "
+                    "'[]', false)"
+                )
+            )
+        migrate.upgrade(engine)
+        with engine.connect() as conn:
+            assert conn.execute(text("SELECT attribute_key FROM classes")).scalar() == "1,0,1"
+            names = conn.execute(text("SELECT attribute_names FROM model_versions")).scalar()
+            assert (
+                json.loads(names)
+                if isinstance(names, str)
+                else names
+                == [
+                    "hard",
+                    "soft",
+                    "warm",
+                ]
+            )
+            origins = conn.execute(text("SELECT DISTINCT origin FROM attributes")).scalars()
+            assert list(origins) == ["dataset"]
+        with engine.begin() as conn:  # a graded value the older schema cannot hold
+            conn.execute(text("UPDATE classes SET attribute_key = '1,0.5,1'"))
+        with pytest.raises(RuntimeError, match="graded values or values not known"):
+            migrate.downgrade(engine, "0006")
+        assert migrate.current_revision(engine) == HEAD
+        with engine.begin() as conn:  # an attribute added through the API
+            conn.execute(text("UPDATE classes SET attribute_key = '1,0,1'"))
+            conn.execute(
+                text("INSERT INTO attributes (position, name, origin) VALUES (3, 'x', 'enrolled')")
+            )
+        with pytest.raises(RuntimeError, match="1 attributes were added through the API"):
+            migrate.downgrade(engine, "0006")
+        with engine.begin() as conn:
+            conn.execute(text("DELETE FROM attributes WHERE name = 'x'"))
+        migrate.downgrade(engine, "0006")
+        with engine.connect() as conn:
+            assert conn.execute(text("SELECT attribute_key FROM classes")).scalar() == "101"
+        migrate.upgrade(engine)
+        assert migrate.current_revision(engine) == HEAD
         engine.dispose()

@@ -1,3 +1,4 @@
+import numpy as np
 from fastapi import APIRouter, Response
 from sqlalchemy.orm import Session
 
@@ -10,10 +11,12 @@ from app.api.deps import (
     JsonBody,
     MetricsDep,
     ModelDep,
+    OptionalModelDep,
     PageDep,
     ReadAccess,
     RowId,
     SessionDep,
+    SettingsDep,
 )
 from app.api.descriptions import description_key, field_of
 from app.api.problems import Problem, blame, not_found
@@ -28,12 +31,14 @@ from app.api.schemas import (
     Withdrawal,
 )
 from app.api.withdrawals import queue_withdrawal
+from app.config import Settings
 from app.framework.recognizer import RAW_TRIALS
+from app.framework.registry import method_class
 from app.service.holder import LoadedModel
 from app.service.keys import Principal
 from app.service.metrics import Metrics
 from app.store import repo
-from app.store.enums import JobKind, Origin
+from app.store.enums import JobKind, Origin, SampleForm
 from app.store.models import Job, ObjectClass
 from app.store.vocabulary import Vocabulary
 
@@ -60,7 +65,7 @@ def class_out(
 
 
 @router.get("", response_model=ClassList, dependencies=[ReadAccess])
-def list_classes(session: SessionDep, model: ModelDep, page: PageDep) -> ClassList:
+def list_classes(session: SessionDep, model: OptionalModelDep, page: PageDep) -> ClassList:
     """Known and novel classes by id, a page at a time, and whether the model now
     serving covers each."""
     rows, next_after = page.cut(
@@ -80,7 +85,7 @@ def list_classes(session: SessionDep, model: ModelDep, page: PageDep) -> ClassLi
     dependencies=[ReadAccess],
     responses=problems.responses(404),
 )
-def get_class(class_id: RowId, session: SessionDep, model: ModelDep) -> ClassOut:
+def get_class(class_id: RowId, session: SessionDep, model: OptionalModelDep) -> ClassOut:
     cls = repo.get_class(session, class_id)
     if cls is None:
         raise not_found("class", "class_id", class_id)
@@ -98,7 +103,8 @@ def get_class(class_id: RowId, session: SessionDep, model: ModelDep) -> ClassOut
 def register_class(
     body: ClassCreate,
     session: SessionDep,
-    model: ModelDep,
+    model: OptionalModelDep,
+    settings: SettingsDep,
     metrics: MetricsDep,
     response: Response,
     idempotency: IdempotencyDep,
@@ -113,7 +119,7 @@ def register_class(
     idempotency.replay(session)
     if body.samples is not None or body.trials is not None:
         return _register_from_samples(
-            body, session, model, metrics, response, idempotency, principal
+            body, session, model, settings, metrics, response, idempotency, principal
         )
     field = field_of(body)
     key = description_key(body, repo.vocabulary(session))
@@ -189,52 +195,35 @@ def redescribe_class(
 def _register_from_samples(
     body: ClassCreate,
     session: Session,
-    model: LoadedModel,
+    model: LoadedModel | None,
+    settings: Settings,
     metrics: Metrics,
     response: Response,
     idempotency: Idempotency,
     principal: Principal,
 ) -> ClassCreated:
-    """A class without a description, learnt from the samples or trials sent with it: the
-    class, its samples (one ``add_sample`` job each) and its registration in one commit."""
-    rec = model.recognizer
+    """A class learnt from the samples or trials sent with it, described or not: the class,
+    its samples (one ``add_sample`` job each) and its registration in one commit."""
+    method = model.recognizer if model is not None else method_class(settings.method)
     field = "trials" if body.trials is not None else "samples"
     described = body.attributes is not None or body.attribute_vector is not None
     key = description_key(body, repo.vocabulary(session)) if described else ""
-    if rec.has_attributes and not described and not rec.graded_attributes:
+    if model is not None and model.recognizer.has_attributes and not described:
+        if not method.graded_attributes:
+            raise Problem(
+                409,
+                "this model describes classes by attributes: register the class "
+                "with 'attributes', then add its samples",
+                field,
+            )
+    if not described and not method.learns_classes_from_samples:
         raise Problem(
             409,
-            "this model describes classes by attributes: register the class "
-            "with 'attributes', then add its samples",
-            field,
-        )
-    if not described and not rec.learns_classes_from_samples:
-        raise Problem(
-            409,
-            f"method '{rec.method}' cannot recognise a class from its samples "
+            f"method '{method.method}' cannot recognise a class from its samples "
             "alone; method 'best' can",
             field,
         )
-    if body.trials is not None:
-        kept = [
-            trials.one(t.model_dump(exclude_none=True), "trials", i)
-            for i, t in enumerate(body.trials)
-        ]
-        with blame("trials"):
-            rec.trial_samples(kept)  # a model of samples: 409; phases not found: 422
-    elif rec.input_kind == RAW_TRIALS:
-        raise Problem(
-            409,
-            "this model was fitted on raw BioTac trials: send 'trials', raw "
-            "trials, which the store keeps as sent",
-            "samples",
-        )
-    else:
-        kept = []
-        for i, data in enumerate(body.samples):
-            x = one_sample(data, rec.input_shape, f"samples[{i}]")
-            with blame(f"samples[{i}]"):
-                kept.append(rec.validate_samples(x)[0])
+    kept = _samples_for(body, model) if model is not None else _samples_for_store(body, session)
 
     def check() -> None:
         _check_name(session, body.name)
@@ -259,13 +248,75 @@ def _register_from_samples(
     return out
 
 
+def _samples_for(body: ClassCreate, model: LoadedModel) -> list:
+    """The registration's samples or raw trials, as the served model takes them."""
+    rec = model.recognizer
+    if body.trials is not None:
+        kept = [
+            trials.one(t.model_dump(exclude_none=True), "trials", i)
+            for i, t in enumerate(body.trials)
+        ]
+        with blame("trials"):
+            rec.trial_samples(kept)  # a model of samples: 409; phases not found: 422
+        return kept
+    if rec.input_kind == RAW_TRIALS:
+        raise Problem(
+            409,
+            "this model was fitted on raw BioTac trials: send 'trials', raw "
+            "trials, which the store keeps as sent",
+            "samples",
+        )
+    kept = []
+    for i, data in enumerate(body.samples):
+        x = one_sample(data, rec.input_shape, f"samples[{i}]")
+        with blame(f"samples[{i}]"):
+            kept.append(rec.validate_samples(x)[0])
+    return kept
+
+
+def _samples_for_store(body: ClassCreate, session: Session) -> list:
+    """The registration's samples or raw trials before a service started empty has a model:
+    of the form and shape the store already holds, or, for the first class, any one form
+    and shape (a flat vector or a C x T image) for all of them."""
+    stored = repo.stored_sample_form(session)
+    if body.trials is not None:
+        if stored is not None and stored[0] != SampleForm.RAW_TRIAL:
+            raise Problem(
+                409,
+                f"the store holds samples of shape {stored[1]}, not raw trials: send 'samples'",
+                "trials",
+            )
+        return [
+            trials.one(t.model_dump(exclude_none=True), "trials", i)
+            for i, t in enumerate(body.trials)
+        ]
+    if stored is not None and stored[0] == SampleForm.RAW_TRIAL:
+        raise Problem(409, "the store holds raw trials: send 'trials'", "samples")
+    shape = tuple(stored[1]) if stored is not None else None
+    kept = []
+    for i, data in enumerate(body.samples):
+        field = f"samples[{i}]"
+        if shape is None:
+            try:
+                shape = np.asarray(data, dtype=np.float32).shape
+            except ValueError:
+                raise Problem(422, "its rows have different lengths", field) from None
+        x = one_sample(data, shape, field)[0]
+        if x.ndim not in (1, 2) or x.size == 0:
+            raise Problem(422, "expected a flat vector or a C x T image of numbers", field)
+        if not np.isfinite(x).all():
+            raise Problem(422, "the sample contains NaN or infinity", field)
+        kept.append(x)
+    return kept
+
+
 def _check_name(session: Session, name: str) -> None:
     if repo.class_by_name(session, name) is not None:
         raise Problem(409, f"a class named '{name}' already exists", "name")
 
 
 def _class_accepted(
-    session: Session, cls: ObjectClass, job: Job, model: LoadedModel
+    session: Session, cls: ObjectClass, job: Job, model: LoadedModel | None
 ) -> ClassCreated:
     n = repo.sample_counts(session, [cls.id]).get(cls.id, 0)
     return ClassCreated(

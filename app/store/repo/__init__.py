@@ -43,6 +43,7 @@ from app.store.repo.classes import (
     sample_record,
     samples_by_id,
     samples_of,
+    stored_sample_form,
     vocabulary,
     withdraw_class,
     withdraw_sample,
@@ -128,6 +129,7 @@ __all__ = [
     "sample_record",
     "samples_by_id",
     "samples_of",
+    "stored_sample_form",
     "withdraw_class",
     "withdraw_sample",
     # encoding

@@ -229,6 +229,13 @@ def add_dataset_samples(
         session.execute(insert(Sample), rows)
 
 
+def stored_sample_form(session: Session) -> tuple[str, list[int]] | None:
+    """``(form, shape)`` of one live sample: what every sample of a store without a model
+    must match (None: the store holds none yet)."""
+    row = session.execute(select(Sample.form, Sample.shape).where(LIVE_SAMPLE).limit(1)).first()
+    return None if row is None else (row.form, list(row.shape))
+
+
 def samples_by_id(session: Session, sample_ids: Collection[int]) -> list[Sample]:
     """The samples ``sample_ids``, by id."""
     stmt = select(Sample).where(Sample.id.in_(sample_ids)).order_by(Sample.id)
