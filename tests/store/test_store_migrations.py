@@ -290,16 +290,8 @@ def test_0007_rewrites_keys_lists_each_versions_vocabulary_and_refuses_to_lose_v
         with engine.connect() as conn:
             assert conn.execute(text("SELECT attribute_key FROM classes")).scalar() == "1,0,1"
             names = conn.execute(text("SELECT attribute_names FROM model_versions")).scalar()
-            assert (
-                json.loads(names)
-                if isinstance(names, str)
-                else names
-                == [
-                    "hard",
-                    "soft",
-                    "warm",
-                ]
-            )
+            names = json.loads(names) if isinstance(names, str) else names
+            assert names == ["hard", "soft", "warm"]
             origins = conn.execute(text("SELECT DISTINCT origin FROM attributes")).scalars()
             assert list(origins) == ["dataset"]
         with engine.begin() as conn:  # a graded value the older schema cannot hold
