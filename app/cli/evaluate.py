@@ -284,29 +284,37 @@ def summary_table(results: dict) -> str:
     )
     n = results.get("splits")
     lines.append(f"mean [95% CI]: Student's t over the {n} splits' values, clipped to [0, 1]")
-    paired = results.get("paired")
-    if paired and paired.get("methods"):
-        ref = paired["reference"]
-        others = list(paired["methods"])
-        pw = 31
-        lines += [
-            "",
-            f"paired difference from {ref} on the same splits: mean [95% CI] won/lost",
-            "figure".ljust(24) + "".join(f"{m} - {ref}".rjust(pw) for m in others),
-        ]
-        for f in rows:
-            if not any(f in paired["methods"][m]["mean"] for m in others):
-                continue
-            cells = []
-            for m in others:
-                p = paired["methods"][m]
-                if f not in p["mean"]:
-                    cells.append("—".rjust(pw))
-                    continue
-                cell = _cell(p["mean"][f], p["ci95"].get(f), signed=True)
-                cells.append(f"{cell} {p['won'][f]}/{p['lost'][f]}".rjust(pw))
-            lines.append(f.ljust(24) + "".join(cells))
+    lines += paired_lines(results, rows)
     return "\n".join(lines)
+
+
+def paired_lines(results: dict, rows: list[str]) -> list[str]:
+    """The paired differences from the reference method, a row per figure (none with one
+    method)."""
+    paired = results.get("paired")
+    if not paired or not paired.get("methods"):
+        return []
+    ref = paired["reference"]
+    others = list(paired["methods"])
+    pw = 31
+    lines = [
+        "",
+        f"paired difference from {ref} on the same splits: mean [95% CI] won/lost",
+        "figure".ljust(24) + "".join(f"{m} - {ref}".rjust(pw) for m in others),
+    ]
+    for f in rows:
+        if not any(f in paired["methods"][m]["mean"] for m in others):
+            continue
+        cells = []
+        for m in others:
+            p = paired["methods"][m]
+            if f not in p["mean"]:
+                cells.append("—".rjust(pw))
+                continue
+            cell = _cell(p["mean"][f], p["ci95"].get(f), signed=True)
+            cells.append(f"{cell} {p['won'][f]}/{p['lost'][f]}".rjust(pw))
+        lines.append(f.ljust(24) + "".join(cells))
+    return lines
 
 
 def _cell(mean, ci=None, signed: bool = False) -> str:
@@ -321,7 +329,8 @@ def _cell(mean, ci=None, signed: bool = False) -> str:
 
 
 def raw_summary_table(results: dict) -> str:
-    """Raw-trial results: mean and 95 % confidence interval of every figure per method."""
+    """Raw-trial results: mean and 95 % confidence interval of every figure per method, and
+    with several methods the paired differences from the first."""
     from app.evaluation.raw import raw_figures
 
     methods = list(results["methods"])
@@ -344,4 +353,5 @@ def raw_summary_table(results: dict) -> str:
         "seconds".ljust(18)
         + "".join(f"{results['methods'][m]['elapsed_s']:.0f}".rjust(width) for m in methods)
     )
+    lines += paired_lines(results, raw_figures(results))
     return "\n".join(lines)

@@ -35,7 +35,10 @@ Student's t over splits (``metrics.mean_interval``, clipped to [0, 1]). Repeated
 splits share trials, so that interval is narrower than the uncertainty about a new set of
 trials would be. A held-out pressure's test set is fixed (its trials), so its figures also
 get the Wilson 95 % interval of the mean accuracy on that many trials (``binomial95``):
-what the size of the test set allows.
+what the size of the test set allows. With several methods, ``paired`` holds each other
+method's differences from the first, split by split and repeat by repeat (the same trials
+and method seeds), with their mean, t interval and the splits won and lost
+(``protocol.paired_summary``). The raw-trial protocol runs in one process.
 """
 
 from __future__ import annotations
@@ -50,7 +53,7 @@ from tqdm.auto import tqdm
 
 from app.data.biotac import BioTacDataset
 from app.evaluation import metrics
-from app.evaluation.protocol import make_recognizer
+from app.evaluation.protocol import make_recognizer, paired_summary
 from app.evaluation.splits import SplitError
 from app.framework.jsonable import jsonable
 from app.framework.registry import method_class
@@ -250,7 +253,8 @@ def evaluate_raw(
     figures], "pressure": [{"pressure", "repeat", "seed", "accuracy"}], "mean", "std",
     "ci95" ([low, high] per figure), "binomial95" ([low, high] per held-out pressure),
     "confusion" (trial splits, summed), "confusion_pressure" (summed), "elapsed_s",
-    "details"}}}.
+    "details"}}, "paired": each other method's differences from the first, split by split
+    and repeat by repeat (mean, 95 % t interval, won / lost; only with several methods)}.
     """
     methods = list(dict.fromkeys(methods))
     if not methods:
@@ -339,11 +343,14 @@ def evaluate_raw(
             results["methods"][m] = entry
     finally:
         bar.close()
+    if len(methods) > 1:
+        results["paired"] = _paired(results["methods"], list(by_pressure), n_splits)
     results["elapsed_s"] = time.perf_counter() - started
     return jsonable(results)
 
 
-def _summarise(entry: dict[str, Any], pressures: list[float], n_repeats: int) -> None:
+def _series(entry: dict[str, Any], pressures: list[float], n_repeats: int) -> dict[str, list]:
+    """Every figure's values in split (repeat) order: split i and repeat i share seed + i."""
     series: dict[str, list[float]] = {f: [s[f] for s in entry["splits"]] for f in TRIAL_FIGURES}
     for level in pressures:
         series[pressure_figure(level)] = [
@@ -354,6 +361,28 @@ def _summarise(entry: dict[str, Any], pressures: list[float], n_repeats: int) ->
             float(np.mean([series[pressure_figure(level)][r] for level in pressures]))
             for r in range(n_repeats)
         ]
+    return series
+
+
+def _paired(entries: dict[str, dict[str, Any]], pressures: list[float], n_repeats: int):
+    """Every method against the first on the same trial splits and held-out-pressure repeats
+    (see ``protocol.paired_summary``)."""
+    rows = {}
+    for m, entry in entries.items():
+        series = _series(entry, pressures, n_repeats)
+        n = max(map(len, series.values()))
+        rows[m] = {
+            "splits": [
+                {"split": i + 1, **{f: v[i] for f, v in series.items() if i < len(v)}}
+                for i in range(n)
+            ],
+            "mean": entry["mean"],
+        }
+    return paired_summary(rows, next(iter(entries)))
+
+
+def _summarise(entry: dict[str, Any], pressures: list[float], n_repeats: int) -> None:
+    series = _series(entry, pressures, n_repeats)
     entry["mean"], entry["std"], entry["ci95"] = {}, {}, {}
     for figure, values in series.items():
         entry["mean"][figure], entry["std"][figure], entry["ci95"][figure] = _summary(values)

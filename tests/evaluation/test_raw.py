@@ -221,6 +221,23 @@ def test_the_evaluate_command_on_the_pilot_at_tiny_size(tmp_path, capsys):
             "pressure_100", "pressure_150", "pressure_200", "pressure_mean",
         }  # fmt: skip
     assert results["methods"]["best"]["mean"]["known_acc"] >= 0.8
+    # paired differences from the first method, split by split and repeat by repeat
+    paired = results["paired"]
+    assert paired["reference"] == "best" and list(paired["methods"]) == ["paper", "extratrees"]
+    best, paper = results["methods"]["best"], results["methods"]["paper"]
+    d = [
+        p["known_acc"] - b["known_acc"]
+        for p, b in zip(paper["splits"], best["splits"], strict=True)
+    ]
+    assert paired["methods"]["paper"]["splits"]["known_acc"] == pytest.approx(d)
+    d200 = [
+        p["accuracy"] - b["accuracy"]
+        for p, b in zip(paper["pressure"], best["pressure"], strict=True)
+        if p["pressure"] == b["pressure"] == 200.0
+    ]
+    assert paired["methods"]["paper"]["splits"]["pressure_200"] == pytest.approx(d200)
+    assert paired["methods"]["paper"]["mean"]["pressure_200"] == pytest.approx(np.mean(d200))
     printed = capsys.readouterr().out
     assert "known_acc" in printed and "pressure_200" in printed
+    assert "paired difference from best" in printed and "paper - best" in printed
     assert (tmp_path / "report" / "accuracy.png").is_file()
