@@ -179,12 +179,14 @@ class TactileClient:
     def register_class(
         self,
         name: str,
-        attributes: list[str] | None = None,
-        attribute_vector: list[int] | None = None,
+        attributes: list[str] | dict[str, float | None] | None = None,
+        attribute_vector: list[float | None] | None = None,
         wait: float = 0,
     ) -> dict[str, Any]:
-        """Register a never-touched object by its attribute names or 0/1 vector; returns its
-        job (``class_id`` names the class), after up to ``wait`` seconds for it to finish."""
+        """Register a never-touched object by its attribute names, by names with values in
+        [0, 1] (``{"soft": 0.5}``; others not known) or by a vector (None: not known);
+        returns its job (``class_id`` names the class), after up to ``wait`` seconds for it
+        to finish."""
         body = {"name": name, **_attributes_body(attributes, attribute_vector)}
         job = self._send(
             "POST", "/v1/classes", json=body, idempotency_key=str(uuid.uuid4())
@@ -194,17 +196,37 @@ class TactileClient:
     def redescribe_class(
         self,
         class_id: int,
-        attributes: list[str] | None = None,
-        attribute_vector: list[int] | None = None,
+        attributes: list[str] | dict[str, float | None] | None = None,
+        attribute_vector: list[float | None] | None = None,
         wait: float = 0,
     ) -> dict[str, Any]:
-        """Correct the attributes a class was registered with, keeping its samples; returns
-        its job, after up to ``wait`` seconds for it to finish."""
+        """Correct the attributes a class was registered with, keeping its samples (names
+        with values set those and keep the rest; for a dataset class, its values for
+        attributes added since); returns its job, after up to ``wait`` seconds."""
         job = self._send(
             "PATCH",
             f"/v1/classes/{int(class_id)}",
             json=_attributes_body(attributes, attribute_vector),
             idempotency_key=str(uuid.uuid4()),
+        ).json()["job"]
+        return self.job(job["id"], wait) if wait else job
+
+    def add_attribute(
+        self, name: str, values: dict[str, float] | None = None, wait: float = 0
+    ) -> dict[str, Any]:
+        """Add an attribute to the vocabulary (an admin key), with its value for the classes
+        it is known for (class name -> value in [0, 1]); returns its job, after up to
+        ``wait`` seconds for the model to learn it."""
+        body = {"name": name, "values": values or {}}
+        job = self._send(
+            "POST", "/v1/attributes", json=body, idempotency_key=str(uuid.uuid4())
+        ).json()["job"]
+        return self.job(job["id"], wait) if wait else job
+
+    def retire_attribute(self, name: str, wait: float = 0) -> dict[str, Any]:
+        """Take an attribute out of later models (an admin key); returns its job."""
+        job = self._send(
+            "DELETE", f"/v1/attributes/{name}", idempotency_key=str(uuid.uuid4())
         ).json()["job"]
         return self.job(job["id"], wait) if wait else job
 
@@ -308,7 +330,8 @@ def _npy(samples: Any) -> bytes:
 
 
 def _attributes_body(
-    attributes: list[str] | None, attribute_vector: list[int] | None
+    attributes: list[str] | dict[str, float | None] | None,
+    attribute_vector: list[float | None] | None,
 ) -> dict[str, Any]:
     if (attributes is None) == (attribute_vector is None):
         raise ValueError("give either attributes or attribute_vector")

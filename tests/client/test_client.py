@@ -181,3 +181,23 @@ def test_touches_of_one_object_get_one_answer_online_and_offline(robot, dataset,
         online["results"][0]["novelty_score"], offline["results"][0]["novelty_score"], rtol=1e-5
     )
     assert len(robot.recognize(touches)["results"]) == 3
+
+
+def test_an_operator_adds_an_attribute_and_describes_a_class_with_it(best_service, best_base):
+    client, _, worker = best_service
+    _, dataset = best_base
+    robot = TactileClient(http=client, retries=0)
+    job = robot.add_attribute("sticky", {dataset.class_names[0]: 1, dataset.class_names[1]: 0.5})
+    assert job["kind"] == "add_attribute" and job["status"] == "queued"
+    registered = robot.register_class("tape", attributes={"sticky": 1})
+    with pytest.raises(ServiceError, match="409.*'tape' described by nothing"):
+        robot.retire_attribute("sticky")  # tape would be described by nothing
+    robot.redescribe_class(registered["class_id"], attributes={dataset.attribute_names[0]: 1})
+    worker.run_once()
+    assert robot.job(job["id"])["status"] == robot.job(registered["id"])["status"] == "succeeded"
+    touch = robot.describe(dataset.samples[:1])["results"][0]["attributes"]
+    assert "sticky" in {a["name"] for a in touch}
+    with pytest.raises(ServiceError, match="409.*never reused|409.*exists"):
+        robot.add_attribute(dataset.attribute_names[0])
+    retired = robot.retire_attribute("sticky")
+    assert retired["kind"] == "retire_attribute"
