@@ -17,6 +17,7 @@ from collections.abc import Callable
 from datetime import UTC, datetime, timedelta
 
 import numpy as np
+from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
@@ -135,6 +136,10 @@ class Worker:
     def _process(self, job_ids: list[int]) -> None:
         try:
             self._retrain(job_ids)
+        except OperationalError:
+            # the store, not the jobs: they stay claimed, and the next round (this worker's
+            # or another's, under the lease) puts them back in the queue
+            raise
         except Exception as exc:
             if len(job_ids) > 1:
                 log.warning(

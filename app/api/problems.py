@@ -261,8 +261,19 @@ async def framework_exception_handler(request: Request, exc: FrameworkError) -> 
 
 
 async def store_unavailable_handler(request: Request, exc: OperationalError) -> ProblemResponse:
-    """A timed-out statement or an unreachable database: retryable, and no SQL leaves."""
+    """A timed-out statement or an unreachable database: retryable, and no SQL leaves. A
+    full disk (SQLite's "database or disk is full", PostgreSQL's "No space left on
+    device") is 507: retrying helps only once an operator frees space."""
     log.warning("store error on %s %s: %s", request.method, request.url.path, exc.orig)
+    message = str(exc.orig).lower()
+    if "disk is full" in message or "no space left" in message:
+        return problem_response(
+            request,
+            507,
+            "the store's disk is full; nothing was written: try again once space is freed",
+            [],
+            {"Retry-After": "60"},
+        )
     return problem_response(
         request,
         503,
