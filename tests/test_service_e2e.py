@@ -224,3 +224,51 @@ def test_robot_session_survives_a_restart(tmp_path):
             assert client.get(f"/v1/classes/{teapot}").json()["attributes"] == fixed
     finally:
         service.stop()
+
+
+def test_a_lab_starts_empty_and_grows_its_own_vocabulary(tmp_path):
+    """A real ``serve`` started without a dataset: attributes added over HTTP, classes
+    registered with their touches, the first model trained, an attribute added later
+    learnt, one retired."""
+    touches = quick_dataset()
+    service = Service(tmp_path / "data", free_port())
+    service.env.update({"TACTILE_DATASET": "none", "TACTILE_METHOD": "best"})
+    service.env.pop("TACTILE_METHOD_PARAMS")
+    service.start()
+    try:
+        with httpx.Client(base_url=f"http://127.0.0.1:{service.port}", timeout=30) as client:
+            service.wait_ready(client)
+            ready = client.get("/readyz").json()
+            assert "model_version" not in ready and "0 so far" in ready["detail"], ready
+            r = client.post("/v1/recognize", json={"samples": touches.samples[:1].tolist()})
+            assert r.status_code == 409 and "0 so far" in r.json()["detail"], r.text
+            assert client.post("/v1/attributes", json={"name": "soft"}).status_code == 202
+            jobs = []
+            for k, (name, soft) in enumerate((("sponge", 1), ("stone", 0), ("felt", 0.5))):
+                body = {
+                    "name": name,
+                    "samples": touches.samples[touches.labels == k][:3].tolist(),
+                    "attributes": {"soft": soft} if soft else None,
+                }
+                r = client.post("/v1/classes", json={k: v for k, v in body.items() if v})
+                assert r.status_code == 202, r.text
+                jobs.append(r.json()["job"]["id"])
+            assert all(wait_job(client, j, service)["status"] == "succeeded" for j in jobs)
+            r = client.post("/v1/recognize", json={"samples": touches.samples[:1].tolist()})
+            assert r.status_code == 200, r.text
+            r = client.post(
+                "/v1/attributes",
+                json={"name": "cold", "values": {"stone": 1, "sponge": 0}},
+            )
+            assert r.status_code == 202, r.text
+            assert wait_job(client, r.json()["job"]["id"], service)["status"] == "succeeded"
+            active = client.get("/v1/models/active").json()
+            assert active["attribute_names"] == ["soft", "cold"], active
+            r = client.post("/v1/describe", json={"samples": touches.samples[:1].tolist()})
+            assert {a["name"] for a in r.json()["results"][0]["attributes"]} == {"soft", "cold"}
+            r = client.delete("/v1/attributes/cold")
+            assert r.status_code == 202, r.text
+            assert wait_job(client, r.json()["job"]["id"], service)["status"] == "succeeded"
+            assert client.get("/v1/models/active").json()["attribute_names"] == ["soft"]
+    finally:
+        service.stop()

@@ -23,7 +23,12 @@ from sqlalchemy.orm import Session, sessionmaker
 from app.config import Settings
 from app.framework import bundle
 from app.framework.recognizer import TactileRecognizer
-from app.service.bootstrap import first_model_missing, model_classes
+from app.service.bootstrap import (
+    FIRST_MODEL_SAMPLES,
+    first_model_missing,
+    model_classes,
+    starts_empty,
+)
 from app.store import bundles, leases, repo, retention
 from app.store.enums import JobStatus
 from worker.retrain import Plan, Rebuild, build, known_dataset, make_first_plan, make_plan
@@ -160,7 +165,9 @@ class Worker:
                 model, plan = None, make_first_plan(s, jobs)
             else:
                 model = self._load(s, base.version, base.bundle_sha256)
-                plan = make_plan(s, base, model, jobs, self.settings.promotion_threshold)
+                threshold = self.settings.promotion_threshold
+                keep = FIRST_MODEL_SAMPLES if starts_empty(self.settings) else threshold
+                plan = make_plan(s, base, model, jobs, threshold, keep_known=keep)
             refit = plan.rebuild in (Rebuild.FULL, Rebuild.ATTRIBUTES)
             known = known_dataset(s, plan) if refit else None
         # the session is closed: no transaction stays open while training runs

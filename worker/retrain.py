@@ -81,8 +81,18 @@ class Plan:
 
 
 def make_plan(
-    s: Session, base: ModelVersion, model: TactileRecognizer, claimed: list[Job], threshold: int
+    s: Session,
+    base: ModelVersion,
+    model: TactileRecognizer,
+    claimed: list[Job],
+    threshold: int,
+    keep_known: int | None = None,
 ) -> Plan:
+    """``threshold``: samples that promote a novel class; a known enrolled class left with
+    fewer than ``keep_known`` (default: ``threshold``) is novel again. A service started
+    empty keeps its known classes from ``FIRST_MODEL_SAMPLES`` samples on, as its first
+    model took them."""
+    keep_known = threshold if keep_known is None else keep_known
     plan = Plan(vocabulary=repo.vocabulary(s))
     claimed_ids = {j.id for j in claimed}
     classes = repo.list_classes(s)  # withdrawn ones are not among them
@@ -149,10 +159,12 @@ def make_plan(
         in_model.append(cls)
         rows = plan.samples.get(cls.id, [])
         missing = [r for r in rows if r.id not in in_base]
-        if cls.kind == ClassKind.KNOWN and (cls.origin == Origin.DATASET or len(rows) >= threshold):
+        if cls.kind == ClassKind.KNOWN and (
+            cls.origin == Origin.DATASET or len(rows) >= keep_known
+        ):
             # a promoted class the base lacks as known, or with samples it has not seen
             full |= cls.name not in reg.known_names or bool(missing)
-        elif cls.kind == ClassKind.KNOWN:  # withdrawals took it below the promotion threshold
+        elif cls.kind == ClassKind.KNOWN:  # withdrawals took it below what keeps it known
             plan.demote.append(cls)
             plan.novel.append(cls)
             full = True

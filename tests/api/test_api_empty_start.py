@@ -77,6 +77,15 @@ def test_an_empty_service_recognises_once_its_first_classes_have_samples(empty, 
     r = client.post("/v1/describe", json={"samples": samples_of(touches, 0, 1)})
     assert r.status_code == 200 and r.json()["results"][0]["attributes"][0]["name"] == "soft"
 
+    # a word added later is learnt; the first model's known classes stay known (they have
+    # fewer samples than the promotion threshold, and need not)
+    r = client.post("/v1/attributes", json={"name": "cold", "values": {"stone": 1, "sponge": 0}})
+    worker.run_once()
+    assert client.get(f"/v1/jobs/{r.json()['job']['id']}").json()["status"] == "succeeded"
+    active = client.get("/v1/models/active").json()
+    assert active["attribute_names"] == ["soft", "cold"]
+    assert {c["name"]: c["kind"] for c in active["classes"]} == kinds
+
 
 def test_samples_before_a_model_must_share_one_shape(empty, touches):
     client, _ = empty

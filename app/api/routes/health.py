@@ -6,9 +6,10 @@ from pydantic import Field
 from sqlalchemy.exc import SQLAlchemyError
 
 from app.api import problems
-from app.api.deps import HolderDep, MetricsDep, SessionDep
+from app.api.deps import HolderDep, MetricsDep, SessionDep, SettingsDep
 from app.api.problems import Problem
 from app.api.schemas import Health
+from app.service.bootstrap import first_model_missing, starts_empty
 from app.store.db import ping
 
 log = logging.getLogger(__name__)
@@ -28,7 +29,8 @@ class Readiness(Health):
         None,
         description="Set when the process serves another version than the active one, and "
         "why: the active version's stored bundle is damaged (`tactile-zsl store check` "
-        "names it), so it serves the newest intact one.",
+        "names it), so it serves the newest intact one; or, for a service started without a "
+        "dataset, what its first model waits for.",
     )
 
 
@@ -38,14 +40,19 @@ class Readiness(Health):
     response_model_exclude_none=True,  # detail only when there is something to say
     responses=problems.responses(503),
 )
-def readyz(session: SessionDep, holder: HolderDep) -> Readiness:
-    """The store answers and a model is loaded (503 with `Retry-After` otherwise)."""
+def readyz(session: SessionDep, holder: HolderDep, settings: SettingsDep) -> Readiness:
+    """The store answers and a model is loaded (503 with `Retry-After` otherwise). A service
+    started without a dataset is ready before its first model: it takes attributes and
+    classes then (`detail` says what the first model waits for)."""
     try:
         ping(session)
     except SQLAlchemyError as exc:
         log.warning("readyz: the store is not reachable: %s", getattr(exc, "orig", exc))
         raise Problem(503, "the store is not reachable", "database", {"Retry-After": "1"}) from None
     model = holder.current
+    if model is None and starts_empty(settings):
+        missing = first_model_missing(session) or "the first model is being trained"
+        return Readiness(status="ready", model_version=None, detail=missing)
     if model is None:
         raise Problem(503, "no model is loaded yet", "model", {"Retry-After": "5"})
     return Readiness(status="ready", model_version=model.version, detail=holder.degraded)

@@ -77,7 +77,7 @@ async def get_job(
         if await watch.wait(job_id, max(0.0, deadline - time.monotonic())):
             job = await run_in_threadpool(_read_job, session, job_id)
     served = holder.current
-    if job.model_version is not None and served is not None and served.version < job.model_version:
+    if job.model_version is not None and (served is None or served.version < job.model_version):
         # whoever sees "succeeded" here gets the new model from this process next
         await run_in_threadpool(holder.refresh)
     return JobOut.model_validate(job)
