@@ -35,8 +35,10 @@ def _vectors(n: int) -> list[list[int]]:
 
 class Enroller:
     """A robot fleet in one thread: registers classes, adds samples, now and then
-    withdraws one or describes a class anew, retrying a timed-out or cut request with the
-    same Idempotency-Key, round-robin over the APIs."""
+    withdraws one, describes a class anew or adds an attribute with values for some
+    classes, retrying a timed-out or cut request with the same Idempotency-Key,
+    round-robin over the APIs. Vectors are padded with null (not known) for the attributes
+    added since the dataset's."""
 
     def __init__(
         self,
@@ -61,6 +63,10 @@ class Enroller:
         self.sample_class: dict[int, int] = {}
         self.withdrawn: list[int] = []  # sample ids whose withdrawal got a 202
         self.described: dict[int, list[int]] = {}  # class id -> vector of its last 202'd PATCH
+        self.attributes: list[str] = []  # 202'd attributes, in the order they were added
+        # class name -> attribute -> value, as the last 202'd request about either left it
+        self.values: dict[str, dict[str, float]] = {}
+        self.attribute_lost = False  # an attribute request nobody answered: stop adding
         self.vectors_used = 0
         self.per_class: dict[int, int] = {}
         self.retries = self.replays = self.bad = 0
@@ -108,6 +114,14 @@ class Enroller:
         return None
 
     def step(self) -> None:
+        if (
+            self.classes
+            and not self.attribute_lost
+            and len(self.attributes) < 5
+            and (self.rng.random() < 0.03 or not self.attributes)
+        ):
+            self._add_attribute()
+            return
         kept = sorted(set(self.sample_ids) - set(self.withdrawn))
         # each kind of request at least once, so a short run checks them all
         if kept and (self.rng.random() < 0.1 or not self.withdrawn):  # a sample of the wrong object
@@ -125,9 +139,10 @@ class Enroller:
         ):
             cid = self.rng.choice(sorted(self.classes))  # described wrongly: corrected
             vector = self._next_vector()
-            r = self.send("PATCH", f"/v1/classes/{cid}", {"attribute_vector": vector})
+            r = self.send("PATCH", f"/v1/classes/{cid}", {"attribute_vector": self._padded(vector)})
             if r is not None and r.status_code == 202:
                 self.described[cid] = vector
+                self.values.pop(self.classes[cid], None)  # the added ones: not known again
             elif r is not None:
                 self.bad += 1
             return
@@ -135,7 +150,9 @@ class Enroller:
         if not open_classes or (self.vectors_used < len(self.vectors) and self.rng.random() < 0.5):
             name = f"crash-{len(self.classes)}-{uuid.uuid4().hex[:6]}"
             r = self.send(
-                "POST", "/v1/classes", {"name": name, "attribute_vector": self._next_vector()}
+                "POST",
+                "/v1/classes",
+                {"name": name, "attribute_vector": self._padded(self._next_vector())},
             )
             if r is not None and r.status_code == 202:
                 cid = r.json()["class"]["id"]
@@ -153,6 +170,26 @@ class Enroller:
             self.per_class[cid] += 1
         elif r is not None:
             self.bad += 1
+
+    def _add_attribute(self) -> None:
+        """A word the vocabulary lacks, with values for a few enrolled classes and one of
+        the dataset's."""
+        name = f"word-{len(self.attributes)}-{uuid.uuid4().hex[:4]}"
+        named = self.rng.sample(sorted(self.classes.values()), min(3, len(self.classes)))
+        values = {n: self.rng.choice((0.0, 0.5, 1.0)) for n in named}
+        values[quick_dataset().class_names[0]] = 1.0
+        r = self.send("POST", "/v1/attributes", {"name": name, "values": values})
+        if r is None:
+            self.attribute_lost = True
+        elif r.status_code == 202:
+            self.attributes.append(name)
+            for cls, value in values.items():
+                self.values.setdefault(cls, {})[name] = value
+        else:
+            self.bad += 1
+
+    def _padded(self, vector: list[int]) -> list[int | None]:
+        return [*vector, *[None] * len(self.attributes)]
 
     def _next_vector(self) -> list[int]:
         self.vectors_used += 1
@@ -172,10 +209,13 @@ def verify(
     withdrawn: list[int] = (),
     described: dict[int, list[int]] | None = None,
     headers: dict[str, str] | None = None,
+    attributes: list[str] = (),
+    values: dict[str, dict[str, float]] | None = None,
 ) -> dict:
     """Every 202'd class and sample is in the store and in the active model, except the
     samples whose withdrawal got a 202, which are in neither; a class described anew has
-    its last 202'd vector in both; jobs settled."""
+    its last 202'd vector in both; every 202'd attribute is in the vocabulary and the
+    served model's, with every 202'd value in the store and the model; jobs settled."""
     counts = wait_jobs_settled(cluster.sqlalchemy_url, timeout)
     url = cluster.urls[0]
     active = httpx.get(f"{url}/v1/models/active", timeout=30, headers=headers).json()
@@ -191,7 +231,9 @@ def verify(
             strict=True,
         )
     )
-    described = described or {}
+    described, values = described or {}, values or {}
+    by_name = {c["name"]: c for c in stored.values()}
+    position = {a: i for i, a in enumerate(served.attribute_names)}
     from app.store import repo
     from app.store.db import make_engine, make_sessionmaker
 
@@ -225,13 +267,29 @@ def verify(
         "descriptions_not_stored": sorted(
             c
             for c, v in described.items()
-            if stored.get(c, {}).get("attributes")
-            != [a for a, bit in zip(vocabulary, v, strict=True) if bit]
+            if [a for a in stored.get(c, {}).get("attributes", []) if a not in attributes]
+            != [a for a, bit in zip(vocabulary, v, strict=False) if bit]
         ),
         "descriptions_not_served": sorted(
             c
             for c, v in described.items()
-            if served_vectors.get(classes[c]) != [float(b) for b in v]
+            if served_vectors.get(classes[c], [])[: len(v)] != [float(b) for b in v]
+        ),
+        "attributes_202": len(attributes),
+        "attributes_not_stored": [a for a in attributes if a not in vocabulary],
+        "attributes_not_served": [a for a in attributes if a not in position],
+        "values_202": sum(len(v) for v in values.values()),
+        "values_not_stored": sorted(
+            (c, a)
+            for c, by_attribute in values.items()
+            for a, value in by_attribute.items()
+            if by_name.get(c, {}).get("attribute_values", {}).get(a) != value
+        ),
+        "values_not_served": sorted(
+            (c, a)
+            for c, by_attribute in values.items()
+            for a, value in by_attribute.items()
+            if a in position and served_vectors.get(c, [None] * len(position))[position[a]] != value
         ),
         "active_version": active["version"],
         # the one failure that is right: a sample withdrawn before a model took it in
@@ -273,7 +331,14 @@ def crash(
         thread.join(120)
     cluster.wait_ready()
     report = verify(
-        cluster, fleet.classes, fleet.sample_ids, settle_timeout, fleet.withdrawn, fleet.described
+        cluster,
+        fleet.classes,
+        fleet.sample_ids,
+        settle_timeout,
+        fleet.withdrawn,
+        fleet.described,
+        attributes=fleet.attributes,
+        values=fleet.values,
     )
     report.update(
         kills=killed,

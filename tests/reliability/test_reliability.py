@@ -33,6 +33,10 @@ def assert_nothing_lost(report: dict) -> None:
     assert (
         report.get("descriptions_not_stored", []) == report.get("descriptions_not_served", []) == []
     ), report
+    for lost in ("attributes_not_stored", "attributes_not_served"):
+        assert report.get(lost, []) == [], report
+    for lost in ("values_not_stored", "values_not_served"):
+        assert report.get(lost, []) == [], report
     assert set(report["jobs"]) <= {"succeeded", "failed"}, report  # none left queued
     assert report["unexpected_failures"] == [], report
 
@@ -55,6 +59,7 @@ def run_crash(tmp_path, database_url: str = "") -> None:
     print(report)
     assert sum(report["kills"].values()) == CI_KILLS
     assert report["classes_202"] > 0 and report["withdrawn_202"] > 0 and report["described_202"] > 0
+    assert report["attributes_202"] > 0 and report["values_202"] > 0
     assert_nothing_lost(report)
 
 
