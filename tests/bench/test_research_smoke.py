@@ -157,6 +157,18 @@ def explore_novelty(phac2: Path, tmp: Path) -> None:
         assert all(share(float(v)) for v in pair.split(" / ")), pair
 
 
+def attribute_growth(phac2: Path, tmp: Path) -> None:
+    out, png = tmp / "growth.json", tmp / "growth.png"
+    done = run("attribute_growth.py", phac2, "--out", str(out), "--plot", str(png))
+    assert done.stdout.startswith("| attribute |") and png.stat().st_size > 0, done.stdout
+    report = json.loads(out.read_text())
+    assert report["splits_run"] == 1 and report["attributes"] == ["hard", "smooth"]
+    for figures in report["per_attribute"].values():
+        for condition in ("start", "later"):
+            auc, zsl = figures[condition]["mean"]["auc"], figures[condition]["mean"]["zsl"]
+            assert (auc is None or share(auc)) and share(zsl), figures  # None: AUC skipped
+
+
 SCRIPTS: dict[str, Callable[[Path, Path], None]] = {
     f"{check.__name__}.py": check
     for check in (
@@ -169,6 +181,7 @@ SCRIPTS: dict[str, Callable[[Path, Path], None]] = {
         explore_cadavae,
         explore_attributes,
         explore_novelty,
+        attribute_growth,
     )
 }
 
