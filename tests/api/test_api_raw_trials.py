@@ -65,7 +65,7 @@ def test_the_active_model_says_it_takes_raw_trials(raw_service, pilot):
     active = client.get("/v1/models/active").json()
     assert active["input_kind"] == "raw_trials"
     assert active["input_shape"] == list(pilot[0].input_shape)
-    assert client.get("/v1/attributes").json() == {"attributes": []}
+    assert client.get("/v1/attributes").json() == {"attributes": [], "vocabulary": []}
 
 
 def test_held_out_trials_are_recognised_once_each_from_both_fingers(raw_service, pilot):
@@ -234,7 +234,7 @@ def test_a_new_object_is_enrolled_from_raw_trials_and_recognised(raw_service, ra
 def test_a_model_without_attributes_refuses_descriptions_and_samples(raw_service, pilot):
     client, _ = raw_service
     found = problem(client.post("/v1/classes", json={"name": "x", "attributes": []}), 409)
-    assert "no attributes" in found["detail"] and "samples or trials" in found["detail"]
+    assert "vocabulary is empty" in found["detail"] and "with its samples" in found["detail"]
     image = np.zeros(pilot[0].input_shape).tolist()
     found = problem(client.post("/v1/classes", json={"name": "x", "samples": [image]}), 409)
     assert "'trials'" in found["detail"]

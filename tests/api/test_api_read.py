@@ -17,7 +17,11 @@ PROBLEM = "application/problem+json"
 def test_attributes_in_vector_order(client, dataset):
     r = client.get("/v1/attributes")
     assert r.status_code == 200
-    assert r.json() == {"attributes": list(dataset.attribute_names)}
+    assert r.json()["attributes"] == list(dataset.attribute_names)
+    vocabulary = r.json()["vocabulary"]
+    assert [a["name"] for a in vocabulary] == list(dataset.attribute_names)
+    assert {a["origin"] for a in vocabulary} == {"dataset"}
+    assert all(a["retired_at"] is None for a in vocabulary)
 
 
 def test_classes_list_the_base_model(client, dataset):

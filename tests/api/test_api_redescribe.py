@@ -28,7 +28,7 @@ def test_new_attributes_are_committed_before_the_202_and_the_samples_stay(client
     assert [j["id"] for j in listed] == [job["id"]]
     assert client.get(f"/v1/classes/{cid}").json()["attributes"] == names_of(vector, dataset)
     with app.state.service.sessions() as s:  # a fresh session sees both: they are committed
-        assert s.get(ObjectClass, cid).attribute_key == "".join(map(str, vector))
+        assert s.get(ObjectClass, cid).attribute_key == ",".join(map(str, vector))
         assert s.get(Job, job["id"]).status == "queued"
     # the old vector is free again, the new one is taken
     old = unused_vectors(dataset, 1)[0]
@@ -55,7 +55,7 @@ def test_a_description_the_model_could_not_tell_apart_is_refused(client, app, da
     same = unused_vectors(dataset, 1)[0]  # its own description again is no conflict
     assert client.patch(f"/v1/classes/{mug}", json={"attribute_vector": same}).status_code == 202
     with app.state.service.sessions() as s:
-        assert s.get(ObjectClass, mug).attribute_key == "".join(map(str, same))
+        assert s.get(ObjectClass, mug).attribute_key == ",".join(map(str, same))
 
 
 def test_bad_redescriptions_are_named_and_change_nothing(client, app, dataset):
@@ -65,9 +65,11 @@ def test_bad_redescriptions_are_named_and_change_nothing(client, app, dataset):
         jobs = s.query(Job).count()
     vector = unused_vectors(dataset, 2)[1]
     body = problem(
-        client.patch(f"/v1/classes/{known.id}", json={"attribute_vector": vector}), 409, "class_id"
+        client.patch(f"/v1/classes/{known.id}", json={"attribute_vector": vector}),
+        409,
+        "attribute_vector",
     )
-    assert "training dataset" in body["detail"]
+    assert "training dataset" in body["detail"] and "stay fixed" in body["detail"]
     problem(client.patch("/v1/classes/424242", json={"attribute_vector": vector}), 404, "class_id")
     problem(
         client.patch(f"/v1/classes/{mug}", json={"attributes": ["no-such-attribute"]}),
@@ -89,7 +91,7 @@ def test_bad_redescriptions_are_named_and_change_nothing(client, app, dataset):
     problem(client.patch(f"/v1/classes/{mug}", json={"attribute_vector": vector}), 404, "class_id")
     with app.state.service.sessions() as s:
         assert s.get(ObjectClass, known.id).attribute_key == known.attribute_key
-        assert s.get(ObjectClass, mug).attribute_key == "".join(
+        assert s.get(ObjectClass, mug).attribute_key == ",".join(
             map(str, unused_vectors(dataset, 1)[0])
         )
         assert s.query(Job).count() == jobs + 1  # the withdrawal's only

@@ -94,7 +94,7 @@ def test_every_v1_operation_needs_a_key_once_one_exists(client, app):
         if path.startswith("/v1")
         for method in item
     ]
-    assert len(operations) == 20
+    assert len(operations) == 22
     for path, item in paths.items():
         for method, operation in item.items():
             if path.startswith("/v1"):

@@ -43,7 +43,7 @@ def list_attributes(session: SessionDep) -> AttributeList:
     status_code=202,
     response_model=AttributeChanged,
     dependencies=[AdminAccess, JsonBody],
-    responses=problems.responses(409, 415),
+    responses=problems.responses(409, 415, 422),
 )
 def add_attribute(
     body: AttributeCreate,
@@ -100,7 +100,7 @@ def add_attribute(
     status_code=202,
     response_model=AttributeChanged,
     dependencies=[AdminAccess],
-    responses=problems.responses(404, 409),
+    responses=problems.responses(404, 409, 422),
 )
 def retire_attribute(
     name: str,
