@@ -123,3 +123,21 @@ def test_the_paper_pipeline_is_fitted_again_instead(data):
     paper.input_shape = train.input_shape  # fitted enough for the refusal to be reached
     with pytest.raises(UnsupportedOperationError, match="fit it again"):
         paper.with_attributes(train)
+
+
+def test_best_fits_on_a_dataset_of_graded_and_unknown_values(data):
+    ds, train, novel = data
+    values = train.attribute_values.copy()
+    values[0, :4] = np.nan
+    values[1, 0] = 0.5
+    values[:, 2] = np.where(np.arange(len(values)) % 2, np.nan, 0.25)
+    graded = train.with_attributes(train.attribute_names, values)
+    assert not graded.binary_attributes
+    model = make_method("best", **FAST).fit(graded)
+    np.testing.assert_array_equal(model.registry.known_attributes, values)
+    assert model.attributes_.constant[2] == 0.25  # every known value of it is 0.25
+    grown = model.add_novel_classes(["n"], [np.r_[ds.class_attributes[novel[0]]]])
+    p = grown.novel_proba(ds.samples[ds.labels == novel[0]])
+    assert np.isfinite(p).all() and np.allclose(p.sum(axis=1), 1)
+    with pytest.raises(Exception, match="graded or not-known"):
+        make_method("dap").fit(graded)
