@@ -16,8 +16,10 @@ from app.api.deps import (
 )
 from app.api.problems import Problem
 from app.api.schemas import AttributeChanged, AttributeCreate, AttributeList, AttributeOut, JobOut
+from app.service.keys import Principal
 from app.store import repo
 from app.store.enums import ClassKind, JobKind, Origin
+from app.store.models import Attribute
 from app.store.vocabulary import MAX_ATTRIBUTES, Vocabulary, describes
 
 router = APIRouter(
@@ -80,17 +82,8 @@ def add_attribute(
     with idempotency.writing(session, recheck=lambda: _check_new(session, body.name)):
         attribute = repo.add_attribute(session, body.name)
         repo.describe(session, keys)
-        job = repo.add_job(
-            session,
-            JobKind.ADD_ATTRIBUTE,
-            None,
-            requested_by=principal.id,
-            attribute_id=attribute.id,
-        )
-        out = AttributeChanged(
-            attribute=AttributeOut.model_validate(attribute), job=JobOut.model_validate(job)
-        )
-        idempotency.accept(session, out, job.id, response)
+        out = _queue(session, JobKind.ADD_ATTRIBUTE, attribute, principal)
+        idempotency.accept(session, out, out.job.id, response)
     metrics.enrollments.labels("attribute").inc()
     return out
 
@@ -139,19 +132,20 @@ def retire_attribute(
     _check_distinct(session, after, {}, "name", because=f"retiring '{name}'")
     with idempotency.writing(session):
         repo.retire_attribute(session, attribute, vocab)
-        job = repo.add_job(
-            session,
-            JobKind.RETIRE_ATTRIBUTE,
-            None,
-            requested_by=principal.id,
-            attribute_id=attribute.id,
-        )
-        out = AttributeChanged(
-            attribute=AttributeOut.model_validate(attribute), job=JobOut.model_validate(job)
-        )
-        idempotency.accept(session, out, job.id, response)
+        out = _queue(session, JobKind.RETIRE_ATTRIBUTE, attribute, principal)
+        idempotency.accept(session, out, out.job.id, response)
     metrics.enrollments.labels("attribute").inc()
     return out
+
+
+def _queue(
+    session: Session, kind: JobKind, attribute: Attribute, principal: Principal
+) -> AttributeChanged:
+    """The job that brings the vocabulary's change into the model, and the 202's body."""
+    job = repo.add_job(session, kind, None, requested_by=principal.id, attribute_id=attribute.id)
+    return AttributeChanged(
+        attribute=AttributeOut.model_validate(attribute), job=JobOut.model_validate(job)
+    )
 
 
 def _check_new(session: Session, name: str) -> None:
