@@ -13,9 +13,12 @@ import functools
 import io
 import itertools
 import os
+import subprocess
+import sys
 import time
 import uuid
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -146,6 +149,25 @@ def quick_settings(data_dir, **overrides) -> Settings:
         "promotion_threshold": 10,
     }
     return Settings(**{**values, **overrides})
+
+
+def store_check(settings: Settings) -> tuple[int, str]:
+    """``tactile-zsl store check`` on the settings' store in a process of its own, as an
+    operator runs it: (exit code, output)."""
+    env = {
+        **os.environ,
+        "TACTILE_DATA_DIR": str(settings.data_dir),
+        "TACTILE_DATABASE_URL": settings.database_url or "",
+    }
+    out = subprocess.run(
+        [sys.executable, "-m", "app.cli", "store", "check"],
+        env=env,
+        cwd=Path(__file__).resolve().parents[1],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    return out.returncode, out.stdout + out.stderr
 
 
 def list_all(client, path: str, key: str) -> list[dict]:

@@ -28,9 +28,8 @@ from fastapi.testclient import TestClient
 from sqlalchemy import event, text
 
 from app.store.integrity import check_store
-from tests.service_fixtures import PROBLEM, quick_settings, unused_vectors
+from tests.service_fixtures import PROBLEM, quick_settings, store_check, unused_vectors
 
-ROOT = Path(__file__).resolve().parents[2]
 WRITES = ("INSERT", "UPDATE", "DELETE", "REPLACE")
 MESSAGES = {
     "read-only": "attempt to write a readonly database",
@@ -94,19 +93,6 @@ def fill(path: Path) -> Path:
     finally:
         os.close(fd)
     return filler
-
-
-def store_check(settings) -> tuple[int, str]:
-    env = {**os.environ, "TACTILE_DATA_DIR": str(settings.data_dir), "TACTILE_DATABASE_URL": ""}
-    out = subprocess.run(
-        [sys.executable, "-m", "app.cli", "store", "check"],
-        env=env,
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    return out.returncode, out.stdout + out.stderr
 
 
 def assert_unavailable(r, what: str) -> None:

@@ -6,11 +6,7 @@ names the damaged bundle and its version."""
 from __future__ import annotations
 
 import logging
-import os
-import subprocess
-import sys
 import time
-from pathlib import Path
 
 import pytest
 from fastapi.testclient import TestClient
@@ -21,9 +17,7 @@ from app.framework.errors import BundleError
 from app.service import holder as holder_module
 from app.store import repo
 from app.store.models import Bundle
-from tests.service_fixtures import register
-
-ROOT = Path(__file__).resolve().parents[2]
+from tests.service_fixtures import register, store_check
 
 
 def flip_byte(sessions, sha: str) -> bytes:
@@ -39,23 +33,6 @@ def flip_byte(sessions, sha: str) -> bytes:
 def put_back(sessions, sha: str, data: bytes) -> None:
     with sessions.begin() as s:
         s.execute(update(Bundle).where(Bundle.sha256 == sha).values(data=data))
-
-
-def store_check(settings) -> tuple[int, str]:
-    env = {
-        **os.environ,
-        "TACTILE_DATA_DIR": str(settings.data_dir),
-        "TACTILE_DATABASE_URL": settings.database_url or "",
-    }
-    out = subprocess.run(
-        [sys.executable, "-m", "app.cli", "store", "check"],
-        env=env,
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    return out.returncode, out.stdout + out.stderr
 
 
 def version_two(client, worker, dataset) -> str:
