@@ -75,3 +75,22 @@ def test_two_processes_starting_at_once_bootstrap_once(settings, base_model):
     with make_sessionmaker(engine)() as s:
         assert s.scalar(select(func.count()).select_from(ObjectClass)) == base_model[1].n_classes
     engine.dispose()
+
+
+def test_a_dataset_of_graded_and_unknown_values_is_stored_as_given(tmp_path, best_base):
+    from tests.service_fixtures import BEST_PARAMS, quick_settings
+
+    model, dataset = best_base
+    values = dataset.attribute_values.copy()
+    values[0, 0], values[1, :3], values[2, 1] = 0.5, np.nan, 0.25
+    graded = dataset.with_attributes(dataset.attribute_names, values)
+    fitted = type(model)(**BEST_PARAMS).fit(graded)
+    settings = quick_settings(tmp_path, method="best", method_params=BEST_PARAMS)
+    engine = make_engine(settings.sqlalchemy_url)
+    sessions = make_sessionmaker(engine)
+    ensure_ready(settings, engine, sessions, trainer=lambda: (fitted, graded), progress=False)
+    with sessions() as s:
+        vocab = repo.vocabulary(s)
+        stored = np.stack([vocab.vector(c.attribute_key) for c in repo.list_classes(s)])
+    np.testing.assert_array_equal(stored, values)  # NaN where not known, graded as given
+    engine.dispose()
