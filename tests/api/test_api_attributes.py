@@ -237,3 +237,17 @@ def test_adding_attributes_takes_an_admin_key(service):
     r = client.post("/v1/attributes", json={"name": "sticky"}, headers={"X-API-Key": admin})
     assert r.status_code == 202, r.text
     problem(client.delete("/v1/attributes/sticky", headers={"X-API-Key": enroll}), 403, "X-API-Key")
+
+
+def test_a_name_with_a_slash_can_be_retired(service):
+    """Found by bench/fuzz.py (2026-11-24): an attribute may be named with a '/', and
+    DELETE /v1/attributes/{name} answered such a name with the router's bare 404 (before
+    the key was even checked), so it could never be retired."""
+    client, _, _ = service
+    assert client.post("/v1/attributes", json={"name": "wet/dry"}).status_code == 202
+    r = client.delete("/v1/attributes/wet%2Fdry")  # as a client encodes the path parameter
+    assert r.status_code == 202, r.text
+    assert r.json()["attribute"]["name"] == "wet/dry"
+    assert "wet/dry" not in names(client)
+    problem(client.delete("/v1/attributes/wet/dry"), 409, "name")  # already retired
+    problem(client.delete("/v1/attributes/no/such/thing"), 404, "name")

@@ -89,7 +89,7 @@ def add_attribute(
 
 
 @router.delete(
-    "/{name}",
+    "/{name:path}",  # a name may hold a slash ("wet/dry")
     status_code=202,
     response_model=AttributeChanged,
     dependencies=[AdminAccess],
