@@ -349,12 +349,13 @@ def evaluate(
                 finished(split.index, outcome)
         else:
             # spawn: a fresh interpreter per worker (no forked torch or BLAS thread state)
-            with ProcessPoolExecutor(
+            pool = ProcessPoolExecutor(
                 max_workers=jobs,
                 mp_context=multiprocessing.get_context("spawn"),
                 initializer=_init_worker,
                 initargs=(dataset,),
-            ) as pool:
+            )
+            try:
                 bar.set_postfix_str(f"{jobs} processes")
                 futures = {
                     pool.submit(_split_task, split, methods, method_params, seed, ceilings): split
@@ -363,6 +364,11 @@ def evaluate(
                 for future in as_completed(futures):
                     finished(futures[future].index, future.result())
                     bar.update(len(methods))
+            except BaseException:
+                # a failed split or Ctrl-C: drop the splits not started, do not wait for them
+                pool.shutdown(wait=False, cancel_futures=True)
+                raise
+            pool.shutdown()
     finally:
         bar.close()
     for split in splits:

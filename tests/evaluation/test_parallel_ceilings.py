@@ -219,3 +219,31 @@ def test_report_shows_intervals_paired_differences_and_ceilings(runs):
         m: {k: v for k, v in entry.items() if k != "ci95"} for m, entry in res["methods"].items()
     }
     assert "95 % confidence" not in markdown(old) and "| `gzsl_h` |" in markdown(old)
+
+
+def test_a_failing_split_in_a_worker_exits_2_with_its_message(tmp_path, capsys):
+    """A method that fails inside a worker process fails the command as it does in one
+    process: exit 2, the method's own message, no results file."""
+    messages = []
+    for jobs in ("1", "2"):
+        out = tmp_path / f"r{jobs}.json"
+        code = main(
+            [
+                "evaluate",
+                *ARGS,
+                "--methods",
+                "eszsl,best",
+                "--param",
+                "best.n_estimators=0",
+                "--jobs",
+                jobs,
+                "--out",
+                str(out),
+                "--no-progress",
+            ]
+        )
+        assert code == 2 and not out.exists()
+        err = capsys.readouterr().err
+        assert "n_estimators" in err
+        messages.append(err)
+    assert messages[0] == messages[1]
