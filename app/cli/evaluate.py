@@ -64,7 +64,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "model fitted on raw training trials (its tactile-image featurizer too) and "
             "answering once per trial from both fingers, and accuracy on each held-out grip "
             "pressure (train on the others), each with its standard deviation and 95% "
-            "confidence interval; --novel does not apply."
+            "confidence interval, and the paired differences from the first method; --novel "
+            "and --ceilings do not apply, and it runs in one process."
         ),
     )
     p.add_argument(
