@@ -34,8 +34,9 @@ splits won / lost (``protocol.paired_entry``), as ``tactile-zsl evaluate`` repor
 methods. The intervals treat splits as independent draws; they share objects and trials,
 so the intervals understate the uncertainty about new objects (``protocol.INTERVALS``).
 
-Split seed: 7 by default, a reporting seed no development run used (0 is the reported
-seed of docs/RESULTS.md's tables, 1-5 were used for development and confirmation).
+Split seed: 7 by default, a seed no development run used (1000 is the reporting seed of
+docs/RESULTS.md's tables from 2026-11-24 on, 0 the one before; 1-5 were used for
+development and confirmation).
 
     .venv/bin/python -m bench.research.attribute_growth            # seed 7, 20 splits, 6 novel
     .venv/bin/python -m bench.research.attribute_growth --tiny     # smoke-test size

@@ -4,7 +4,8 @@ Runs the evaluation harness (``app.evaluation.protocol.evaluate``: the same
 splits, whole-trial hold-out and figures as ``tactile-zsl evaluate``) for some
 methods and parameter variants, on *development* split seeds, and prints the
 mean figures side by side. Development happened on seeds 1 and 2 so that the
-reported figures (seed 0, ``tactile-zsl evaluate``) were not the ones tuned on;
+reported figures (seed 0 until 2026-11-24, seed 1000 since, ``tactile-zsl evaluate``)
+were not the ones tuned on;
 every method still tunes its own novelty threshold on validation objects carved
 from the known set only.
 

@@ -4,9 +4,9 @@ The detection targets (docs/RESULTS.md) ask for ``nd_known_kept`` and ``nd_novel
 given novelty score, no threshold can do better than the *oracle* one, chosen on the
 test samples themselves to maximise min(known test trials kept, novel test samples
 detected). This prints, per split and on average, that oracle figure next to what the
-method's own validation-tuned threshold gives, on development split seeds (never the
-reported seed 0). If the oracle mean is below the target, the score, not the tuning,
-is what limits the figure.
+method's own validation-tuned threshold gives, on development split seeds (never seed 0,
+reported until 2026-11-24, nor 1000, reported since). If the oracle mean is below the
+target, the score, not the tuning, is what limits the figure.
 
     .venv/bin/python bench/research/novelty_bound.py --seeds 1,2 --novel 6
     .venv/bin/python bench/research/novelty_bound.py --seeds 1,2 --novel 12
