@@ -37,6 +37,10 @@ def default_jobs() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def _touch_counts(value: str) -> list[int]:
+    return [_positive(v.strip()) for v in value.split(",") if v.strip()]
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     from app.framework.registry import DEFAULT_METHOD, METHODS
 
@@ -175,6 +179,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "trials to the known-class classifier, novel ones to the zero-shot classifier)",
     )
     p.add_argument(
+        "--touches",
+        type=_touch_counts,
+        default=[],
+        metavar="K,K,...",
+        help="also the figures after K touches of each test object answered as one (as "
+        "POST /v1/recognize?same_object=true does), for each K, and the mixed known + novel "
+        "figure after one enrolled touch per novel object (osl_gzsl_*); K up to "
+        "--test-trials, which then holds out that many trials of every known object",
+    )
+    p.add_argument(
         "--no-progress",
         action="store_true",
         help="hide the progress bar and the line printed on stderr per finished split",
@@ -215,8 +229,10 @@ def run(args: argparse.Namespace) -> int:
     params = method_params(args.param, methods)
     dataset = open_dataset(args.dataset, seed=args.data_seed)
     if isinstance(dataset, BioTacDataset):
-        if args.ceilings:
-            raise ValueError("--ceilings applies to known/novel splits, not to raw BioTac trials")
+        if args.ceilings or args.touches:
+            raise ValueError(
+                "--ceilings and --touches apply to known/novel splits, not to raw BioTac trials"
+            )
         results = evaluate_raw(
             dataset,
             methods,
@@ -243,6 +259,7 @@ def run(args: argparse.Namespace) -> int:
             distinct_from_known=args.distinct_from_known,
             jobs=args.jobs or default_jobs(),
             ceilings=args.ceilings,
+            touches=args.touches,
         )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=1))

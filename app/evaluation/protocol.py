@@ -67,6 +67,8 @@ from tqdm.auto import tqdm
 from app.data.dataset import TactileDataset
 from app.evaluation import metrics
 from app.evaluation.splits import ZslSplit, make_zsl_splits
+from app.evaluation.touches import check_touches, touch_figures
+from app.evaluation.touches import measure as measure_touches
 from app.framework.jsonable import jsonable
 from app.framework.recognizer import TactileRecognizer
 from app.framework.registry import method_class
@@ -117,9 +119,11 @@ ZSL_VARIANTS: dict[str, dict[str, dict[str, Any] | None]] = {
 _CURVE_POINTS = 200
 
 
-def method_figures(method: str, ceilings: bool = False) -> tuple[str, ...]:
+def method_figures(
+    method: str, ceilings: bool = False, touches: Sequence[int] = ()
+) -> tuple[str, ...]:
     extra = CEILING_FIGURES if ceilings else ()
-    return FIGURES + tuple(ZSL_VARIANTS.get(method, {})) + extra
+    return FIGURES + tuple(ZSL_VARIANTS.get(method, {})) + extra + touch_figures(touches)
 
 
 def make_recognizer(method: str, params: dict[str, Any] | None, seed: int) -> TactileRecognizer:
@@ -143,9 +147,12 @@ def evaluate_split(
     params: dict[str, Any] | None = None,
     seed: int = 0,
     ceilings: bool = False,
+    touches: Sequence[int] = (),
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """(figures, details) of one method on one split; details hold matrices, curve, timings.
-    ``ceilings``: also the measured limits of ``CEILING_FIGURES``."""
+    ``ceilings``: also the measured limits of ``CEILING_FIGURES``; ``touches``: also the
+    figures after that many touches of each test object, and after one enrolled touch
+    (``app.evaluation.touches``)."""
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     train = split.train_dataset(dataset)
@@ -231,6 +238,22 @@ def evaluate_split(
         figures["ceil_gzsl_unseen"] = figures["zsl"]
         figures["ceil_gzsl_h"] = metrics.harmonic_mean(figures["known_acc"], figures["zsl"])
 
+    if touches:
+        t = time.perf_counter()
+        figures.update(
+            measure_touches(
+                zsl_model,
+                osl_model,
+                (xk, yk, dataset.trials[split.known_test_idx]),
+                (xn, yn, dataset.trials[split.novel_test_idx]),
+                known_names,
+                names,
+                touches,
+                np.random.default_rng([seed, split.index]),
+            )
+        )
+        timings["touches_s"] = time.perf_counter() - t
+
     timings["total_s"] = time.perf_counter() - t0
     details["timings"] = timings
     details["model_metrics"] = jsonable(getattr(model, "metrics", {}) or {})
@@ -265,6 +288,7 @@ def evaluate(
     distinct_from_known: bool = False,
     jobs: int = 1,
     ceilings: bool = False,
+    touches: Sequence[int] = (),
 ) -> dict[str, Any]:
     """Every method on the same ``n_splits`` splits; a JSON-ready results dict.
 
@@ -278,7 +302,10 @@ def evaluate(
     runs every method in order with method seed ``seed``, whichever process runs it, so the
     figures do not depend on ``jobs``; ``progress`` prints a line per finished split to
     stderr below the bar. ``ceilings``: also the figures of ``CEILING_FIGURES``.
+    ``touches``: touch counts (at most ``test_trials``) for ``app.evaluation.touches``'s
+    figures; ValueError naming the problem otherwise.
     """
+    touches = check_touches(touches, test_trials)
     methods = list(dict.fromkeys(methods))
     if not methods:
         raise ValueError("no methods to evaluate")
@@ -317,6 +344,7 @@ def evaluate(
     jobs = min(int(jobs), len(splits))
     results["jobs"] = jobs
     results["ceilings"] = bool(ceilings)
+    results["touches"] = touches
     results["intervals"] = INTERVALS
     started = time.perf_counter()
     bar = tqdm(total=len(splits) * len(methods), desc="evaluate", unit="fit", disable=not progress)
@@ -343,7 +371,9 @@ def evaluate(
                 for m in methods:
                     bar.set_postfix_str(f"split {split.index + 1}/{len(splits)} {m}")
                     outcome.append(
-                        _run_method(dataset, split, m, method_params.get(m), seed, ceilings)
+                        _run_method(
+                            dataset, split, m, method_params.get(m), seed, ceilings, touches
+                        )
                     )
                     bar.update(1)
                 finished(split.index, outcome)
@@ -358,7 +388,9 @@ def evaluate(
             try:
                 bar.set_postfix_str(f"{jobs} processes")
                 futures = {
-                    pool.submit(_split_task, split, methods, method_params, seed, ceilings): split
+                    pool.submit(
+                        _split_task, split, methods, method_params, seed, ceilings, touches
+                    ): split
                     for split in splits
                 }
                 for future in as_completed(futures):
@@ -378,7 +410,7 @@ def evaluate(
             entry["splits"].append(figures)
             entry["details"].append(details)
     for m in methods:
-        summarize_entry(results["methods"][m], method_figures(m, ceilings))
+        summarize_entry(results["methods"][m], method_figures(m, ceilings, touches))
     if len(methods) > 1:
         results["paired"] = paired_summary(results["methods"], methods[0])
     results["elapsed_s"] = time.perf_counter() - started
@@ -392,9 +424,10 @@ def _run_method(
     params: dict[str, Any] | None,
     seed: int,
     ceilings: bool,
+    touches: Sequence[int] = (),
 ) -> tuple[dict[str, Any], dict[str, Any], float]:
     t = time.perf_counter()
-    figures, details = evaluate_split(dataset, split, method, params, seed, ceilings)
+    figures, details = evaluate_split(dataset, split, method, params, seed, ceilings, touches)
     return figures, details, time.perf_counter() - t
 
 
@@ -417,11 +450,12 @@ def _split_task(
     method_params: dict[str, dict[str, Any]],
     seed: int,
     ceilings: bool,
+    touches: Sequence[int] = (),
 ) -> list[tuple[dict[str, Any], dict[str, Any], float]]:
     """Every method on one split, in order (a worker process's task)."""
     assert _WORKER_DATASET is not None, "worker not initialised"
     return [
-        _run_method(_WORKER_DATASET, split, m, method_params.get(m), seed, ceilings)
+        _run_method(_WORKER_DATASET, split, m, method_params.get(m), seed, ceilings, touches)
         for m in methods
     ]
 

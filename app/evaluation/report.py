@@ -456,6 +456,18 @@ def write_report(
         )
         images["Fig. 8d: attribute similarity of the novel objects"] = [path.name]
         written.append(path)
+    if results.get("touches"):
+        from app.evaluation.touches import plot_touches
+
+        path = out / "touches.png"
+        plot_touches(
+            results,
+            path,
+            f"After k touches answered as one, and after one enrolled touch\n"
+            f"{results['splits']} splits, {results['novel']} novel objects",
+        )
+        images["Touches and one enrolled touch"] = [path.name]
+        written.append(path)
     md = out / "report.md"
     md.write_text(markdown(results, images))
     written.insert(0, md)

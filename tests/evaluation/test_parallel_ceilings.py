@@ -190,7 +190,7 @@ def test_ceilings_on_raw_trials_exit_2_with_a_message(tmp_path, capsys):
         ]
     )
     assert code == 2
-    assert "--ceilings applies to known/novel splits" in capsys.readouterr().err
+    assert "--ceilings and --touches apply to known/novel splits" in capsys.readouterr().err
     assert not (tmp_path / "r.json").exists()
 
 
