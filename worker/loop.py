@@ -22,6 +22,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
 from app.framework import bundle
+from app.framework.errors import BundleError
 from app.framework.recognizer import TactileRecognizer
 from app.service.bootstrap import (
     FIRST_MODEL_SAMPLES,
@@ -141,9 +142,11 @@ class Worker:
     def _process(self, job_ids: list[int]) -> None:
         try:
             self._retrain(job_ids)
-        except OperationalError:
-            # the store, not the jobs: they stay claimed, and the next round (this worker's
-            # or another's, under the lease) puts them back in the queue
+        except (OperationalError, BundleError):
+            # the store, not the jobs (unreachable, or the active model's stored bytes
+            # damaged: `store check` names them, a rollback or restore mends it): they stay
+            # claimed, and the next round (this worker's or another's, under the lease) puts
+            # them back in the queue
             raise
         except Exception as exc:
             if len(job_ids) > 1:

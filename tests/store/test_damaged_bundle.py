@@ -140,3 +140,20 @@ def test_a_damaged_part_of_every_version(settings, app, client, worker, dataset,
     with pytest.raises(BundleError, match="no earlier version is intact"):
         with TestClient(fresh):
             pass
+
+
+def test_a_worker_keeps_enrolments_while_the_active_model_is_damaged(client, worker, dataset):
+    """A worker that must read the damaged active model neither builds on it nor fails the
+    202'd enrolments: they wait, and go through once the bytes are mended."""
+    from worker import Worker
+
+    head = version_two(client, worker, dataset)
+    original = flip_byte(worker.sessions, head)
+    job = register(client, dataset, "cup", 1)["job"]
+    other = Worker(worker.settings, worker.sessions)  # holds no model: reads the stored one
+    with pytest.raises(BundleError):
+        other.run_once()
+    assert client.get(f"/v1/jobs/{job['id']}").json()["status"] in ("queued", "running")
+    put_back(worker.sessions, head, original)
+    assert other.run_once() == 1
+    assert client.get(f"/v1/jobs/{job['id']}").json()["status"] == "succeeded"
