@@ -287,6 +287,13 @@ def _add_links(doc: dict[str, Any], input_field: str) -> None:
     ids = {
         op.get("operationId") for operations in doc["paths"].values() for op in operations.values()
     }
+    # operationId -> its body's media types: schemathesis cannot tell which one a whole body
+    # from a link is for when there are several (recognize: JSON, .npy, HDF5)
+    bodies = {
+        op.get("operationId"): tuple(op.get("requestBody", {}).get("content", {}))
+        for operations in doc["paths"].values()
+        for op in operations.values()
+    }
     for (method, path, status), links in _links(input_field).items():
         response = doc["paths"].get(path, {}).get(method, {}).get("responses", {}).get(status)
         if response is None:
@@ -298,7 +305,8 @@ def _add_links(doc: dict[str, Any], input_field: str) -> None:
             link: dict[str, Any] = {"operationId": target, "description": description}
             if parameters:
                 link["parameters"] = parameters
-            if body is not None:  # the whole body, as OpenAPI means it (schemathesis would merge)
+            if body is not None:
                 link["requestBody"] = body
-                link["x-schemathesis"] = {"merge_body": False}
+                if len(bodies.get(target, ())) == 1:  # the whole body, as OpenAPI means it
+                    link["x-schemathesis"] = {"merge_body": False}  # (schemathesis merges)
             out[name] = link
