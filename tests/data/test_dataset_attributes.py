@@ -9,7 +9,7 @@ import pytest
 from app.data.dataset import DatasetError, TactileDataset
 from app.data.simulator import simulate_dataset
 from app.evaluation.splits import make_zsl_splits
-from app.framework.registry import METHODS, make_method
+from app.framework.registry import METHODS, make_method, method_class
 
 
 def with_values(values: np.ndarray, names: tuple[str, ...] | None = None) -> TactileDataset:
@@ -55,11 +55,18 @@ def test_values_outside_zero_one_are_rejected():
         with_values(np.ones((6, 2)), ("a", "a"))
 
 
-@pytest.mark.parametrize("method", sorted(METHODS))
-def test_every_method_refuses_graded_values_before_training(method):
+@pytest.mark.parametrize(
+    "method", sorted(m for m in METHODS if not method_class(m).graded_attributes)
+)
+def test_methods_of_0_1_attributes_refuse_graded_values_before_training(method):
     ds = with_values(np.full((6, 3), 0.5))
     with pytest.raises(DatasetError, match="graded or not-known attribute values"):
         make_method(method).fit(ds)
+
+
+def test_the_methods_that_take_graded_values_are_named():
+    graded = sorted(m for m in METHODS if method_class(m).graded_attributes)
+    assert graded == ["best", "paper", "paper-fgmm"]
 
 
 def test_evaluation_splits_refuse_datasets_without_attributes():
