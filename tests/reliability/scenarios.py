@@ -302,6 +302,23 @@ def verify(
     }
 
 
+def verify_fleet(
+    cluster: Cluster, fleet: Enroller, timeout: float, headers: dict[str, str] | None = None
+) -> dict:
+    """``verify`` of everything a fleet got a 202 for."""
+    return verify(
+        cluster,
+        fleet.classes,
+        fleet.sample_ids,
+        timeout,
+        fleet.withdrawn,
+        fleet.described,
+        headers=headers,
+        attributes=fleet.attributes,
+        values=fleet.values,
+    )
+
+
 def crash(
     cluster: Cluster,
     kills: int,
@@ -330,16 +347,7 @@ def crash(
         fleet.stop.set()
         thread.join(120)
     cluster.wait_ready()
-    report = verify(
-        cluster,
-        fleet.classes,
-        fleet.sample_ids,
-        settle_timeout,
-        fleet.withdrawn,
-        fleet.described,
-        attributes=fleet.attributes,
-        values=fleet.values,
-    )
+    report = verify_fleet(cluster, fleet, settle_timeout)
     report.update(
         kills=killed,
         seconds=round(time.monotonic() - started, 1),
@@ -586,15 +594,7 @@ def pg_outage(
         stop.set()
         for t in threads:
             t.join(120)
-    report = verify(
-        cluster,
-        fleet.classes,
-        fleet.sample_ids,
-        settle_timeout,
-        fleet.withdrawn,
-        fleet.described,
-        headers=headers,
-    )
+    report = verify_fleet(cluster, fleet, settle_timeout, headers)
     report.update(
         _outage_figures(outages, fleet, reads, ready, len(urls)),
         modes=used,
