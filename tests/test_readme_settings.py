@@ -1,4 +1,4 @@
-"""The README documents every setting (the issue asks for it; a new setting is easy to forget)."""
+"""The README documents every setting (a new setting is easy to forget)."""
 
 from pathlib import Path
 
