@@ -100,13 +100,12 @@ def test_with_attributes_refits_the_attributes_and_keeps_the_forest(fitted, data
     assert proba.shape == (len(x), train.n_attributes + 1)
     np.testing.assert_array_equal(proba[:, :-1], fitted.attribute_proba(x))
     # the new attribute's classifier: trained on the classes whose value is known only
-    z = fitted.known_.cues_model.scaled(x.reshape(len(x), -1))
     target = new_column[train.labels].astype(np.float64)
     expected = LinearAttributeModel.fit_one(
         fitted.known_.cues_model.scaled(train.samples.reshape(len(train), -1)), target, C=0.1
     )
     np.testing.assert_allclose(model.attributes_.weights[-1], expected[0])
-    assert proba[:, -1].std() > 0 and z.shape[0] == len(x)
+    assert proba[:, -1].std() > 0
     assert fitted.registry.attribute_names == train.attribute_names  # the base is untouched
 
 

@@ -82,14 +82,8 @@ def retire_attribute(session: Session, attribute: Attribute, vocab: Vocabulary) 
     compare as the active descriptions they are."""
     attribute.retired_at = utcnow()
     rows = session.execute(select(ObjectClass.id, ObjectClass.attribute_key)).all()
-    describe(
-        session,
-        {
-            cid: vocab.without(key, attribute.name)
-            for cid, key in rows
-            if key != vocab.without(key, attribute.name)
-        },
-    )
+    blanked = {cid: (key, vocab.without(key, attribute.name)) for cid, key in rows}
+    describe(session, {cid: new for cid, (old, new) in blanked.items() if new != old})
     session.flush()
 
 
