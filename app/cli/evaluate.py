@@ -170,6 +170,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         f"{default_jobs()} here; the raw-trial protocol runs in one process)",
     )
     p.add_argument(
+        "--rerun-splits",
+        type=_positive,
+        default=None,
+        metavar="N",
+        help="the size of the re-run whose landing range is reported beside every mean: "
+        "where the mean of the same command on another --seed with N splits lands, 95%% "
+        "(default: --splits)",
+    )
+    p.add_argument(
         "--ceilings",
         action="store_true",
         help="also measure limits on the same splits: nd_test_kept and nd_balance (known test "
@@ -229,9 +238,10 @@ def run(args: argparse.Namespace) -> int:
     params = method_params(args.param, methods)
     dataset = open_dataset(args.dataset, seed=args.data_seed)
     if isinstance(dataset, BioTacDataset):
-        if args.ceilings or args.touches:
+        if args.ceilings or args.touches or args.rerun_splits:
             raise ValueError(
-                "--ceilings and --touches apply to known/novel splits, not to raw BioTac trials"
+                "--ceilings, --touches and --rerun-splits apply to known/novel splits, not to "
+                "raw BioTac trials"
             )
         results = evaluate_raw(
             dataset,
@@ -260,6 +270,7 @@ def run(args: argparse.Namespace) -> int:
             jobs=args.jobs or default_jobs(),
             ceilings=args.ceilings,
             touches=args.touches,
+            rerun_splits=args.rerun_splits,
         )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=1))
@@ -302,8 +313,29 @@ def summary_table(results: dict) -> str:
     )
     n = results.get("splits")
     lines.append(f"mean [95% CI]: Student's t over the {n} splits' values, clipped to [0, 1]")
+    lines += rerun_lines(results, rows, width)
     lines += paired_lines(results, rows)
     return "\n".join(lines)
+
+
+def rerun_lines(results: dict, rows: list[str], width: int) -> list[str]:
+    """Where a re-run's mean lands, a row per figure (none in results that predate it)."""
+    methods = list(results["methods"])
+    if not any("rerun95" in results["methods"][m] for m in methods):
+        return []
+    lines = [
+        "",
+        f"where a re-run of {results.get('rerun_splits')} splits on another seed lands (95%)",
+        "figure".ljust(24) + "".join(m.rjust(width) for m in methods),
+    ]
+    for f in rows:
+        cells = []
+        for m in methods:
+            lo, hi = (results["methods"][m].get("rerun95") or {}).get(f) or (None, None)
+            ok = lo is not None and hi is not None and not (math.isnan(lo) or math.isnan(hi))
+            cells.append((f"[{lo:.3f}, {hi:.3f}]" if ok else "—").rjust(width))
+        lines.append(f.ljust(24) + "".join(cells))
+    return lines
 
 
 def paired_lines(results: dict, rows: list[str]) -> list[str]:

@@ -38,7 +38,10 @@ Routing can only lose answers, so ``ceil_gzsl_*`` ≥ ``gzsl_*`` and ``ceil_nd_b
 Summaries over splits (``summarize_entry``): the mean, the standard deviation (ddof 0, the
 ``std`` key kept from the first layout) and ``ci95``, the 95 % confidence interval of the
 mean from Student's t with n - 1 degrees of freedom and the sample standard deviation
-(``metrics.mean_interval``), clipped to [0, 1]. With several methods, ``paired`` holds each
+(``metrics.mean_interval``), clipped to [0, 1], and ``rerun95``, where the mean of a re-run
+of the same command on another seed with ``rerun_splits`` splits lands, 95 %
+(``metrics.rerun_interval``: a confidence interval holds the true mean, and catches a
+re-run's mean less often, since that moves too). With several methods, ``paired`` holds each
 method's per-split difference from the first method (the reference) on the same splits,
 its mean, its t interval (clipped to [-1, 1]) and the splits won and lost. Repeated
 random splits share objects and trials, so these intervals are narrower than the
@@ -102,7 +105,9 @@ INTERVALS = (
     "freedom and the sample standard deviation, clipped to [0, 1]; paired differences: the "
     "same over the per-split differences from the reference method on the same splits, "
     "clipped to [-1, 1]. Splits share objects and trials, so the intervals understate the "
-    "uncertainty about new objects."
+    "uncertainty about new objects. A confidence interval holds the true mean, not the mean "
+    "of a re-run on another seed (both means move); rerun95 is where that re-run's mean "
+    "lands, 95%: a bootstrap prediction interval over the splits' values."
 )
 
 # Extra ZSL figures per method: figure -> add_novel_classes options, or None for
@@ -289,13 +294,15 @@ def evaluate(
     jobs: int = 1,
     ceilings: bool = False,
     touches: Sequence[int] = (),
+    rerun_splits: int | None = None,
 ) -> dict[str, Any]:
     """Every method on the same ``n_splits`` splits; a JSON-ready results dict.
 
     Layout: {"dataset", "novel", "seed", "splits", "test_trials", "config", "jobs",
     "ceilings", "intervals", "split_definitions", "methods": {name: {"splits": [per-split
-    figures], "mean": {...}, "std": {...}, "ci95": {figure: [low, high]}, "elapsed_s": ...,
-    "details": [per split]}}, "paired": {"reference": first method, "methods": {other:
+    figures], "mean": {...}, "std": {...}, "ci95": {figure: [low, high]}, "rerun95": {...},
+    "elapsed_s": ..., "details": [per split]}}, "rerun_splits", "paired": {"reference":
+    first method, "methods": {other:
     {"mean", "ci95", "won", "lost", "splits"}}}}; ``paired`` only with several methods.
 
     ``jobs``: worker processes running splits side by side (1: this process). Each split
@@ -303,9 +310,14 @@ def evaluate(
     figures do not depend on ``jobs``; ``progress`` prints a line per finished split to
     stderr below the bar. ``ceilings``: also the figures of ``CEILING_FIGURES``.
     ``touches``: touch counts (at most ``test_trials``) for ``app.evaluation.touches``'s
-    figures; ValueError naming the problem otherwise.
+    figures; ValueError naming the problem otherwise. ``rerun_splits``: the size of the
+    re-run that ``rerun95`` predicts (default ``n_splits``).
     """
     touches = check_touches(touches, test_trials)
+    if rerun_splits is not None and (
+        not isinstance(rerun_splits, int | np.integer) or rerun_splits < 1
+    ):
+        raise ValueError(f"rerun_splits must be a positive integer, got {rerun_splits!r}")
     methods = list(dict.fromkeys(methods))
     if not methods:
         raise ValueError("no methods to evaluate")
@@ -346,6 +358,7 @@ def evaluate(
     results["ceilings"] = bool(ceilings)
     results["touches"] = touches
     results["intervals"] = INTERVALS
+    results["rerun_splits"] = int(rerun_splits or n_splits)
     started = time.perf_counter()
     bar = tqdm(total=len(splits) * len(methods), desc="evaluate", unit="fit", disable=not progress)
     per_split: dict[int, list[tuple[dict, dict, float]]] = {}
@@ -410,7 +423,9 @@ def evaluate(
             entry["splits"].append(figures)
             entry["details"].append(details)
     for m in methods:
-        summarize_entry(results["methods"][m], method_figures(m, ceilings, touches))
+        summarize_entry(
+            results["methods"][m], method_figures(m, ceilings, touches), results["rerun_splits"]
+        )
     if len(methods) > 1:
         results["paired"] = paired_summary(results["methods"], methods[0])
     results["elapsed_s"] = time.perf_counter() - started
@@ -460,14 +475,19 @@ def _split_task(
     ]
 
 
-def summarize_entry(entry: dict[str, Any], figures: Sequence[str]) -> None:
-    """A method's ``mean``, ``std`` (ddof 0) and ``ci95`` ([low, high], Student's t over
-    splits, clipped to [0, 1]) of every figure, from its ``splits``."""
-    entry["mean"], entry["std"], entry["ci95"] = {}, {}, {}
+def summarize_entry(
+    entry: dict[str, Any], figures: Sequence[str], rerun_splits: int | None = None
+) -> None:
+    """A method's ``mean``, ``std`` (ddof 0), ``ci95`` ([low, high], Student's t over
+    splits, clipped to [0, 1]) and ``rerun95`` (where the mean of a re-run over
+    ``rerun_splits`` splits, default as many, lands: ``metrics.rerun_interval``) of every
+    figure, from its ``splits``."""
+    entry["mean"], entry["std"], entry["ci95"], entry["rerun95"] = {}, {}, {}, {}
     for f in figures:
         values = [s.get(f, math.nan) for s in entry["splits"]]
         entry["mean"][f], entry["std"][f] = metrics.summarize(values)
         entry["ci95"][f] = list(metrics.mean_interval(values, bounds=(0.0, 1.0)))
+        entry["rerun95"][f] = list(metrics.rerun_interval(values, rerun_splits, bounds=(0.0, 1.0)))
 
 
 def paired_summary(entries: dict[str, dict[str, Any]], reference: str) -> dict[str, Any]:

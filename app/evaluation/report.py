@@ -232,6 +232,24 @@ def _interval_sections(results: dict[str, Any], figures: list[str]) -> list[str]
             for m in methods
         ]
         lines.append(f"| `{f}` | " + " | ".join(cells) + " |")
+    if any("rerun95" in results["methods"][m] for m in methods):
+        lines += [
+            "",
+            "## Where a re-run lands",
+            "",
+            f"The range in which the mean of the same command on another seed with "
+            f"{results.get('rerun_splits')} splits lands, 95 % (a bootstrap prediction "
+            "interval over the splits' values: a confidence interval holds the true mean and "
+            "catches a re-run's mean less often, since that moves too).",
+            "",
+            "| figure | " + " | ".join(methods) + " |",
+            "| --- | " + " | ".join("---" for _ in methods) + " |",
+        ]
+        for f in figures:
+            cells = [
+                _fmt_interval(results["methods"][m].get("rerun95", {}).get(f)) for m in methods
+            ]
+            lines.append(f"| `{f}` | " + " | ".join(cells) + " |")
     paired = results.get("paired") or {}
     others = list(paired.get("methods", {}))
     if others:

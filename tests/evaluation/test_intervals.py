@@ -113,3 +113,70 @@ def test_oracle_threshold_beats_every_threshold_on_random_scores():
     assert min(kept, detected) == pytest.approx(brute)
     for t in grid[::50]:
         assert min(kept, detected) >= min(np.mean(known <= t), np.mean(novel > t))
+
+
+def _long_tailed(rng: np.random.Generator, size: int) -> np.ndarray:
+    """Per-split figures like PHAC-2's novelty detection: most splits near 0.94, one in 20
+    far below (a threshold tuned badly on that split's validation objects)."""
+    tail = rng.random(size) < 0.05
+    return np.where(tail, rng.uniform(0.5, 0.8, size), rng.normal(0.94, 0.03, size))
+
+
+def _coverage(law, base_size: int, runs: int, seed: int) -> tuple[float, float]:
+    """How often a 50-split re-run's mean lands in the published run's confidence interval
+    and in its re-run interval, the published run having ``base_size`` splits."""
+    rng = np.random.default_rng(seed)
+    caught_ci = caught_rerun = 0
+    for _ in range(runs):
+        published = law(rng, base_size)
+        rerun_mean = law(rng, 50).mean()
+        lo, hi = metrics.mean_interval(published)
+        caught_ci += lo <= rerun_mean <= hi
+        lo, hi = metrics.rerun_interval(published, rerun_size=50, draws=1_000, seed=1)
+        caught_rerun += lo <= rerun_mean <= hi
+    return caught_ci / runs, caught_rerun / runs
+
+
+def test_rerun_interval_catches_reruns_where_the_confidence_interval_does_not():
+    # a 95 % confidence interval holds the true mean but misses many re-runs' means, since
+    # those move too (~0.83 of same-sized re-runs caught under a normal law); the re-run
+    # interval is built to hold them
+    ci, rerun = _coverage(lambda rng, n: rng.normal(0.5, 0.1, n), 50, runs=300, seed=7)
+    assert ci < 0.89
+    assert 0.91 <= rerun <= 0.99
+    # a long-tailed figure needs a long base: 500 splits show the tail often enough
+    ci, rerun = _coverage(_long_tailed, 500, runs=150, seed=7)
+    assert ci < 0.6  # a 500-split confidence interval is far narrower than a re-run's spread
+    assert 0.91 <= rerun <= 1.0
+
+
+def test_rerun_interval_for_a_smaller_rerun_from_a_long_base():
+    # a 500-split base predicting a 50-split re-run: wider than the base's own confidence
+    # interval, about t * s * sqrt(1/500 + 1/50) on each side, and longer below (the tail)
+    rng = np.random.default_rng(3)
+    base = _long_tailed(rng, 500)
+    lo, hi = metrics.rerun_interval(base, rerun_size=50, seed=0)
+    mean, s = base.mean(), base.std(ddof=1)
+    half = stats.t.ppf(0.975, 499) * s * math.sqrt(1 / 500 + 1 / 50)
+    assert lo <= mean - half and hi >= mean + half  # never narrower than the t interval
+    assert mean - lo > hi - mean  # the long lower tail shows
+    assert (mean - lo) < 1.5 * half
+    ci = metrics.mean_interval(base)
+    assert lo < ci[0] and hi > ci[1]
+    # reproducible, NaN ignored, undefined below two values, bad arguments named
+    assert metrics.rerun_interval(base, rerun_size=50, seed=0) == (lo, hi)
+    assert metrics.rerun_interval([*base, math.nan], rerun_size=50, seed=0) == (lo, hi)
+    assert all(math.isnan(v) for v in metrics.rerun_interval([0.5]))
+    with pytest.raises(ValueError, match="rerun_size"):
+        metrics.rerun_interval(base, rerun_size=0)
+    with pytest.raises(ValueError, match="level"):
+        metrics.rerun_interval(base, level=1.0)
+
+
+def test_summarize_entry_gives_every_figure_its_rerun_range():
+    entry = {"splits": [{"split": i + 1, "zsl": v} for i, v in enumerate(VALUES)]}
+    summarize_entry(entry, ["zsl"], rerun_splits=20)
+    lo, hi = entry["rerun95"]["zsl"]
+    assert (lo, hi) == metrics.rerun_interval(VALUES, 20, bounds=(0.0, 1.0))
+    ci = entry["ci95"]["zsl"]
+    assert lo < ci[0] < ci[1] < hi

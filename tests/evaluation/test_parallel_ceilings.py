@@ -77,6 +77,11 @@ def test_every_figure_has_its_interval_and_every_other_method_its_paired_differe
             values = [s[f] for s in entry["splits"]]
             assert low == pytest.approx(metrics.mean_interval(values, bounds=(0, 1))[0])
             assert 0.0 <= low <= entry["mean"][f] <= high <= 1.0, (m, f)
+            # where a re-run of as many splits lands: wider than the confidence interval
+            r_low, r_high = entry["rerun95"][f]
+            assert [r_low, r_high] == list(metrics.rerun_interval(values, 3, bounds=(0, 1)))
+            assert r_low <= low and r_high >= high, (m, f)
+    assert res["rerun_splits"] == 3
     paired = res["paired"]
     assert paired["reference"] == "eszsl" and list(paired["methods"]) == ["best"]
     p = paired["methods"]["best"]
@@ -141,6 +146,8 @@ def test_printed_table_has_intervals_and_paired_differences(tmp_path, capsys):
             "eszsl,dap",
             "--jobs",
             "1",
+            "--rerun-splits",
+            "10",
             "--out",
             str(tmp_path / "r.json"),
         ]
@@ -151,6 +158,12 @@ def test_printed_table_has_intervals_and_paired_differences(tmp_path, capsys):
     e = res["methods"]["eszsl"]
     low, high = e["ci95"]["zsl"]
     assert f"{e['mean']['zsl']:.3f} [{low:.3f}, {high:.3f}]" in captured.out
+    assert res["rerun_splits"] == 10
+    values = [s["zsl"] for s in e["splits"]]
+    r_low, r_high = e["rerun95"]["zsl"]
+    assert [r_low, r_high] == list(metrics.rerun_interval(values, 10, bounds=(0, 1)))
+    assert "where a re-run of 10 splits on another seed lands (95%)" in captured.out
+    assert f"[{r_low:.3f}, {r_high:.3f}]" in captured.out
     assert "paired difference from eszsl" in captured.out
     p = res["paired"]["methods"]["dap"]
     assert f"{p['mean']['zsl']:+.3f} [{p['ci95']['zsl'][0]:+.3f}" in captured.out
@@ -178,20 +191,22 @@ def test_bad_jobs_exit_2_with_a_message(option, message, capsys):
 def test_ceilings_on_raw_trials_exit_2_with_a_message(tmp_path, capsys):
     from tests.framework.raw_data import pilot_path
 
-    code = main(
-        [
-            "evaluate",
-            "--dataset",
-            f"biotac:{pilot_path()}",
-            "--ceilings",
-            "--out",
-            str(tmp_path / "r.json"),
-            "--no-progress",
-        ]
-    )
-    assert code == 2
-    assert "--ceilings and --touches apply to known/novel splits" in capsys.readouterr().err
-    assert not (tmp_path / "r.json").exists()
+    for option in (["--ceilings"], ["--rerun-splits", "50"]):
+        code = main(
+            [
+                "evaluate",
+                "--dataset",
+                f"biotac:{pilot_path()}",
+                *option,
+                "--out",
+                str(tmp_path / "r.json"),
+                "--no-progress",
+            ]
+        )
+        assert code == 2
+        err = capsys.readouterr().err
+        assert "--ceilings, --touches and --rerun-splits apply to known/novel splits" in err
+        assert not (tmp_path / "r.json").exists()
 
 
 def test_evaluate_rejects_bad_jobs():
@@ -213,12 +228,16 @@ def test_report_shows_intervals_paired_differences_and_ceilings(runs):
     lo, hi = p["ci95"]["gzsl_h"]
     cell = f"{p['mean']['gzsl_h']:+.3f} [{lo:+.3f}, {hi:+.3f}] ({p['won']['gzsl_h']} / "
     assert "## Paired differences from `eszsl`" in md and cell in md
+    lo, hi = e["rerun95"]["zsl"]
+    assert "## Where a re-run lands" in md and f"[{lo:.3f}, {hi:.3f}]" in md
     # results written before intervals existed still make a report, without those sections
     old = {k: v for k, v in res.items() if k != "paired"}
     old["methods"] = {
-        m: {k: v for k, v in entry.items() if k != "ci95"} for m, entry in res["methods"].items()
+        m: {k: v for k, v in entry.items() if k not in ("ci95", "rerun95")}
+        for m, entry in res["methods"].items()
     }
     assert "95 % confidence" not in markdown(old) and "| `gzsl_h` |" in markdown(old)
+    assert "re-run" not in markdown(old)
 
 
 def test_a_failing_split_in_a_worker_exits_2_with_its_message(tmp_path, capsys):
