@@ -7,14 +7,22 @@ arrays, each paying its call overhead, plus constants recomputed on every call. 
 - computes the model's constants once (``SmallBatchScorer`` is built per fitted model and
   novel part): DAP's prior term, the unit attribute vectors, the one-shot prototypes, the
   attribute model's fixed columns;
-- fuses the exact element-wise steps (+ - * /, min, max, sqrt, copysign: IEEE gives the
-  same bits in any order of elements) and the forest walk into compiled kernels; one
-  sample walks a block of trees at once (``_walk_trees``: independent load chains, as
-  ``forest._walk`` gets from a block of samples) and sums the leaves in tree order;
-- leaves to numpy exactly what the general path does with numpy: every transcendental
-  function (log, log1p, exp, tanh: numpy's SIMD versions need not round like libm), every
-  sum along an axis (numpy sums pairwise) and every matrix product (BLAS), called on arrays
-  of the same shapes and memory layout, so their bits are the general path's.
+- fuses every step whose bits IEEE or numpy define into five compiled kernels, each run
+  between two rounds of the numpy calls that must stay: the exact element-wise steps
+  (+ - * /, min, max, sqrt, copysign: IEEE gives the same bits in any order of
+  elements), the forest walk (one sample walks a block of trees at once: ``_walk_trees``,
+  independent load chains, as ``forest._walk`` gets from a block of samples; the leaves
+  are summed in tree order), and every sum along an axis, which ``_row_sum`` adds in
+  numpy's own order (its pairwise summation: 8 accumulators up to 128 elements, halves
+  above; ``tests/methods/test_small_batch.py`` checks it against ``np.add.reduce``);
+- leaves to numpy exactly what the general path does with numpy and no order of IEEE
+  operations defines: every transcendental function (log, log1p, exp, tanh: numpy's SIMD
+  versions need not round like libm) and every matrix product (BLAS: a 1-row product
+  takes gemv, more rows gemm, and each kernel adds in its own order), called on arrays of
+  the same shapes, dtypes and memory layout, so their bits are the general path's;
+- allocates the arrays the kernels fill in Python (a compiled function that returns an
+  array pays more to hand it back than ``np.empty`` costs) and passes each kernel as few
+  arguments as it can (each one costs the dispatcher time to check).
 
 A cue whose weight is 0 in the novelty score (the entropy, in ``best``) is not computed:
 its product with 0 adds nothing to the weighted sum.
@@ -35,7 +43,11 @@ if TYPE_CHECKING:
 
 _add = np.add.reduce
 _ENTROPY = CUES.index("entropy")
+_BLOCK = 128  # numpy's pairwise sum adds up to this many elements in one block
 _TREES = 8  # trees one sample takes down together (as forest._BLOCK samples)
+_NONE64 = np.zeros((0, 0))  # an array a kernel is given for a part the model lacks
+_NONE32 = np.zeros((0, 0), np.float32)
+_NO_ROWS = np.zeros(0)
 
 
 class SmallBatchScorer:
@@ -63,28 +75,29 @@ class SmallBatchScorer:
             raise ValueError("the small-batch path needs the scaler's statistics per feature")
         self.clip = np.float32(cues.scaler.clip)
         self.log_compress = bool(cues.scaler.log_compress)
-        self.dist = dist
+        self.basis = dist.basis
         self.ref_t = dist._ref.T  # the same transposed view the general path multiplies by
-        self.no_res = np.zeros(0, np.float32)
+        self.ref_sq = dist._ref_sq
+        # no residuals with exact distances (no subspace)
+        self.ref_res = np.zeros(0, np.float32) if dist.basis is None else dist._ref_res
         self.labels = cues.reference_labels
         self.offsets = cues.offsets
         self.cue_weights = model.known_.weights
         self.entropy_used = bool(self.cue_weights[_ENTROPY] != 0.0)
+        self.several = self.n_classes > 1
         self.novel = _NovelConstants(model) if model.registry.novel_names else None
 
     def scores(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        z, p, novelty = self.known(x)
-        return novelty, p, None if self.novel is None else self.novel.proba(z, p)
-
-    def known(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(scaled samples, known-class probabilities, novelty scores): ``KnownModel.scores``."""
+        n, d = x.shape
         if self.log_compress:  # RobustInputScaler._compress: log1p(|x|) with x's sign
             mag = np.abs(x)
             np.log1p(mag, out=mag)
         else:
             mag = x
-        f, dist = self.forest, self.dist
-        z, q, p, top, best = _scale_and_walk(
+        f = self.forest
+        z, q = np.empty((n, d), np.float32), np.empty((n, d), np.float32)
+        p, top = np.empty((n, self.n_classes)), np.empty((n, 3))
+        _scale_and_walk(
             x,
             mag,
             self.log_compress,
@@ -95,18 +108,24 @@ class SmallBatchScorer:
             f.leaf_ptr,
             f.leaf_class,
             f.leaf_value,
-            self.n_classes,
+            z,
+            q,
+            p,
+            top,
         )
-        if dist.basis is None:  # exact distances: no subspace, no residuals
-            proj, q_sq, ref_res = q, self.no_res, self.no_res
-        else:
-            proj, q_sq, ref_res = q @ dist.basis, _add(q * q, axis=1), dist._ref_res
-        proj_sq = _add(proj * proj, axis=1)
-        near = _near(proj @ self.ref_t, q_sq, proj_sq, dist._ref_sq, ref_res, self.labels, best)
-        log_d = np.log(near)
-        entropy = -_add(p * np.log(np.clip(p, 1e-12, None)), axis=1) if self.entropy_used else None
-        cues = _cues(top, log_d, self.offsets, best, entropy, self.n_classes > 1)
-        return z, p, cues @ self.cue_weights
+        proj = q if self.basis is None else q @ self.basis
+        g = proj @ self.ref_t
+        near = np.empty((n, 3))
+        entropy = _NO_ROWS
+        if self.entropy_used:
+            entropy = -_add(p * np.log(np.clip(p, 1e-12, None)), axis=1)
+        nv = self.novel
+        if nv is None:
+            _near(q, proj, g, self.ref_sq, self.ref_res, self.labels, top, near)
+            cues = np.empty((n, 6))
+            _cues(top, np.log(near), self.offsets, entropy, self.several, cues)
+            return cues @ self.cue_weights, p, None
+        return nv.scores(self, z, q, proj, g, p, top, near, entropy)
 
 
 class _NovelConstants:
@@ -114,6 +133,7 @@ class _NovelConstants:
 
     def __init__(self, model: BestRecognizer) -> None:
         reg = model.registry
+        self.n_novel = len(reg.novel_names)
         self.has_attributes = model.has_attributes
         self.shot_temperature = float(model.shot_temperature)
         has = model.shot_has_
@@ -121,12 +141,13 @@ class _NovelConstants:
         self.shot_columns = np.flatnonzero(has)
         self.zsl_columns = np.flatnonzero(~has)
         # (L', K) prototypes; the general path multiplies by the transpose of this copy
-        self.prototypes = (
+        self.prototypes_t = (
             model.shot_prototypes_ if not self.has_attributes else model.shot_prototypes_[has]
-        )
+        ).T
         if not self.has_attributes:
             return
         attrs = model.attributes_
+        self.n_attributes = len(attrs.bias)
         self.attr_weights_t = attrs._weights_t32
         self.attr_bias = attrs.bias
         self.fixed = np.flatnonzero(~np.isnan(attrs.constant))
@@ -145,48 +166,134 @@ class _NovelConstants:
             self.unit_vectors_t = _unit(vectors).T
             self.sae_temperature = float(model.sae_temperature)
 
-    def proba(self, z: np.ndarray, known_p: np.ndarray) -> np.ndarray:
-        """``BestRecognizer._novel_from(z, known_p)``."""
+    def scores(
+        self,
+        known: SmallBatchScorer,
+        z: np.ndarray,
+        q: np.ndarray,
+        proj: np.ndarray,
+        g: np.ndarray,
+        p: np.ndarray,
+        top: np.ndarray,
+        near: np.ndarray,
+        entropy: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``SmallBatchScorer.scores`` from the forest's answers on: the nearest distances
+        and novelty scores, and ``BestRecognizer._novel_from(z, p)`` (LinearAttributeModel.
+        predict_proba, dap_log_scores, cosine_scores, the softmaxes and the one-shot mix)."""
+        n = len(z)
+        sig = np.empty((n, p.shape[1])) if self.any_shot else _NONE64
+        attr, half, sae, unit = _NONE32, _NONE64, _NONE32, _NONE64
+        if self.has_attributes:
+            attr, half = z @ self.attr_weights_t, np.empty((n, self.n_attributes))
+            if self.sae_t is not None:
+                sae, unit = z @ self.sae_t, np.empty((n, self.n_attributes))
+        _near_and_novel_inputs(
+            q, proj, g, known.ref_sq, known.ref_res, known.labels, p, top, near, attr,
+            self.attr_bias if self.has_attributes else _NO_ROWS, half, sae, unit, sig,
+        )  # fmt: skip
+        log_d = np.log(near)
+        sim = sig @ self.prototypes_t if self.any_shot else _NONE64
+        cues = np.empty((n, 6))
+        shot = np.empty((n, len(self.shot_columns))) if self.any_shot else _NONE64
         if not self.has_attributes:
-            sim = _signatures(known_p) @ self.prototypes.T
-            return _softmax_of_shifted(_shifted(sim, self.shot_temperature))
-        # LinearAttributeModel.predict_proba, then dap_log_scores
-        half = _half_logits(z @ self.attr_weights_t, self.attr_bias)
-        p, minus_p = _attribute_clip(
-            np.tanh(half), self.fixed, self.fixed_values, self.dap_clip, 1 - self.dap_clip
-        )
-        present, absent = np.log(p) @ self.present_t, np.log1p(minus_p) @ self.absent_t
-        cosine = None
-        if self.sae_t is not None:  # cosine_scores
-            projected, squares = _widened_and_squared(z @ self.sae_t)
-            cosine = _divide_by_norm(projected, _add(squares, axis=1)) @ self.unit_vectors_t
-        shifted = _zsl_shifted(present, absent, self.log_prior, cosine, self.sae_temperature)
-        p_zsl = _softmax_of_shifted(shifted)
-        if not self.any_shot:
-            return p_zsl
-        sim = _signatures(known_p) @ self.prototypes.T
-        e_shot = np.exp(_shifted(sim, self.shot_temperature))
-        rest = _add(p_zsl[:, self.zsl_columns], axis=1)
-        return _mix_shots(p_zsl, rest, e_shot, _add(e_shot, axis=1), self.shot_columns)
+            _cues_and_shifts(
+                top, log_d, known.offsets, entropy, known.several, cues, _NONE64, _NONE64,
+                _NONE64, _NONE64, 0.0, _NONE64, sim, self.shot_temperature, shot,
+            )  # fmt: skip
+            out = np.empty((n, self.n_novel))
+            _mix(_NONE64, np.exp(shot), self.zsl_columns, self.shot_columns, out)
+            return cues @ known.cue_weights, p, out
+        t = np.tanh(half)
+        minus = np.empty_like(t)
+        _attribute_clip(t, self.fixed, self.fixed_values, self.dap_clip, 1 - self.dap_clip, minus)
+        present, absent = np.log(t) @ self.present_t, np.log1p(minus) @ self.absent_t
+        cosine = unit @ self.unit_vectors_t if self.sae_t is not None else _NONE64
+        zsl = np.empty((n, self.n_novel))
+        _cues_and_shifts(
+            top, log_d, known.offsets, entropy, known.several, cues, present, absent,
+            self.log_prior, cosine, self.sae_temperature, zsl, sim, self.shot_temperature, shot,
+        )  # fmt: skip
+        novelty = cues @ known.cue_weights
+        e_zsl = np.exp(zsl)
+        out = np.empty_like(zsl)
+        _mix(e_zsl, np.exp(shot) if self.any_shot else _NONE64, self.zsl_columns,
+             self.shot_columns, out)  # fmt: skip
+        return novelty, p, out
 
 
 def _unit(m: np.ndarray) -> np.ndarray:
     """Rows scaled to unit length, as ``cosine_scores`` does (np.linalg.norm's own steps)."""
-    return _divide_by_norm(m, _add(m * m, axis=1))
-
-
-def _softmax_of_shifted(shifted: np.ndarray) -> np.ndarray:
-    """``attributes.softmax`` of logits already less their row maximum."""
-    e = np.exp(shifted)
-    return e / _add(e, axis=1, keepdims=True)
-
-
-def _signatures(known_p: np.ndarray) -> np.ndarray:
-    """``best.signatures`` of float64 posteriors."""
-    return _unit(known_p)
+    norm = np.maximum(np.sqrt(_add(m * m, axis=1, keepdims=True)), 1e-12)
+    return m / norm
 
 
 # ------------------------------------------------------------------ compiled kernels
+@njit(cache=True, nogil=True)
+def _row_sum(a, zero):
+    """``np.add.reduce`` of a contiguous row ``a`` in its dtype (``zero`` of that dtype): the
+    reduction starts from 0, its identity, and adds numpy's pairwise sum of the row, up to
+    128 elements by ``_pairwise_block``, above that the sum of its two halves (the first a
+    multiple of 8), each split again. The halves are walked with a stack, not by recursion
+    (a recursive kernel loaded from numba's cache crashes)."""
+    n = a.shape[0]
+    if n <= _BLOCK:
+        return zero + _pairwise_block(a, 0, n, zero)
+    seg_lo = np.empty(192, np.int64)  # pending segments: 2 per level of at most 64 levels
+    seg_n = np.empty(192, np.int64)
+    seg_join = np.empty(192, np.bool_)  # "add the last two sums" rather than a segment
+    sums = np.full(66, zero)
+    seg_lo[0], seg_n[0], seg_join[0] = 0, n, False
+    pending, done = 1, 0
+    while pending > 0:
+        pending -= 1
+        lo, m = seg_lo[pending], seg_n[pending]
+        if seg_join[pending]:
+            done -= 1
+            sums[done - 1] = sums[done - 1] + sums[done]
+        elif m <= _BLOCK:
+            sums[done] = _pairwise_block(a, lo, m, zero)
+            done += 1
+        else:
+            half = m // 2
+            half -= half % 8
+            seg_lo[pending], seg_n[pending], seg_join[pending] = lo, m, True
+            seg_lo[pending + 1], seg_n[pending + 1] = lo + half, m - half
+            seg_lo[pending + 2], seg_n[pending + 2] = lo, half
+            seg_join[pending + 1] = seg_join[pending + 2] = False
+            pending += 3  # the first half on top: its sum comes first
+    return zero + sums[0]
+
+
+@njit(cache=True, nogil=True)
+def _pairwise_block(a, lo, n, zero):
+    """numpy's pairwise sum of a[lo : lo + n], n <= 128: below 8 elements one by one; else
+    in 8 accumulators, combined as a tree, then the rest one by one."""
+    if n < 8:
+        res = zero
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i, end = lo + 8, lo + n - n % 8
+    while i < end:
+        r0 += a[i]
+        r1 += a[i + 1]
+        r2 += a[i + 2]
+        r3 += a[i + 3]
+        r4 += a[i + 4]
+        r5 += a[i + 5]
+        r6 += a[i + 6]
+        r7 += a[i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < lo + n:
+        res += a[i]
+        i += 1
+    return res
+
+
 @njit(cache=True, nogil=True)
 def _scale_and_walk(
     x,
@@ -199,11 +306,15 @@ def _scale_and_walk(
     leaf_ptr,
     leaf_class,
     leaf_value,
-    n_classes,
+    z,
+    q,
+    p,
+    top,
 ):
-    """RobustInputScaler.transform's exact steps after log1p, the centred feature-weighted
-    query of ReferenceDistances._split, and FlatForest.predict_proba; per sample also the
-    largest and second largest probability and the first class with the largest."""
+    """RobustInputScaler.transform's exact steps after log1p (into ``z``), the centred
+    feature-weighted query of ReferenceDistances._split (``q``), FlatForest.predict_proba
+    (``p``); per sample also the largest and second largest probability and the first class
+    with the largest (``top``)."""
     n, d = x.shape
     center, scale, feature_weights, dist_center = (
         per_feature[0],
@@ -211,8 +322,6 @@ def _scale_and_walk(
         per_feature[2],
         per_feature[3],
     )
-    z = np.empty((n, d), np.float32)
-    q = np.empty((n, d), np.float32)
     for i in range(n):
         for j in range(d):
             v = np.copysign(mag[i, j], x[i, j]) if log_compress else mag[i, j]
@@ -220,24 +329,21 @@ def _scale_and_walk(
             v = min(max(v, -clip), clip)
             z[i, j] = v
             q[i, j] = v * feature_weights[j] - dist_center[j]
-    p = np.zeros((n, n_classes))
+    p[:] = 0.0
     thresholds = nodes.view(np.float32)
     for i in range(n):
         _walk_trees(z[i], nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, p[i])
     n_trees = np.float64(roots.shape[0])
-    top = np.empty((n, 2))  # largest, second largest
-    best = np.empty(n, np.int64)  # the first class with the largest
     for i in range(n):
         first, second, arg = -np.inf, -np.inf, 0
-        for c in range(n_classes):
+        for c in range(p.shape[1]):
             v = p[i, c] / n_trees
             p[i, c] = v
             if v > first:
                 first, second, arg = v, first, c
             elif v > second:
                 second = v
-        top[i, 0], top[i, 1], best[i] = first, second, arg
-    return z, q, p, top, best
+        top[i, 0], top[i, 1], top[i, 2] = first, second, arg
 
 
 @njit(cache=True, nogil=True)
@@ -266,128 +372,158 @@ def _walk_trees(x, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, p
 
 
 @njit(cache=True, nogil=True)
-def _near(g, q_sq, proj_sq, ref_sq, ref_res, labels, best):
-    """ReferenceDistances.nearest from the products ``g``, plus ForestCues.cues' epsilon:
-    the residual norms sqrt(max(|q|^2 - |P q|^2, 0)) in float32 as ``_split`` takes them
-    (none without a basis: ``q_sq`` empty)."""
-    res = np.empty(q_sq.shape[0], np.float32)
-    for i in range(q_sq.shape[0]):
-        res[i] = np.sqrt(max(q_sq[i] - proj_sq[i], np.float32(0.0)))
-    near = _nearest(g, proj_sq, ref_sq, res, ref_res, labels, best, _KNN)
-    for i in range(near.shape[0]):
+def _near(q, proj, g, ref_sq, ref_res, labels, top, near):
+    """ReferenceDistances.nearest from the products ``g``, plus ForestCues.cues' epsilon
+    (into ``near``): |P q|^2, and with a basis (``ref_res`` not empty) the residual norms
+    sqrt(max(|q|^2 - |P q|^2, 0)) in float32 as ``_split`` takes them."""
+    n = q.shape[0]
+    zero = np.float32(0.0)
+    proj_sq = np.empty(n, np.float32)
+    res = np.empty(n if ref_res.shape[0] > 0 else 0, np.float32)
+    squares = np.empty(q.shape[1], np.float32)
+    for i in range(n):
+        for j in range(proj.shape[1]):
+            squares[j] = proj[i, j] * proj[i, j]
+        proj_sq[i] = _row_sum(squares[: proj.shape[1]], zero)
+        if res.shape[0] > 0:
+            for j in range(q.shape[1]):
+                squares[j] = q[i, j] * q[i, j]
+            res[i] = np.sqrt(max(_row_sum(squares, zero) - proj_sq[i], zero))
+    best = np.empty(n, np.int64)
+    for i in range(n):
+        best[i] = np.int64(top[i, 2])
+    found = _nearest(g, proj_sq, ref_sq, res, ref_res, labels, best, _KNN)
+    for i in range(n):
         for c in range(3):
-            near[i, c] = near[i, c] + _EPS
-    return near
+            near[i, c] = found[i, c] + _EPS
 
 
 @njit(cache=True, nogil=True)
-def _cues(top, log_d, offsets, best, entropy, several):
-    """ForestCues.cues' columns from the top probabilities and log distances."""
-    n = top.shape[0]
-    out = np.empty((n, 6))
-    for i in range(n):
+def _unit_rows(m, out):
+    """m's rows (float64 values) over max(their norm, 1e-12), as np.linalg.norm and
+    signatures / cosine_scores compute them."""
+    squares = np.empty(m.shape[1])
+    for i in range(m.shape[0]):
+        for j in range(m.shape[1]):
+            v = np.float64(m[i, j])
+            squares[j] = v * v
+        norm = max(np.sqrt(_row_sum(squares, 0.0)), 1e-12)
+        for j in range(m.shape[1]):
+            out[i, j] = np.float64(m[i, j]) / norm
+
+
+@njit(cache=True, nogil=True)
+def _near_and_novel_inputs(
+    q, proj, g, ref_sq, ref_res, labels, p, top, near, attr, bias, half, sae, unit, sig
+):
+    """``_near``; 0.5 x the attribute logits (float32 products ``attr`` to float64, plus the
+    bias) for the sigmoid by tanh; the autoencoder's projections ``sae`` as float64 over
+    their norms; the signatures of the known-class posteriors (``best.signatures``). An
+    empty output is a part the model lacks."""
+    _near(q, proj, g, ref_sq, ref_res, labels, top, near)
+    for i in range(half.shape[0]):
+        for j in range(half.shape[1]):
+            half[i, j] = 0.5 * (np.float64(attr[i, j]) + bias[j])
+    if unit.shape[0] > 0:
+        _unit_rows(sae, unit)
+    if sig.shape[0] > 0:
+        _unit_rows(p, sig)
+
+
+@njit(cache=True, nogil=True)
+def _cues(top, log_d, offsets, entropy, several, out):
+    """ForestCues.cues' columns from the top probabilities and log distances (the entropy's
+    column 0 where it is not computed: ``entropy`` empty)."""
+    for i in range(top.shape[0]):
         gap = top[i, 0] - (top[i, 1] if several else 0.0)
         out[i, 0] = 1.0 - top[i, 0]
-        out[i, 1] = 0.0 if entropy is None else entropy[i]
+        out[i, 1] = entropy[i] if entropy.shape[0] > 0 else 0.0
         out[i, 2] = -gap
         out[i, 3] = log_d[i, 0] - offsets[0]
         out[i, 4] = log_d[i, 1] - offsets[1]
-        out[i, 5] = log_d[i, 2] - offsets[2 + best[i]]
-    return out
+        out[i, 5] = log_d[i, 2] - offsets[2 + np.int64(top[i, 2])]
 
 
 @njit(cache=True, nogil=True)
-def _divide_by_norm(m, sq):
-    out = np.empty_like(m)
-    for i in range(m.shape[0]):
-        norm = max(np.sqrt(sq[i]), 1e-12)
-        for j in range(m.shape[1]):
-            out[i, j] = m[i, j] / norm
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _half_logits(products, bias):
-    """0.5 x the attribute logits (float32 products to float64, plus the bias)."""
-    out = np.empty((products.shape[0], products.shape[1]))
-    for i in range(products.shape[0]):
-        for j in range(products.shape[1]):
-            out[i, j] = 0.5 * (np.float64(products[i, j]) + bias[j])
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _attribute_clip(tanh_half, fixed, fixed_values, lo, hi):
-    """The sigmoid from tanh, the attributes constant over the known classes, DAP's clip;
-    the clipped probabilities and their negatives."""
-    p = np.empty_like(tanh_half)
-    minus = np.empty_like(tanh_half)
+def _attribute_clip(p, fixed, fixed_values, lo, hi, minus):
+    """In place, tanh(half logit) to the sigmoid, the attributes constant over the known
+    classes, DAP's clip; their negatives into ``minus``."""
     for i in range(p.shape[0]):
         for j in range(p.shape[1]):
-            p[i, j] = 0.5 * (1.0 + tanh_half[i, j])
+            p[i, j] = 0.5 * (1.0 + p[i, j])
         for f in range(fixed.shape[0]):
             p[i, fixed[f]] = fixed_values[f]
         for j in range(p.shape[1]):
             v = min(max(p[i, j], lo), hi)
             p[i, j] = v
             minus[i, j] = -v
-    return p, minus
 
 
 @njit(cache=True, nogil=True)
-def _widened_and_squared(m):
-    """float32 ``m`` as float64, and its squares."""
-    wide = np.empty((m.shape[0], m.shape[1]))
-    squares = np.empty_like(wide)
-    for i in range(m.shape[0]):
-        for j in range(m.shape[1]):
-            v = np.float64(m[i, j])
-            wide[i, j] = v
-            squares[i, j] = v * v
-    return wide, squares
-
-
-@njit(cache=True, nogil=True)
-def _zsl_shifted(present, absent, log_prior, cosine, temperature):
-    """DAP's log scores (its two products) less the prior term, plus the autoencoder's
-    weighted cosine, less each row's maximum (softmax's shift)."""
-    out = np.empty_like(present)
-    for i in range(out.shape[0]):
-        for j in range(out.shape[1]):
+def _cues_and_shifts(
+    top,
+    log_d,
+    offsets,
+    entropy,
+    several,
+    cues,
+    present,
+    absent,
+    log_prior,
+    cosine,
+    temperature,
+    zsl,
+    sim,
+    shot_temperature,
+    shot,
+):
+    """``_cues``; DAP's log scores (its two products) less the prior term, plus the
+    autoencoder's weighted cosine (``cosine`` not empty), less each row's maximum
+    (softmax's shift), into ``zsl``; sim / shot temperature less each row's maximum into
+    ``shot``."""
+    _cues(top, log_d, offsets, entropy, several, cues)
+    for i in range(zsl.shape[0]):
+        for j in range(zsl.shape[1]):
             v = (present[i, j] + absent[i, j]) - log_prior[0, j]
-            if cosine is not None:
+            if cosine.shape[0] > 0:
                 v = v + temperature * cosine[i, j]
-            out[i, j] = v
-    return _shift_rows(out)
-
-
-@njit(cache=True, nogil=True)
-def _shifted(sim, temperature):
-    """sim / temperature less each row's maximum."""
-    out = np.empty_like(sim)
+            zsl[i, j] = v
+    _shift_rows(zsl)
     for i in range(sim.shape[0]):
         for j in range(sim.shape[1]):
-            out[i, j] = sim[i, j] / temperature
-    return _shift_rows(out)
+            shot[i, j] = sim[i, j] / shot_temperature
+    _shift_rows(shot)
 
 
 @njit(cache=True, nogil=True)
 def _shift_rows(x):
+    if x.shape[1] == 0:
+        return
     for i in range(x.shape[0]):
         top = x[i, 0]
         for j in range(1, x.shape[1]):
             top = max(top, x[i, j])
         for j in range(x.shape[1]):
             x[i, j] = x[i, j] - top
-    return x
 
 
 @njit(cache=True, nogil=True)
-def _mix_shots(p_zsl, rest, e_shot, e_sum, shot_columns):
-    """Classes with one-shot samples share what the zero-shot-only classes leave, by their
-    softmax (exponentials ``e_shot`` over their row sums ``e_sum``)."""
-    out = p_zsl.copy()
-    for i in range(out.shape[0]):
-        for s in range(shot_columns.shape[0]):
-            out[i, shot_columns[s]] = (1.0 - rest[i]) * (e_shot[i, s] / e_sum[i])
-    return out
+def _mix(e_zsl, e_shot, zsl_columns, shot_columns, out):
+    """The zero-shot softmax from its exponentials ``e_zsl`` (absent without attributes),
+    then the classes with one-shot samples (``e_shot`` not empty) share what the
+    zero-shot-only classes leave, by their softmax."""
+    n = out.shape[0]
+    rest_of = np.empty(zsl_columns.shape[0])
+    for i in range(n):
+        rest = 0.0
+        if e_zsl.shape[0] > 0:
+            total = _row_sum(e_zsl[i], 0.0)
+            for j in range(out.shape[1]):
+                out[i, j] = e_zsl[i, j] / total
+            for j in range(zsl_columns.shape[0]):
+                rest_of[j] = out[i, zsl_columns[j]]
+            rest = _row_sum(rest_of, 0.0)
+        if e_shot.shape[0] > 0:
+            total = _row_sum(e_shot[i], 0.0)
+            for s in range(shot_columns.shape[0]):
+                out[i, shot_columns[s]] = (1.0 - rest) * (e_shot[i, s] / total)
