@@ -169,6 +169,24 @@ def attribute_growth(phac2: Path, tmp: Path) -> None:
             assert (auc is None or share(auc)) and share(zsl), figures  # None: AUC skipped
 
 
+def rerun_check(phac2: Path, tmp: Path) -> None:
+    from app.cli import main
+
+    base, out, png = tmp / "base.json", tmp / "check.json", tmp / "check.png"
+    args = ["--dataset", f"phac2:{phac2}", "--novel", "6", "--splits", "2", "--seed", "5"]
+    code = main(["evaluate", *args, "--methods", "best", "--jobs", "1", "--out", str(base)])
+    assert code == 0
+    done = run("rerun_check.py", phac2, "--base", str(base), "--seeds", "9,10", "--out", str(out))
+    run("rerun_check.py", phac2, "--base", str(base), "--seeds", "9", "--plot", str(png))
+    assert done.stdout.startswith("`best`, 6 novel objects: published over 2 splits (seed 5)")
+    assert png.stat().st_size > 0
+    report = json.loads(out.read_text())
+    assert report["seeds"] == [9] and report["rerun_splits"] == 1  # --tiny: one seed, one split
+    for row in report["methods"]["best"].values():
+        assert row["checked"] == 1 and row["inside_rerun95"] in (0, 1)
+        assert share(row["reruns"]["9"]) and share(row["base_mean"])
+
+
 SCRIPTS: dict[str, Callable[[Path, Path], None]] = {
     f"{check.__name__}.py": check
     for check in (
@@ -182,6 +200,7 @@ SCRIPTS: dict[str, Callable[[Path, Path], None]] = {
         explore_attributes,
         explore_novelty,
         attribute_growth,
+        rerun_check,
     )
 }
 
