@@ -21,6 +21,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.api import openapi, problems
 from app.api.deps import Replay, replay_handler
+from app.api.fast_path import RecognizeFastPath
 from app.api.routes import attributes, classes, describe, health, jobs, models, recognize, samples
 from app.api.state import ServiceState
 from app.config import Settings
@@ -143,6 +144,13 @@ def create_app(
             allow_headers=["Content-Type", "X-API-Key", "Idempotency-Key"],
         )
     app.add_middleware(RequestMetrics, metrics=metrics)
+    if not settings.opentelemetry:  # its spans name the route FastAPI's router selected
+        app.add_middleware(
+            RecognizeFastPath,
+            metrics=metrics,
+            max_bytes=settings.max_body_bytes,
+            cors=bool(settings.cors_origins),
+        )
     return app
 
 
@@ -180,7 +188,7 @@ class BodySizeLimit:
         self.max_bytes = max_bytes
 
     def _too_large(self) -> problems.Problem:
-        return problems.Problem(413, f"request body is larger than {self.max_bytes} bytes", "body")
+        return problems.body_too_large(self.max_bytes)
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
@@ -231,6 +239,4 @@ class RequestMetrics:
         finally:
             route = scope.get("route")
             path = getattr(route, "path", None) or "unmatched"
-            method = scope["method"]
-            self.metrics.requests.labels(method, path, str(status)).inc()
-            self.metrics.latency.labels(method, path).observe(time.perf_counter() - start)
+            self.metrics.observe_request(scope["method"], path, status, time.perf_counter() - start)

@@ -67,6 +67,11 @@ class Problem(HTTPException):
         self.errors = [{"field": field, "reason": detail}] if field else []
 
 
+def body_too_large(max_bytes: int) -> Problem:
+    """The 413 of a body over the ``max_bytes`` cap."""
+    return Problem(413, f"request body is larger than {max_bytes} bytes", "body")
+
+
 def not_found(what: str, field: str, value: Any) -> Problem:
     return Problem(404, f"no {what} with {field} {value}", field)
 

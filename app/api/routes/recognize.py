@@ -15,7 +15,7 @@ from app.api.deps import JSON, NPY, api_key_header, get_recognizing, media_type
 from app.api.problems import Problem, blame
 from app.api.schemas import RecognizeRequest, RecognizeResponse
 from app.data.biotac import RawTrial
-from app.framework.recognizer import RAW_TRIALS, RecognitionBatch, TactileRecognizer
+from app.framework.recognizer import RAW_TRIALS, TactileRecognizer
 
 router = APIRouter(prefix="/v1", tags=["recognize"], responses=problems.responses(401, 403, 429))
 
@@ -104,6 +104,14 @@ async def recognize(request: Request) -> Response:
     instead, or an HDF5 body, and answers once per trial from all its fingers; the other
     kind of input is a 409 that says which the model takes.
     """
+    return Response(await answer(request), media_type=JSON)
+
+
+async def answer(request: Request) -> bytes:
+    """The JSON body of ``POST /v1/recognize``'s 200 answer; errors are raised, for the
+    app's exception handlers. The route above calls it, and so does
+    ``app.api.fast_path.RecognizeFastPath``, which answers this route without FastAPI's
+    routing (the route robots call hundreds of times a second)."""
     # called, not declared with Depends: FastAPI's dependency machinery cost ~15 µs a
     # request on the route robots call most (RECOGNIZE_EXTRA documents the key it checks)
     model, service = await get_recognizing(request)
@@ -119,9 +127,7 @@ async def recognize(request: Request) -> Response:
                 results = await service.recognize_object(model, body.samples)
             else:
                 results = await service.recognize(model, body.samples, body.n)
-    return Response(
-        _to_json(model.version, results, model.class_ids), media_type="application/json"
-    )
+    return service.to_json(model, results)
 
 
 def _same_object(request: Request) -> bool:
@@ -170,11 +176,6 @@ async def read_body(request: Request, input_shape: tuple[int, ...], batch_limit:
     if n > batch_limit:
         raise Problem(422, f"{n} samples is more than the batch limit of {batch_limit}", "samples")
     return Body(samples, None, n)
-
-
-def _to_json(version: int, batch: RecognitionBatch, class_ids: dict[str, int]) -> bytes:
-    """The RecognizeResponse body (the schema documents it), built straight from the arrays."""
-    return orjson.dumps({"model_version": version, "results": batch.records(class_ids)})
 
 
 def _from_json(body: bytes, input_shape: tuple[int, ...], batch_limit: int) -> Body:
