@@ -30,6 +30,7 @@ its product with 0 adds nothing to the weighted sum.
 
 from __future__ import annotations
 
+from threading import get_ident
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -48,6 +49,10 @@ _TREES = 8  # trees one sample takes down together (as forest._BLOCK samples)
 _NONE64 = np.zeros((0, 0))  # an array a kernel is given for a part the model lacks
 _NONE32 = np.zeros((0, 0), np.float32)
 _NO_ROWS = np.zeros(0)
+# SmallBatchScorer.settings: the scaler's clip, whether it log-compresses, whether there are
+# several known classes, the one-shot and autoencoder temperatures, DAP's clip bounds
+_CLIP, _LOG_COMPRESS, _SEVERAL, _SHOT_TEMPERATURE, _SAE_TEMPERATURE, _DAP_LO, _DAP_HI = range(7)
+_SETTINGS = 7
 
 
 class SmallBatchScorer:
@@ -73,7 +78,6 @@ class SmallBatchScorer:
         ).astype(np.float32)
         if self.per_feature.shape[1] != forest.n_features:
             raise ValueError("the small-batch path needs the scaler's statistics per feature")
-        self.clip = np.float32(cues.scaler.clip)
         self.log_compress = bool(cues.scaler.log_compress)
         self.basis = dist.basis
         self.ref_t = dist._ref.T  # the same transposed view the general path multiplies by
@@ -84,25 +88,61 @@ class SmallBatchScorer:
         self.offsets = cues.offsets
         self.cue_weights = model.known_.weights
         self.entropy_used = bool(self.cue_weights[_ENTROPY] != 0.0)
-        self.several = self.n_classes > 1
-        self.novel = _NovelConstants(model) if model.registry.novel_names else None
+        nv = self.novel = _NovelConstants(model) if model.registry.novel_names else None
+        # the kernels' scalars in one array (a scalar argument costs more than an array)
+        self.settings = np.zeros(_SETTINGS)
+        self.settings[_CLIP] = cues.scaler.clip
+        self.settings[_LOG_COMPRESS] = self.log_compress
+        self.settings[_SEVERAL] = self.n_classes > 1
+        if nv is not None:
+            self.settings[_SHOT_TEMPERATURE] = nv.shot_temperature
+            if nv.has_attributes:
+                self.settings[_DAP_LO], self.settings[_DAP_HI] = nv.dap_clip, 1 - nv.dap_clip
+                self.settings[_SAE_TEMPERATURE] = nv.sae_temperature
+        # one sample's intermediate arrays, one set per thread: allocating them anew cost
+        # as much as a kernel (the arrays returned are new on every call)
+        self._one: dict[int, tuple[np.ndarray, ...]] = {}
+
+    def _buffers(self, n: int) -> tuple[np.ndarray, ...]:
+        """The intermediate arrays of ``n`` samples; an array for a part the model lacks
+        is empty."""
+        d, nv = self.per_feature.shape[1], self.novel
+        z, q = np.empty((n, d), np.float32), np.empty((n, d), np.float32)
+        top, near, cues = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 6))
+        if nv is None:
+            return z, q, top, near, cues
+        m = nv.n_attributes
+        sig = np.empty((n, self.n_classes)) if nv.any_shot else _NONE64
+        half, minus, unit = _NONE64, _NONE64, _NONE64
+        if nv.has_attributes:
+            half, minus = np.empty((n, m)), np.empty((n, m))
+            if nv.sae_t is not None:
+                unit = np.empty((n, m))
+        zsl = nv.n_novel if nv.has_attributes else 0
+        shifted = np.empty((n, zsl + len(nv.shot_columns)))
+        return z, q, top, near, cues, sig, half, minus, unit, shifted
 
     def scores(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        n, d = x.shape
+        n = len(x)
+        if n == 1:
+            buffers = self._one.get(get_ident())
+            if buffers is None:
+                buffers = self._one[get_ident()] = self._buffers(1)
+        else:
+            buffers = self._buffers(n)
+        z, q, top, near, cues = buffers[:5]
         if self.log_compress:  # RobustInputScaler._compress: log1p(|x|) with x's sign
             mag = np.abs(x)
             np.log1p(mag, out=mag)
         else:
             mag = x
         f = self.forest
-        z, q = np.empty((n, d), np.float32), np.empty((n, d), np.float32)
-        p, top = np.empty((n, self.n_classes)), np.empty((n, 3))
+        p = np.empty((n, self.n_classes))
         _scale_and_walk(
             x,
             mag,
-            self.log_compress,
             self.per_feature,
-            self.clip,
+            self.settings,
             f._nodes,
             f.roots,
             f.leaf_ptr,
@@ -115,17 +155,43 @@ class SmallBatchScorer:
         )
         proj = q if self.basis is None else q @ self.basis
         g = proj @ self.ref_t
-        near = np.empty((n, 3))
         entropy = _NO_ROWS
         if self.entropy_used:
             entropy = -_add(p * np.log(np.clip(p, 1e-12, None)), axis=1)
         nv = self.novel
         if nv is None:
             _near(q, proj, g, self.ref_sq, self.ref_res, self.labels, top, near)
-            cues = np.empty((n, 6))
-            _cues(top, np.log(near), self.offsets, entropy, self.several, cues)
+            _cues(top, np.log(near), self.offsets, entropy, self.settings, cues)
             return cues @ self.cue_weights, p, None
-        return nv.scores(self, z, q, proj, g, p, top, near, entropy)
+        # BestRecognizer._novel_from: LinearAttributeModel.predict_proba, dap_log_scores,
+        # cosine_scores, the softmaxes and the one-shot mix
+        sig, half, minus, unit, shifted = buffers[5:]
+        attr, sae = _NONE32, _NONE32
+        if nv.has_attributes:
+            attr = z @ nv.attr_weights_t
+            if nv.sae_t is not None:
+                sae = z @ nv.sae_t
+        _near_and_novel_inputs(
+            q, proj, g, self.ref_sq, self.ref_res, self.labels, p, top, near, attr, nv.attr_bias,
+            half, sae, unit, sig,
+        )  # fmt: skip
+        log_d = np.log(near)
+        sim = sig @ nv.prototypes_t if nv.any_shot else _NONE64
+        present, absent, cosine = _NONE64, _NONE64, _NONE64
+        if nv.has_attributes:
+            t = np.tanh(half)
+            _attribute_clip(t, nv.fixed, nv.fixed_values, self.settings, minus)
+            present, absent = np.log(t) @ nv.present_t, np.log1p(minus) @ nv.absent_t
+            if nv.sae_t is not None:
+                cosine = unit @ nv.unit_vectors_t
+        _cues_and_shifts(
+            top, log_d, self.offsets, entropy, self.settings, cues, present, absent,
+            nv.log_prior, cosine, sim, shifted,
+        )  # fmt: skip
+        novelty = cues @ self.cue_weights
+        out = np.empty((n, nv.n_novel))
+        _mix(np.exp(shifted), nv.zsl_columns, nv.shot_columns, out)
+        return novelty, p, out
 
 
 class _NovelConstants:
@@ -144,6 +210,7 @@ class _NovelConstants:
         self.prototypes_t = (
             model.shot_prototypes_ if not self.has_attributes else model.shot_prototypes_[has]
         ).T
+        self.n_attributes, self.attr_bias, self.sae_t, self.log_prior = 0, _NO_ROWS, None, _NONE64
         if not self.has_attributes:
             return
         attrs = model.attributes_
@@ -159,67 +226,12 @@ class _NovelConstants:
         self.present_t, self.absent_t = present.T, absent.T
         q = np.clip(model.prior_, clip, 1 - clip)
         self.log_prior = (np.log(q) @ present.T + np.log1p(-q) @ absent.T)[None, :]
-        self.sae_t, self.sae_temperature = None, 0.0
+        self.sae_temperature = 0.0
         if model.sae_ is not None:
             self.sae_t = np.asarray(model.sae_, np.float32).T
             vectors = np.asarray(impute(reg.novel_attributes, model.prior_), np.float64)
             self.unit_vectors_t = _unit(vectors).T
             self.sae_temperature = float(model.sae_temperature)
-
-    def scores(
-        self,
-        known: SmallBatchScorer,
-        z: np.ndarray,
-        q: np.ndarray,
-        proj: np.ndarray,
-        g: np.ndarray,
-        p: np.ndarray,
-        top: np.ndarray,
-        near: np.ndarray,
-        entropy: np.ndarray,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``SmallBatchScorer.scores`` from the forest's answers on: the nearest distances
-        and novelty scores, and ``BestRecognizer._novel_from(z, p)`` (LinearAttributeModel.
-        predict_proba, dap_log_scores, cosine_scores, the softmaxes and the one-shot mix)."""
-        n = len(z)
-        sig = np.empty((n, p.shape[1])) if self.any_shot else _NONE64
-        attr, half, sae, unit = _NONE32, _NONE64, _NONE32, _NONE64
-        if self.has_attributes:
-            attr, half = z @ self.attr_weights_t, np.empty((n, self.n_attributes))
-            if self.sae_t is not None:
-                sae, unit = z @ self.sae_t, np.empty((n, self.n_attributes))
-        _near_and_novel_inputs(
-            q, proj, g, known.ref_sq, known.ref_res, known.labels, p, top, near, attr,
-            self.attr_bias if self.has_attributes else _NO_ROWS, half, sae, unit, sig,
-        )  # fmt: skip
-        log_d = np.log(near)
-        sim = sig @ self.prototypes_t if self.any_shot else _NONE64
-        cues = np.empty((n, 6))
-        shot = np.empty((n, len(self.shot_columns))) if self.any_shot else _NONE64
-        if not self.has_attributes:
-            _cues_and_shifts(
-                top, log_d, known.offsets, entropy, known.several, cues, _NONE64, _NONE64,
-                _NONE64, _NONE64, 0.0, _NONE64, sim, self.shot_temperature, shot,
-            )  # fmt: skip
-            out = np.empty((n, self.n_novel))
-            _mix(_NONE64, np.exp(shot), self.zsl_columns, self.shot_columns, out)
-            return cues @ known.cue_weights, p, out
-        t = np.tanh(half)
-        minus = np.empty_like(t)
-        _attribute_clip(t, self.fixed, self.fixed_values, self.dap_clip, 1 - self.dap_clip, minus)
-        present, absent = np.log(t) @ self.present_t, np.log1p(minus) @ self.absent_t
-        cosine = unit @ self.unit_vectors_t if self.sae_t is not None else _NONE64
-        zsl = np.empty((n, self.n_novel))
-        _cues_and_shifts(
-            top, log_d, known.offsets, entropy, known.several, cues, present, absent,
-            self.log_prior, cosine, self.sae_temperature, zsl, sim, self.shot_temperature, shot,
-        )  # fmt: skip
-        novelty = cues @ known.cue_weights
-        e_zsl = np.exp(zsl)
-        out = np.empty_like(zsl)
-        _mix(e_zsl, np.exp(shot) if self.any_shot else _NONE64, self.zsl_columns,
-             self.shot_columns, out)  # fmt: skip
-        return novelty, p, out
 
 
 def _unit(m: np.ndarray) -> np.ndarray:
@@ -298,9 +310,8 @@ def _pairwise_block(a, lo, n, zero):
 def _scale_and_walk(
     x,
     mag,
-    log_compress,
     per_feature,
-    clip,
+    settings,
     nodes,
     roots,
     leaf_ptr,
@@ -316,6 +327,7 @@ def _scale_and_walk(
     (``p``); per sample also the largest and second largest probability and the first class
     with the largest (``top``)."""
     n, d = x.shape
+    clip, log_compress = np.float32(settings[_CLIP]), settings[_LOG_COMPRESS] != 0.0
     center, scale, feature_weights, dist_center = (
         per_feature[0],
         per_feature[1],
@@ -431,9 +443,10 @@ def _near_and_novel_inputs(
 
 
 @njit(cache=True, nogil=True)
-def _cues(top, log_d, offsets, entropy, several, out):
+def _cues(top, log_d, offsets, entropy, settings, out):
     """ForestCues.cues' columns from the top probabilities and log distances (the entropy's
     column 0 where it is not computed: ``entropy`` empty)."""
+    several = settings[_SEVERAL] != 0.0
     for i in range(top.shape[0]):
         gap = top[i, 0] - (top[i, 1] if several else 0.0)
         out[i, 0] = 1.0 - top[i, 0]
@@ -445,9 +458,10 @@ def _cues(top, log_d, offsets, entropy, several, out):
 
 
 @njit(cache=True, nogil=True)
-def _attribute_clip(p, fixed, fixed_values, lo, hi, minus):
+def _attribute_clip(p, fixed, fixed_values, settings, minus):
     """In place, tanh(half logit) to the sigmoid, the attributes constant over the known
     classes, DAP's clip; their negatives into ``minus``."""
+    lo, hi = settings[_DAP_LO], settings[_DAP_HI]
     for i in range(p.shape[0]):
         for j in range(p.shape[1]):
             p[i, j] = 0.5 * (1.0 + p[i, j])
@@ -461,37 +475,25 @@ def _attribute_clip(p, fixed, fixed_values, lo, hi, minus):
 
 @njit(cache=True, nogil=True)
 def _cues_and_shifts(
-    top,
-    log_d,
-    offsets,
-    entropy,
-    several,
-    cues,
-    present,
-    absent,
-    log_prior,
-    cosine,
-    temperature,
-    zsl,
-    sim,
-    shot_temperature,
-    shot,
+    top, log_d, offsets, entropy, settings, cues, present, absent, log_prior, cosine, sim, out
 ):
-    """``_cues``; DAP's log scores (its two products) less the prior term, plus the
-    autoencoder's weighted cosine (``cosine`` not empty), less each row's maximum
-    (softmax's shift), into ``zsl``; sim / shot temperature less each row's maximum into
-    ``shot``."""
-    _cues(top, log_d, offsets, entropy, several, cues)
-    for i in range(zsl.shape[0]):
-        for j in range(zsl.shape[1]):
+    """``_cues``; then, into ``out``'s first columns (as many as ``present`` has), DAP's log
+    scores (its two products) less the prior term, plus the autoencoder's weighted cosine
+    (``cosine`` not empty), and into the rest sim / shot temperature; each part less its
+    row's maximum (softmax's shift)."""
+    _cues(top, log_d, offsets, entropy, settings, cues)
+    zsl = out[:, : present.shape[1]]
+    for i in range(present.shape[0]):
+        for j in range(present.shape[1]):
             v = (present[i, j] + absent[i, j]) - log_prior[0, j]
             if cosine.shape[0] > 0:
-                v = v + temperature * cosine[i, j]
+                v = v + settings[_SAE_TEMPERATURE] * cosine[i, j]
             zsl[i, j] = v
     _shift_rows(zsl)
+    shot = out[:, present.shape[1] :]
     for i in range(sim.shape[0]):
         for j in range(sim.shape[1]):
-            shot[i, j] = sim[i, j] / shot_temperature
+            shot[i, j] = sim[i, j] / settings[_SHOT_TEMPERATURE]
     _shift_rows(shot)
 
 
@@ -508,22 +510,22 @@ def _shift_rows(x):
 
 
 @njit(cache=True, nogil=True)
-def _mix(e_zsl, e_shot, zsl_columns, shot_columns, out):
-    """The zero-shot softmax from its exponentials ``e_zsl`` (absent without attributes),
-    then the classes with one-shot samples (``e_shot`` not empty) share what the
-    zero-shot-only classes leave, by their softmax."""
-    n = out.shape[0]
+def _mix(e, zsl_columns, shot_columns, out):
+    """From the exponentials ``e`` of ``_cues_and_shifts``' two parts: the zero-shot softmax
+    (none without attributes: ``e`` has only the one-shot part), then the classes with
+    one-shot samples share what the zero-shot-only classes leave, by their softmax."""
+    n_zsl = e.shape[1] - shot_columns.shape[0]
     rest_of = np.empty(zsl_columns.shape[0])
-    for i in range(n):
+    for i in range(out.shape[0]):
         rest = 0.0
-        if e_zsl.shape[0] > 0:
-            total = _row_sum(e_zsl[i], 0.0)
-            for j in range(out.shape[1]):
-                out[i, j] = e_zsl[i, j] / total
+        if n_zsl > 0:
+            total = _row_sum(e[i, :n_zsl], 0.0)
+            for j in range(n_zsl):
+                out[i, j] = e[i, j] / total
             for j in range(zsl_columns.shape[0]):
                 rest_of[j] = out[i, zsl_columns[j]]
             rest = _row_sum(rest_of, 0.0)
-        if e_shot.shape[0] > 0:
-            total = _row_sum(e_shot[i], 0.0)
+        if shot_columns.shape[0] > 0:
+            total = _row_sum(e[i, n_zsl:], 0.0)
             for s in range(shot_columns.shape[0]):
-                out[i, shot_columns[s]] = (1.0 - rest) * (e_shot[i, s] / total)
+                out[i, shot_columns[s]] = (1.0 - rest) * (e[i, n_zsl + s] / total)
