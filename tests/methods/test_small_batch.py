@@ -1,11 +1,13 @@
 """``best``'s small-batch path (``app.methods.small_batch``) gives the general path's answers
 bit for bit: every output of ``recognize_batch`` and ``attribute_proba``, for single samples,
 small batches and a large one, on models with and without novel classes, one-shot samples,
-the semantic autoencoder, subspace or exact distances, and attributes."""
+the semantic autoencoder, subspace or exact distances, and attributes; and its sums along a
+row add in numpy's order."""
 
 from __future__ import annotations
 
 import copy
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
@@ -14,6 +16,7 @@ from app.data.dataset import TactileDataset
 from app.data.simulator import simulate_dataset
 from app.framework.recognizer import RecognitionBatch
 from app.framework.registry import make_method
+from app.methods.small_batch import _row_sum
 
 FIELDS = ("top_index", "top_probability", "is_novel", "novelty_score")
 SIZES = (1, 2, 7)
@@ -204,3 +207,47 @@ def test_a_weighted_entropy_cue_is_computed_as_the_general_path_does(models, dat
     for n in SIZES:
         assert_same_bits(fast.recognize_batch(x[:n]), general(model).recognize_batch(x[:n]))
     assert fast._small_batch.entropy_used
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_row_sums_add_in_numpys_order(dtype):
+    """The kernels' ``_row_sum`` gives ``np.add.reduce``'s bits along a row: numpy's pairwise
+    summation, in one block up to 128 elements and in halves above (lengths around every
+    boundary, rows of mixed magnitudes so that the order shows in the last bits)."""
+    rng = np.random.default_rng(5)
+    zero = dtype(0.0)
+    lengths = [*range(0, 140), 255, 256, 257, 383, 512, 600, 959, 960, 961, 2049, 10_000]
+    for n in lengths:
+        m = (rng.standard_normal((3, n)) * rng.uniform(0.1, 1e3, (3, 1))).astype(dtype)
+        m[:, ::5] *= dtype(1e-4)
+        want = np.add.reduce(m, axis=1)
+        got = np.array([_row_sum(row, zero) for row in m], dtype)
+        assert got.tobytes() == want.tobytes(), n
+
+
+def test_threads_keep_their_own_one_sample_arrays(models, data):
+    """One sample's intermediate arrays are kept per thread: threads scoring different
+    samples at once get each sample's own answer."""
+    model, x = small(models["one-shot"]), queries(data[0], seed=5)[:8]
+    want = [general(model).recognize_batch(x[i : i + 1]) for i in range(len(x))]
+    model.recognize_batch(x[:1])  # build the scorer before the threads start
+
+    def answers(i: int) -> list[RecognitionBatch]:
+        return [model.recognize_batch(x[i : i + 1]) for _ in range(50)]
+
+    with ThreadPoolExecutor(4) as pool:
+        for i, got in enumerate(pool.map(answers, range(len(x)))):
+            for answer in got:
+                assert_same_bits(answer, want[i])
+
+
+def test_a_copied_model_scores_alike(models, data):
+    """The scorer, with its per-thread arrays, survives a deep copy (as the model is copied
+    for enrolment) and gives the same bits afterwards."""
+    model, x = small(models["zero-shot"]), queries(data[0], seed=6)[:3]
+    first = model.recognize_batch(x[:1])
+    twin = copy.deepcopy(model)
+    assert twin._small_batch is not None
+    for n in (1, 3):
+        assert_same_bits(twin.recognize_batch(x[:n]), model.recognize_batch(x[:n]))
+    assert_same_bits(twin.recognize_batch(x[:1]), first)
