@@ -97,7 +97,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--seed",
         type=int,
         default=0,
-        help="seed of the split draws and of the methods' own randomness (default: %(default)s)",
+        help="seed of the split draws and of the methods' own randomness: each split derives "
+        "a method seed of its own from it (default: %(default)s)",
     )
     p.add_argument(
         "--methods",

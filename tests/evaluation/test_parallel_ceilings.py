@@ -117,10 +117,13 @@ def test_ceilings_recomputed_from_the_model():
     ds = simulate_dataset(n_objects=14, seed=0)
     res = evaluate(ds, ["eszsl"], n_novel=3, n_splits=1, seed=2, progress=False, ceilings=True)
     s = res["methods"]["eszsl"]["splits"][0]
+    from app.evaluation.protocol import split_method_seed
     from app.evaluation.splits import make_zsl_splits
 
     split = make_zsl_splits(ds, 3, 1, 2)[0]
-    model = make_recognizer("eszsl", None, 2).fit(split.train_dataset(ds))
+    own_seed = split_method_seed(2, 0)
+    assert res["methods"]["eszsl"]["details"][0]["method_seed"] == own_seed
+    model = make_recognizer("eszsl", None, own_seed).fit(split.train_dataset(ds))
     known = model.novelty_score(ds.samples[split.known_test_idx])
     novel = model.novelty_score(ds.samples[split.novel_test_idx])
     assert s["nd_test_kept"] == np.mean(known <= model.novelty_threshold)
@@ -266,3 +269,17 @@ def test_a_failing_split_in_a_worker_exits_2_with_its_message(tmp_path, capsys):
         assert "n_estimators" in err
         messages.append(err)
     assert messages[0] == messages[1]
+
+
+def test_every_split_gives_its_methods_a_seed_of_its_own(runs):
+    # one seed shared by every split would be a random effect no number of splits averages
+    # out; each split's methods get their own, the same in every process
+    from app.evaluation.protocol import split_method_seed
+
+    res = runs[1]
+    seeds = [d["method_seed"] for d in res["methods"]["best"]["details"]]
+    assert seeds == [split_method_seed(2, i) for i in range(3)]
+    assert len(set(seeds)) == 3 and all(0 <= s < 2**31 for s in seeds)
+    assert seeds == [d["method_seed"] for d in res["methods"]["eszsl"]["details"]]  # paired
+    assert seeds == [d["method_seed"] for d in runs[2]["methods"]["best"]["details"]]
+    assert split_method_seed(3, 0) not in seeds  # another run seed, other method seeds
