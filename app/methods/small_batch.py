@@ -21,8 +21,20 @@ arrays, each paying its call overhead, plus constants recomputed on every call. 
   takes gemv, more rows gemm, and each kernel adds in its own order), called on arrays of
   the same shapes, dtypes and memory layout, so their bits are the general path's;
 - allocates the arrays the kernels fill in Python (a compiled function that returns an
-  array pays more to hand it back than ``np.empty`` costs) and passes each kernel as few
-  arguments as it can (each one costs the dispatcher time to check).
+  array pays more to hand it back than ``np.empty`` costs), for one sample once per thread,
+  and passes each kernel as few arguments as it can (each one costs the dispatcher time to
+  check; the scalars go in one array);
+- calls numpy's exp once for both softmaxes (the zero-shot and the one-shot logits side by
+  side in one contiguous array: numpy rounds each element of a contiguous array alike,
+  wherever it lies).
+
+What bit-identity keeps out of the kernels: fusing the two 960-wide products with ``z``
+into one (``z`` times both matrices side by side) would change which BLAS kernel computes
+each column (the attribute matrix is C-ordered, gemv "N"; the autoencoder's a transposed
+view, gemv "T"), and merging DAP's two 19 x 6 products, the cosine's and the signatures'
+would change BLAS's order of additions; float32 log1p, tanh, log and exp have SIMD
+versions in numpy (SVML on AVX-512) that libm, which the kernels would call, need not
+match.
 
 A cue whose weight is 0 in the novelty score (the entropy, in ``best``) is not computed:
 its product with 0 adds nothing to the weighted sum.
