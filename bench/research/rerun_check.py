@@ -1,17 +1,20 @@
 """Do re-runs on seeds nobody used land inside the published intervals?
 
-    .venv/bin/python bench/research/rerun_check.py \\
+    .venv/bin/python bench/research/rerun_check.py --methods best \\
         --base docs/results/phac2-best500-novel12/results.json \\
-        --seeds 11000,12000,13000,14000 --out docs/results/rerun-check-novel12.json \\
-        --plot docs/results/rerun-check-novel12.png
+        --base docs/results/phac2-novel12/results.json \\
+        --seeds 11000,12000,13000,14000,15000,16000 \\
+        --out docs/results/rerun-check-novel12.json --plot docs/results/rerun-check-novel12.png
 
-``--base`` is a published ``tactile-zsl evaluate`` results file (``rerun95`` in it, so
-written since 351c88d). For each of ``--seeds`` this runs the same evaluation (the base's
-methods, number of novel objects and held-out trials, on ``--data``) with the base's
-``rerun_splits`` splits, and says for every figure whether the re-run's mean landed inside
-the base's ``rerun95`` (where a re-run should land, 95 %) and inside its ``ci95`` (the
-interval of the true mean, which catches re-runs less often). It prints a markdown table,
-writes the JSON report to ``--out`` and a figure per method to ``--plot``.
+Each ``--base`` is a published ``tactile-zsl evaluate`` results file (``rerun95`` in it, so
+written since 351c88d); all of them of the same number of novel objects, held-out trials
+and re-run size. For each of ``--seeds`` this runs that evaluation once (``--methods``,
+default the first base's, on ``--data``) with the bases' ``rerun_splits`` splits, and says
+for every base and figure whether the re-run's mean landed inside the base's ``rerun95``
+(where a re-run should land, 95 %) and inside its ``ci95`` (the interval of the true mean,
+which catches re-runs less often). It prints a markdown table per base, writes the JSON
+report to ``--out`` and, per base, a PNG of the first method to ``--plot`` (``-2``, ``-3``,
+… before the suffix for the later bases).
 
 The seeds must be ones no development run and no published table used; the check is only
 worth its seeds. ``--tiny`` (the smoke test) runs one split of the first seed.
@@ -37,6 +40,8 @@ def check(base: dict, reruns: dict[int, dict]) -> dict:
     mean, and how many re-runs landed inside each interval."""
     out: dict = {}
     for method, entry in base["methods"].items():
+        if not all(method in run["methods"] for run in reruns.values()):
+            continue
         figures = {}
         for f, mean in entry["mean"].items():
             lo, hi = entry["rerun95"][f]
@@ -140,21 +145,30 @@ def plot(report: dict, path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--base", type=Path, required=True, help="the published results.json")
+    p.add_argument(
+        "--base", type=Path, action="append", required=True, help="a published results.json"
+    )
     p.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the PHAC-2 folder")
     p.add_argument("--seeds", required=True, help="comma-separated unused split seeds")
+    p.add_argument("--methods", help="comma-separated methods to re-run (default: the base's)")
     p.add_argument("--jobs", type=int, default=1, help="processes per evaluation")
     p.add_argument("--out", type=Path, help="the JSON report")
-    p.add_argument("--plot", type=Path, help="the PNG")
+    p.add_argument("--plot", type=Path, help="the PNG (one per base)")
     p.add_argument("--tiny", action="store_true", help="smoke-test size: one split, one seed")
     args = p.parse_args(argv)
-    base = json.loads(args.base.read_text())
-    if "rerun_splits" not in base:
-        raise SystemExit(f"{args.base} has no re-run ranges (written before 351c88d)")
+    bases = [json.loads(path.read_text()) for path in args.base]
+    for path, base in zip(args.base, bases, strict=True):
+        if "rerun_splits" not in base:
+            raise SystemExit(f"{path} has no re-run ranges (written before 351c88d)")
+    for key in ("novel", "test_trials", "rerun_splits"):
+        if len({b[key] for b in bases}) > 1:
+            raise SystemExit(f"the bases differ in {key}: {[b[key] for b in bases]}")
     seeds = [int(s) for s in args.seeds.split(",")]
-    if base["seed"] in seeds:
-        raise SystemExit(f"seed {base['seed']} is the published run's own")
-    splits = base["rerun_splits"]
+    for base in bases:
+        if base["seed"] in seeds:
+            raise SystemExit(f"seed {base['seed']} is a published run's own")
+    methods = args.methods.split(",") if args.methods else list(bases[0]["methods"])
+    splits = bases[0]["rerun_splits"]
     if args.tiny:
         seeds, splits = seeds[:1], 1
     dataset = open_dataset(f"phac2:{args.data}")
@@ -163,29 +177,34 @@ def main(argv: list[str] | None = None) -> int:
         print(f"seed {seed}: {splits} splits", file=sys.stderr)
         reruns[seed] = evaluate(
             dataset,
-            list(base["methods"]),
-            n_novel=base["novel"],
+            methods,
+            n_novel=bases[0]["novel"],
             n_splits=splits,
             seed=seed,
-            test_trials=base["test_trials"],
+            test_trials=bases[0]["test_trials"],
             jobs=args.jobs,
             progress=not args.tiny,
         )
-    report = {
-        "base": str(args.base),
-        "base_seed": base["seed"],
-        "base_splits": base["splits"],
-        "novel": base["novel"],
-        "rerun_splits": splits,
-        "seeds": seeds,
-        "methods": check(base, reruns),
-    }
-    print(table(report))
+    reports = [
+        {
+            "base": str(path),
+            "base_seed": base["seed"],
+            "base_splits": base["splits"],
+            "novel": base["novel"],
+            "rerun_splits": splits,
+            "seeds": seeds,
+            "methods": check(base, reruns),
+        }
+        for path, base in zip(args.base, bases, strict=True)
+    ]
+    print("\n".join(table(r) for r in reports))
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(report, indent=1))
+        args.out.write_text(json.dumps(reports, indent=1))
     if args.plot:
-        plot(report, args.plot)
+        for i, report in enumerate(reports):
+            suffix = "" if i == 0 else f"-{i + 1}"
+            plot(report, args.plot.with_name(f"{args.plot.stem}{suffix}{args.plot.suffix}"))
     return 0
 
 

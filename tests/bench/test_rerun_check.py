@@ -50,6 +50,14 @@ def test_refuses_a_base_without_rerun_ranges_and_its_own_seed(script, tmp_path):
     with pytest.raises(SystemExit, match="no re-run ranges"):
         script["main"](["--base", str(old), "--seeds", "11"])
     own = tmp_path / "own.json"
-    own.write_text('{"seed": 1000, "rerun_splits": 50, "methods": {}}')
-    with pytest.raises(SystemExit, match="seed 1000 is the published run's own"):
+    own.write_text('{"seed": 1000, "rerun_splits": 50, "novel": 6, "test_trials": 2}')
+    with pytest.raises(SystemExit, match="seed 1000 is a published run's own"):
         script["main"](["--base", str(own), "--seeds", "11,1000"])
+
+
+def test_refuses_bases_of_different_sizes(script, tmp_path):
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    a.write_text('{"seed": 1000, "rerun_splits": 50, "novel": 6, "test_trials": 2}')
+    b.write_text('{"seed": 1000, "rerun_splits": 50, "novel": 12, "test_trials": 2}')
+    with pytest.raises(SystemExit, match="the bases differ in novel"):
+        script["main"](["--base", str(a), "--base", str(b), "--seeds", "11"])

@@ -176,13 +176,18 @@ def rerun_check(phac2: Path, tmp: Path) -> None:
     args = ["--dataset", f"phac2:{phac2}", "--novel", "6", "--splits", "2", "--seed", "5"]
     code = main(["evaluate", *args, "--methods", "best", "--jobs", "1", "--out", str(base)])
     assert code == 0
-    done = run("rerun_check.py", phac2, "--base", str(base), "--seeds", "9,10", "--out", str(out))
-    run("rerun_check.py", phac2, "--base", str(base), "--seeds", "9", "--plot", str(png))
+    done = run(
+        "rerun_check.py",
+        phac2,
+        *("--base", str(base), "--base", str(base), "--seeds", "9,10"),
+        *("--out", str(out), "--plot", str(png)),
+    )
     assert done.stdout.startswith("`best`, 6 novel objects: published over 2 splits (seed 5)")
-    assert png.stat().st_size > 0
-    report = json.loads(out.read_text())
-    assert report["seeds"] == [9] and report["rerun_splits"] == 1  # --tiny: one seed, one split
-    for row in report["methods"]["best"].values():
+    assert png.stat().st_size > 0 and (tmp / "check-2.png").stat().st_size > 0
+    first, second = json.loads(out.read_text())
+    assert first == second  # the same base twice: the same re-runs, the same counts
+    assert first["seeds"] == [9] and first["rerun_splits"] == 1  # --tiny: one seed, one split
+    for row in first["methods"]["best"].values():
         assert row["checked"] == 1 and row["inside_rerun95"] in (0, 1)
         assert share(row["reruns"]["9"]) and share(row["base_mean"])
 
