@@ -253,7 +253,7 @@ def _unit(m: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ compiled kernels
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _row_sum(a, zero):
     """``np.add.reduce`` of a contiguous row ``a`` in its dtype (``zero`` of that dtype): the
     reduction starts from 0, its identity, and adds numpy's pairwise sum of the row, up to
@@ -289,7 +289,7 @@ def _row_sum(a, zero):
     return zero + sums[0]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _pairwise_block(a, lo, n, zero):
     """numpy's pairwise sum of a[lo : lo + n], n <= 128: below 8 elements one by one; else
     in 8 accumulators, combined as a tree, then the rest one by one."""
@@ -318,7 +318,7 @@ def _pairwise_block(a, lo, n, zero):
     return res
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _scale_and_walk(
     x,
     mag,
@@ -370,7 +370,7 @@ def _scale_and_walk(
         top[i, 0], top[i, 1], top[i, 2] = first, second, arg
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _walk_trees(x, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, proba):
     """forest._walk for one sample: it takes a block of trees down together instead of a
     block of samples (independent load chains again), then adds the leaves' distributions
@@ -395,7 +395,7 @@ def _walk_trees(x, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, p
                 proba[leaf_class[j]] += leaf_value[j]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _near(q, proj, g, ref_sq, ref_res, labels, top, near):
     """ReferenceDistances.nearest from the products ``g``, plus ForestCues.cues' epsilon
     (into ``near``): |P q|^2, and with a basis (``ref_res`` not empty) the residual norms
@@ -422,7 +422,7 @@ def _near(q, proj, g, ref_sq, ref_res, labels, top, near):
             near[i, c] = found[i, c] + _EPS
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _unit_rows(m, out):
     """m's rows (float64 values) over max(their norm, 1e-12), as np.linalg.norm and
     signatures / cosine_scores compute them."""
@@ -436,7 +436,7 @@ def _unit_rows(m, out):
             out[i, j] = np.float64(m[i, j]) / norm
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _near_and_novel_inputs(
     q, proj, g, ref_sq, ref_res, labels, p, top, near, attr, bias, half, sae, unit, sig
 ):
@@ -454,7 +454,7 @@ def _near_and_novel_inputs(
         _unit_rows(p, sig)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _cues(top, log_d, offsets, entropy, settings, out):
     """ForestCues.cues' columns from the top probabilities and log distances (the entropy's
     column 0 where it is not computed: ``entropy`` empty)."""
@@ -469,7 +469,7 @@ def _cues(top, log_d, offsets, entropy, settings, out):
         out[i, 5] = log_d[i, 2] - offsets[2 + np.int64(top[i, 2])]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _attribute_clip(p, fixed, fixed_values, settings, minus):
     """In place, tanh(half logit) to the sigmoid, the attributes constant over the known
     classes, DAP's clip; their negatives into ``minus``."""
@@ -485,7 +485,7 @@ def _attribute_clip(p, fixed, fixed_values, settings, minus):
             minus[i, j] = -v
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _cues_and_shifts(
     top, log_d, offsets, entropy, settings, cues, present, absent, log_prior, cosine, sim, out
 ):
@@ -509,7 +509,7 @@ def _cues_and_shifts(
     _shift_rows(shot)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _shift_rows(x):
     if x.shape[1] == 0:
         return
@@ -521,7 +521,7 @@ def _shift_rows(x):
             x[i, j] = x[i, j] - top
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _mix(e, zsl_columns, shot_columns, out):
     """From the exponentials ``e`` of ``_cues_and_shifts``' two parts: the zero-shot softmax
     (none without attributes: ``e`` has only the one-shot part), then the classes with
