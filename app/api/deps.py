@@ -106,13 +106,24 @@ api_key_header = APIKeyHeader(
 )
 
 
-def authorize(request: Request, key: str | None, scope: str) -> Principal:
+def header(request: Request, name: bytes) -> str | None:
+    """``request.headers.get(name)`` for a lower-case ``name`` (the first such header),
+    without building the request's ``Headers``: what the recognize path reads."""
+    for key, value in request.scope["headers"]:
+        if key == name:
+            return value.decode("latin-1")
+    return None
+
+
+def authorize(
+    request: Request, key: str | None, scope: str, state: ServiceState | None = None
+) -> Principal:
     """The caller of ``request``: 401 without a valid key (once keys exist), 403 without
-    ``scope``, 429 over the rate."""
-    state = service(request)
+    ``scope``, 429 over the rate. ``state``: the app's, when the caller has it."""
+    state = state or service(request)
     if not state.keys.required:
-        client = request.client.host if request.client else "unknown"
-        principal = Principal(f"addr:{client}", "admin")
+        client = request.scope.get("client")  # request.client, without its Address
+        principal = Principal(f"addr:{client[0] if client else 'unknown'}", "admin")
     else:
         principal = state.keys.authenticate(key) if key else None
         if principal is None:
@@ -136,8 +147,11 @@ def authorize(request: Request, key: str | None, scope: str) -> Principal:
             "X-API-Key",
             {"Retry-After": retry_after(wait)},
         )
-    request.state.principal = principal
+    request.scope.setdefault("state", {})["principal"] = principal  # request.state.principal
     return principal
+
+
+API_KEY_HEADER = api_key_header.model.name.lower().encode("latin-1")
 
 
 def _access(scope: str):
@@ -157,12 +171,10 @@ NPY = "application/x-npy"
 def media_type(request: Request, accepted: tuple[str, ...]) -> str:
     """The body's media type (``Content-Type`` without parameters) when it is one of
     ``accepted``; a 415 naming them otherwise. A request without a body needs none."""
-    given = request.headers.get("content-type")
+    given = header(request, b"content-type")
     if given is None:
-        if (
-            request.headers.get("content-length", "0") == "0"
-            and "transfer-encoding" not in request.headers
-        ):
+        length = header(request, b"content-length")
+        if (length is None or length == "0") and header(request, b"transfer-encoding") is None:
             return accepted[0]
         raise Problem(
             415, f"the body has no Content-Type; send one of: {', '.join(accepted)}", "Content-Type"
@@ -192,8 +204,12 @@ async def get_recognizing(request: Request) -> Recognizing:
     dependency. It is the hot path: FastAPI spends ~15 µs resolving each dependency, and
     the five of the separate ones were a fifth of a single-sample request's CPU. The key
     is read from the header here; the route documents the same security scheme."""
-    authorize(request, request.headers.get(api_key_header.model.name), "read")
-    return Recognizing(current_model(request), service(request).recognition)
+    state = service(request)
+    authorize(request, header(request, API_KEY_HEADER), "read", state)
+    model = state.holder.current  # current_model(request), the state at hand
+    if model is None:
+        raise _no_model(state)
+    return Recognizing(model, state.recognition)
 
 
 # one function object per scope, so a route depending on one twice runs it once

@@ -30,6 +30,7 @@ from app.service.metrics import Metrics
 
 PATH = "/v1/recognize"
 _JSON_HEADERS = [(b"content-type", b"application/json")]
+_NOT_FOR_US = object()
 
 
 class RecognizeFastPath:
@@ -48,13 +49,18 @@ class RecognizeFastPath:
             or scope["path"] != PATH
             or scope["method"] != "POST"
             or scope.get("root_path")
-            or self._not_for_us(scope["headers"])
         ):
+            await self.app(scope, receive, send)
+            return
+        declared = self._declared_length(scope["headers"])
+        if declared is _NOT_FOR_US:
             await self.app(scope, receive, send)
             return
         start = time.perf_counter()
         status = 500  # what an error no handler answers becomes (ServerErrorMiddleware's)
-        request = Request(scope, _counted(receive, self.max_bytes))
+        # a declared length (at most the cap) bounds the body: the server reads no more of
+        # it; a body sent without one is counted as it comes, as BodySizeLimit counts it
+        request = Request(scope, receive if declared else _counted(receive, self.max_bytes))
         try:
             try:
                 body = await answer(request)
@@ -75,18 +81,21 @@ class RecognizeFastPath:
         finally:
             self.metrics.observe_request("POST", PATH, status, time.perf_counter() - start)
 
-    def _not_for_us(self, headers: list[tuple[bytes, bytes]]) -> bool:
-        """A declared Content-Length over the cap (``BodySizeLimit`` answers it, before any
-        byte is read), or an ``Origin`` when CORS is configured."""
-        too_large = False
-        length_seen = False
+    def _declared_length(self, headers: list[tuple[bytes, bytes]]) -> bool | object:
+        """Whether the request declares its body's length (the first Content-Length, as
+        ``Headers.get`` reads it, a number), or ``_NOT_FOR_US``: a declared length over the cap
+        (``BodySizeLimit`` answers it, before any byte is read), or an ``Origin`` when
+        CORS is configured."""
+        declared, length_seen = False, False
         for name, value in headers:
-            if name == b"content-length" and not length_seen:  # the first, as Headers.get
+            if name == b"content-length" and not length_seen:
                 length_seen = True
-                too_large = value.isdigit() and int(value) > self.max_bytes
+                declared = value.isdigit()
+                if declared and int(value) > self.max_bytes:
+                    return _NOT_FOR_US
             elif name == b"origin" and self.cors:
-                return True
-        return too_large
+                return _NOT_FOR_US
+        return declared
 
 
 def _counted(receive: Receive, max_bytes: int) -> Receive:
