@@ -2,6 +2,7 @@
 scikit-learn service, and the model's own in-process speed.
 
     .venv/bin/python -m bench.side_by_side [--seconds 10] [--clients 32] [--rounds 5]
+                                           [--methods best,paper] [--max-load 1.0]
 
 Three servers on the same stack (uvicorn, uvloop, httptools; no access log), all started
 first, then hammered one at a time by the lean keep-alive client of ``bench/load.py``
@@ -15,6 +16,9 @@ machine then spoils one round's pair, not the result); absolute figures are medi
   method ``best``, embedded worker) in a fresh temporary data dir (the first start trains
   the base model), and ``--processes 2`` on the same store; the rate limit is off
   (``TACTILE_RATE_LIMIT=0``, as ``bench/load.py`` runs it), so capacity is measured;
+- the same for each other method of ``--methods`` (by default the paper's pipeline,
+  ``TACTILE_METHOD=paper``, its default parameters), on a store of its own, measured and
+  compared with the floor the same way (phases ``paper_1_process``, ``paper_2_processes``);
 - the floor: a bare FastAPI app (``floor_app`` below) whose ``POST /v1/recognize`` parses
   the body into a float32 array (orjson + numpy) and answers a fixed small JSON, on one
   uvicorn process, and on two that share the port through SO_REUSEPORT as the service's
@@ -30,6 +34,10 @@ process, on the model the service trained, read from its store through
 ``GET /v1/models/active/bundle``, one BLAS thread as the service runs it, measured in each
 round between the two HTTP batch phases while the servers idle), and the in-process cost of
 ``recognize_batch`` on one sample against its batch-amortised cost per sample.
+
+Before anything starts, it waits (polling every 30 s, at most ``--max-wait`` seconds) until
+the 1-minute load average is below ``--max-load``: other work on a shared machine spoils
+the figures; the load at the start and at the end is in the report.
 
 It prints JSON: the ratios first, then the targets they are compared with, then the
 absolute figures of this machine (each load phase with the cores each server process, the
@@ -192,10 +200,11 @@ def tail(log, n: int = 2000) -> str:
 
 
 @contextlib.contextmanager
-def service(data_dir: Path, processes: int, database_url: str = ""):
+def service(data_dir: Path, processes: int, database_url: str = "", method: str = ""):
     """``tactile-zsl serve --processes N`` (embedded worker) on the embedded default, through
     the test harness's ``Cluster``, on a fresh store in ``data_dir`` or on ``database_url``;
-    yields (url, pid, its store's URL). Its polling intervals, lease and version count are
+    yields (url, pid, its store's URL). ``method``: the method a fresh store is trained with
+    (the service's default when empty). Its polling intervals, lease and version count are
     put back to the service's defaults (the harness shortens them)."""
     from app.config import Settings
     from app.framework.registry import DEFAULT_METHOD
@@ -209,7 +218,7 @@ def service(data_dir: Path, processes: int, database_url: str = ""):
     env = {
         **defaults,
         "TACTILE_DATASET": "simulated",
-        "TACTILE_METHOD": DEFAULT_METHOD,
+        "TACTILE_METHOD": method or DEFAULT_METHOD,
         "TACTILE_METHOD_PARAMS": "{}",
         "TACTILE_RATE_LIMIT": "0",
     }
@@ -364,6 +373,19 @@ def loadavg() -> list[float] | None:
         return None
 
 
+def wait_for_load(max_load: float, max_wait: float, every: float = 30) -> float:
+    """Wait until the 1-minute load average is below ``max_load`` (polled every ``every``
+    seconds, at most ``max_wait`` seconds in all); the seconds waited."""
+    start = time.monotonic()
+    while True:
+        load = loadavg()
+        waited = time.monotonic() - start
+        if load is None or load[0] < max_load or waited >= max_wait:
+            return round(waited, 1)
+        print(f"1-minute load {load[0]:.2f} >= {max_load}: waiting", file=sys.stderr)
+        time.sleep(min(every, max(0.0, max_wait - waited)))
+
+
 def ratio(a: float, b: float, digits: int = 3) -> float | None:
     return round(a / b, digits) if a and b else None
 
@@ -394,6 +416,14 @@ def ratios(r: dict) -> dict:
             "rps": ratio(svc2["rps"], floor1["rps"]),
             "p99": ratio(svc2["p99_ms"], floor1["p99_ms"]),
         },
+        **{
+            f"{m}_over_floor_{n}": {
+                "rps": ratio(s[f"{m}_{n}"]["rps"], s[f"floor_{n}"]["rps"]),
+                "p99": ratio(s[f"{m}_{n}"]["p99_ms"], s[f"floor_{n}"]["p99_ms"]),
+            }
+            for m in other_methods(s)
+            for n in ("1_process", "2_processes")
+        },
         "sklearn_over_floor_1_process": {
             "rps": ratio(sk["rps"], floor1["rps"], 4),
             "p99": ratio(sk["p99_ms"], floor1["p99_ms"]),
@@ -419,6 +449,25 @@ def ratios(r: dict) -> dict:
     }
 
 
+def other_methods(single: dict) -> list[str]:
+    """The methods besides the default measured in a round (``paper`` for phases
+    ``paper_1_process`` and ``paper_2_processes``)."""
+    return [
+        k[: -len("_1_process")]
+        for k in single
+        if k.endswith("_1_process")
+        and k[: -len("_1_process")] not in ("floor", "service", "sklearn")
+    ]
+
+
+def _other_ratio(key: str) -> bool:
+    return key.endswith("_over_floor_1_process") and key not in (
+        "service_over_floor_1_process",
+        "sklearn_over_floor_1_process",
+        "service_2_processes_over_floor_1_process",
+    )
+
+
 def targets(q: dict) -> dict:
     """The product owner's targets, each with the measured ratio and whether it is met."""
 
@@ -429,10 +478,12 @@ def targets(q: dict) -> dict:
         return {"goal": f"<= {goal}", "measured": v, "met": v is not None and v <= goal}
 
     out = {}
-    for n in ("1_process", "2_processes"):
-        s = q[f"service_over_floor_{n}"]
-        out[f"service_rps_over_floor_{n}"] = at_least(s["rps"], 0.8)
-        out[f"service_p99_over_floor_{n}"] = at_most(s["p99"], 1.25)
+    services = ["service"] + [k[: -len("_over_floor_1_process")] for k in q if _other_ratio(k)]
+    for name in services:
+        for n in ("1_process", "2_processes"):
+            s = q[f"{name}_over_floor_{n}"]
+            out[f"{name}_rps_over_floor_{n}"] = at_least(s["rps"], 0.8)
+            out[f"{name}_p99_over_floor_{n}"] = at_most(s["p99"], 1.25)
     out["http_batch_over_in_process_1_process"] = at_least(
         q["http_batch_over_in_process_batch"]["1_process"], 0.8
     )
@@ -442,8 +493,12 @@ def targets(q: dict) -> dict:
     return out
 
 
-def run(seconds: float, clients: int, batch_size: int, rounds: int) -> tuple[dict, list[dict]]:
-    """Every server started, then ``rounds`` rounds, each measuring every server in turn for
+def run(
+    seconds: float, clients: int, batch_size: int, rounds: int, methods: tuple[str, ...] = ("best",)
+) -> tuple[dict, list[dict]]:
+    """Every server started (the service once per method of ``methods``, the first as
+    ``service_*``, the others as ``<method>_*``), then ``rounds`` rounds, each measuring every
+    server in turn for
     ``seconds / rounds``, and the model in this process, the order reversed every other
     round. Each ratio is taken within a round, between phases measured one after the other
     (a neighbour's burst on a shared machine then spoils a round's pair, not the run), and
@@ -477,20 +532,27 @@ def run(seconds: float, clients: int, batch_size: int, rounds: int) -> tuple[dic
             t = time.monotonic()
             servers[name] = up.enter_context(app_server(kind, workers, tmp))
             r["start_s"][name] = round(time.monotonic() - t, 1)
-        store = ""  # the second service serves the store the first one bootstrapped
-        for n, name in ((1, "service_1_process"), (2, "service_2_processes")):
-            t = time.monotonic()
-            url, pid, store = up.enter_context(service(tmp / name, n, store))
-            servers[name] = url, pid
-            r["start_s"][name] = round(time.monotonic() - t, 1)  # the first trains the model
+        r["methods"] = {}
+        for i, method in enumerate(methods):
+            prefix = "service" if i == 0 else method
+            r["methods"][prefix] = method
+            store = ""  # the second service serves the store the first one bootstrapped
+            for n, name in ((1, f"{prefix}_1_process"), (2, f"{prefix}_2_processes")):
+                t = time.monotonic()
+                url, pid, store = up.enter_context(service(tmp / name, n, store, method))
+                servers[name] = url, pid
+                r["start_s"][name] = round(time.monotonic() - t, 1)  # the first trains
         model = load_model(fetch_bundle(servers["service_1_process"][0]))
         r["in_process_method"] = model.method
         # the pairs of each ratio side by side in the order
+        others = [m for m in r["methods"] if m != "service"]
         phases = [
             ("floor_1_process", "single"),
             ("service_1_process", "single"),
+            *[(f"{m}_1_process", "single") for m in others],
             ("floor_2_processes", "single"),
             ("service_2_processes", "single"),
+            *[(f"{m}_2_processes", "single") for m in others],
             ("sklearn_1_process", "single"),
             ("service_1_process", "batch_http"),
             ("model", "in_process"),
@@ -615,6 +677,25 @@ def main() -> int:
     )
     p.add_argument("--clients", type=int, default=32, help="concurrent single-sample clients")
     p.add_argument("--batch", type=int, default=1024, help="samples per .npy batch")
+    p.add_argument(
+        "--methods",
+        default="best,paper",
+        help="the service's methods, comma-separated: the first is measured as 'service' "
+        "(the targets' service), each other under its own name (default best,paper)",
+    )
+    p.add_argument(
+        "--max-load",
+        type=float,
+        default=1.0,
+        help="wait until the 1-minute load average is below this before starting (default 1.0)",
+    )
+    p.add_argument(
+        "--max-wait",
+        type=float,
+        default=600,
+        help="the longest wait for --max-load, in seconds; then the run starts anyway "
+        "(default 600)",
+    )
     p.add_argument("--serve", choices=sorted(APPS), help=argparse.SUPPRESS)
     p.add_argument("--port", type=int, help=argparse.SUPPRESS)
     p.add_argument("--workers", type=int, default=1, help=argparse.SUPPRESS)
@@ -623,12 +704,20 @@ def main() -> int:
         return serve(args.serve, args.port, args.workers)
     if not 0 < args.seconds <= 600 or not 1 <= args.clients <= 1024 or not 1 <= args.rounds <= 20:
         p.error("--seconds must be in (0, 600], --clients in [1, 1024], --rounds in [1, 20]")
+    methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
+    from app.framework.registry import METHODS
+
+    unknown = [m for m in methods if m not in METHODS]
+    if not methods or unknown or len(set(methods)) != len(methods):
+        p.error(f"--methods: distinct names of {sorted(METHODS)} (got {args.methods!r})")
     # SIGTERM unwinds like Ctrl-C, so that every server this run started is stopped
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     commit = git("rev-parse", "--short", "HEAD").strip()
     # the servers run the working tree: code changed since the commit is named with it
     changed = git("status", "--porcelain", "--", *CODE).splitlines()
-    absolute, by_round = run(args.seconds, args.clients, args.batch, args.rounds)
+    waited = wait_for_load(args.max_load, args.max_wait)
+    absolute, by_round = run(args.seconds, args.clients, args.batch, args.rounds, methods)
+    absolute["waited_for_load_s"] = waited
     per_round = [ratios(r) for r in by_round]
     q = median_leaves(per_round)
     report = {
@@ -642,6 +731,8 @@ def main() -> int:
             "rounds": args.rounds,
             "clients": args.clients,
             "batch": args.batch,
+            "methods": list(methods),
+            "max_load": args.max_load,
             "batch_clients": BATCH_CLIENTS,
             "warmup_s": WARMUP_S,
             "round_warmup_s": ROUND_WARMUP_S,

@@ -87,3 +87,50 @@ def test_median_over_rounds() -> None:
     rounds = [{"a": {"rps": 1.0, "p99": None}, "b": 3}, {"a": {"rps": 3.0, "p99": 2.0}, "b": 1}]
     rounds.append({"a": {"rps": 2.0, "p99": 4.0}, "b": 2})
     assert sbs.median_leaves(rounds) == {"a": {"rps": 2.0, "p99": 3.0}, "b": 2}
+
+
+def test_other_methods_get_their_ratios_and_targets() -> None:
+    def phase(rps: float, p99: float) -> dict:
+        return {"rps": rps, "p99_ms": p99}
+
+    absolute = {
+        "single": {
+            "floor_1_process": phase(4000, 10),
+            "floor_2_processes": phase(5000, 8),
+            "sklearn_1_process": phase(100, 400),
+            "service_1_process": phase(3600, 11),
+            "service_2_processes": phase(3000, 12),
+            "paper_1_process": phase(2000, 20),
+            "paper_2_processes": phase(4500, 9),
+        },
+        "batch_http": {
+            name: {"samples_per_s": 30720, "rps": 30, "cpu_us_per_request": {"server": 40960}}
+            for name in ("service_1_process", "service_2_processes")
+        },
+        "in_process": {
+            "cores_used": {"this_process": 1.0, "others": 0.0},
+            "batch_samples_per_s": 40960,
+            "batch_amortised_us_per_sample": 25,
+            "single_median_us": 100,
+        },
+    }
+    q = sbs.ratios(absolute)
+    assert list(q)[0] == "service_over_floor_1_process"
+    assert q["paper_over_floor_1_process"] == {"rps": 0.5, "p99": 2.0}
+    assert q["paper_over_floor_2_processes"] == {"rps": 0.9, "p99": 1.125}
+    t = sbs.targets(q)
+    assert t["paper_rps_over_floor_1_process"]["met"] is False
+    assert t["paper_rps_over_floor_2_processes"]["met"] is True
+    assert t["paper_p99_over_floor_2_processes"]["met"] is True
+    assert t["service_rps_over_floor_1_process"]["met"] is True
+    assert not any(k.startswith("sklearn") for k in t)
+
+
+def test_waits_for_the_load_at_most_max_wait(monkeypatch) -> None:
+    loads = iter([[3.0, 1, 1], [2.0, 1, 1], [0.5, 1, 1]])
+    monkeypatch.setattr(sbs, "loadavg", lambda: next(loads))
+    monkeypatch.setattr(sbs.time, "sleep", lambda s: None)
+    assert sbs.wait_for_load(1.0, 600, every=0) >= 0
+    assert next(loads, None) is None  # polled until it fell below 1.0
+    monkeypatch.setattr(sbs, "loadavg", lambda: [9.0, 9, 9])
+    assert sbs.wait_for_load(1.0, 0) == 0  # no waiting allowed: starts at once
