@@ -19,7 +19,7 @@ from app.framework.registry import make_method
 from app.methods.small_batch import _row_sum
 
 FIELDS = ("top_index", "top_probability", "is_novel", "novelty_score")
-SIZES = (1, 2, 7)
+SIZES = (1, 2, 7, 32)  # 32: BestRecognizer.small_batch_max
 LARGE = 150
 
 
@@ -251,3 +251,15 @@ def test_a_copied_model_scores_alike(models, data):
     for n in (1, 3):
         assert_same_bits(twin.recognize_batch(x[:n]), model.recognize_batch(x[:n]))
     assert_same_bits(twin.recognize_batch(x[:1]), first)
+
+
+def test_a_scaler_without_log_compression_matches(models, data):
+    """The kernels scale raw inputs when the scaler does not log-compress (``best`` always
+    does; the scaler allows it)."""
+    model = copy.deepcopy(models["one-shot"])
+    model.known_.cues_model.scaler.log_compress = False
+    model._small_batch = None
+    x, fast = queries(data[0], seed=7), small(model)
+    for n in SIZES:
+        assert_same_bits(fast.recognize_batch(x[:n]), general(model).recognize_batch(x[:n]))
+    assert not fast._small_batch.log_compress
