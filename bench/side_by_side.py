@@ -712,10 +712,11 @@ def main() -> int:
         p.error(f"--methods: distinct names of {sorted(METHODS)} (got {args.methods!r})")
     # SIGTERM unwinds like Ctrl-C, so that every server this run started is stopped
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
-    commit = git("rev-parse", "--short", "HEAD").strip()
-    # the servers run the working tree: code changed since the commit is named with it
-    changed = git("status", "--porcelain", "--", *CODE).splitlines()
     waited = wait_for_load(args.max_load, args.max_wait)
+    # after the wait: the commit the servers start from (the working tree: code changed
+    # since the commit is named with it)
+    commit = git("rev-parse", "--short", "HEAD").strip()
+    changed = git("status", "--porcelain", "--", *CODE).splitlines()
     absolute, by_round = run(args.seconds, args.clients, args.batch, args.rounds, methods)
     absolute["waited_for_load_s"] = waited
     per_round = [ratios(r) for r in by_round]
