@@ -623,7 +623,7 @@ class TactileRecognizer(ABC):
             order = np.concatenate([order, np.full(missing, -1, np.int64)])
             value = np.concatenate([value, np.full(missing, np.nan)])
         batch = object.__new__(RecognitionBatch)
-        # a frozen dataclass's fields set as its __init__ sets them, without its checks' cost
+        # the frozen dataclass's fields, set without its __init__'s object.__setattr__ calls
         batch.__dict__.update(
             class_names=(*known_names, *reg.novel_names),
             n_known=len(known_names),
