@@ -44,6 +44,8 @@ def check(base: dict, reruns: dict[int, dict]) -> dict:
             continue
         figures = {}
         for f, mean in entry["mean"].items():
+            if not all(f in run["methods"][method]["mean"] for run in reruns.values()):
+                continue  # a figure the re-runs do not measure (--ceilings, --touches)
             lo, hi = entry["rerun95"][f]
             c_lo, c_hi = entry["ci95"][f]
             means = {seed: run["methods"][method]["mean"][f] for seed, run in reruns.items()}

@@ -31,6 +31,10 @@ def test_counts_reruns_inside_each_interval(script):
     assert row["inside_ci95"] == 1  # only 0.51
     assert row["inside_rerun95"] == 2  # 0.51 and 0.53; 0.56 lies outside both
     assert row["reruns"] == {"11": 0.51, "12": 0.53, "13": 0.56}
+    # a figure the re-runs do not measure (a base run with --ceilings) is left out
+    base["methods"]["best"]["mean"]["ceil_gzsl_h"] = 0.6
+    assert list(script["check"](base, reruns)["best"]) == ["zsl"]
+    del base["methods"]["best"]["mean"]["ceil_gzsl_h"]
     report = {
         "seeds": [11, 12, 13],
         "novel": 6,
