@@ -122,18 +122,26 @@ def mean_interval(
     uncertainty."""
     from scipy.stats import t as student_t
 
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must lie in (0, 1), got {level}")
-    v = np.asarray(values, dtype=np.float64)
-    v = v[np.isfinite(v)]
+    v = _finite(values, level)
     if v.size < 2:
         return float("nan"), float("nan")
     half = float(student_t.ppf(0.5 + level / 2, v.size - 1) * v.std(ddof=1) / np.sqrt(v.size))
     mean = float(v.mean())
-    low, high = mean - half, mean + half
-    if bounds is not None:
-        low, high = max(low, bounds[0]), min(high, bounds[1])
-    return low, high
+    return _clipped(mean - half, mean + half, bounds)
+
+
+def _finite(values: Sequence[float], level: float) -> np.ndarray:
+    """The finite ``values`` as float64, after checking ``level`` (an interval's)."""
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must lie in (0, 1), got {level}")
+    v = np.asarray(values, dtype=np.float64)
+    return v[np.isfinite(v)]
+
+
+def _clipped(low: float, high: float, bounds: tuple[float, float] | None) -> tuple[float, float]:
+    if bounds is None:
+        return low, high
+    return max(low, bounds[0]), min(high, bounds[1])
 
 
 def rerun_interval(
@@ -159,10 +167,7 @@ def rerun_interval(
     resampling a few values understates their spread. It cannot know of tails
     ``values`` never showed, so it is only as good as the splits behind it. ``seed`` fixes
     the resampling, so the interval is reproducible. ``bounds`` clips it."""
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must lie in (0, 1), got {level}")
-    v = np.asarray(values, dtype=np.float64)
-    v = v[np.isfinite(v)]
+    v = _finite(values, level)
     if v.size < 2:
         return float("nan"), float("nan")
     m = v.size if rerun_size is None else int(rerun_size)
@@ -185,10 +190,7 @@ def rerun_interval(
         student_t.ppf(0.5 + level / 2, v.size - 1) * v.std(ddof=1) * np.sqrt(1 / v.size + 1 / m)
     )
     mean = float(v.mean())
-    low, high = mean + min(float(low_q), -half), mean + max(float(high_q), half)
-    if bounds is not None:
-        low, high = max(low, bounds[0]), min(high, bounds[1])
-    return low, high
+    return _clipped(mean + min(float(low_q), -half), mean + max(float(high_q), half), bounds)
 
 
 def wilson_interval(fraction: float, n: int, level: float = 0.95) -> tuple[float, float]:
