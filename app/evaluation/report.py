@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from app.evaluation.metrics import jaccard_similarity, row_normalize
+from app.evaluation.touches import touch_markdown
 
 # Paper averages (fractions). 6 novel objects: Tables II, III, V, VI, VIII;
 # 12 novel objects: means of Table IX's rows (the paper gives no other figure there).
@@ -152,6 +153,7 @@ def markdown(results: dict[str, Any], images: dict[str, list[str]] | None = None
         else "The paper reports no figures for this number of novel objects.",
     ]
     lines += _interval_sections(results, figures)
+    lines += touch_markdown(results)
     lines += [
         "",
         "## Wall time",

@@ -138,6 +138,58 @@ def measure(
     return out
 
 
+SHOWN = ("known_acc", "nd_known_kept", "nd_novel_detected", "zsl", "gzsl_h")
+
+
+def touch_markdown(results: dict[str, Any]) -> list[str]:
+    """Markdown tables per method: each figure of ``SHOWN`` after each touch count and the
+    paired difference (most touches − 1 touch) on the same splits, and the mixed figure
+    after one enrolled touch against the zero-shot one, paired; mean [95 % interval] over
+    splits (``metrics.mean_interval``). Nothing without touch figures."""
+    touches = list(results.get("touches") or [])
+    if not touches:
+        return []
+    first, last = touches[0], touches[-1]
+
+    def cell(values: list[float], signed: bool = False) -> str:
+        fmt = "{:+.3f}" if signed else "{:.3f}"
+        lo, hi = metrics.mean_interval(values, bounds=(-1.0, 1.0) if signed else (0.0, 1.0))
+        m = float(np.nanmean(values))
+        return f"{fmt.format(m)} [{fmt.format(lo)}, {fmt.format(hi)}]"
+
+    lines = ["", "## Touches answered as one, and one enrolled touch", ""]
+    for m, entry in results["methods"].items():
+        splits = entry["splits"]
+        if not all(f"touches{last}_gzsl_h" in s for s in splits):
+            continue
+        head = [f"{k} touch{'es' if k > 1 else ''}" for k in touches]
+        lines += [
+            f"`{m}`: mean [95 % interval] over {len(splits)} splits; the last column is "
+            f"the paired difference {last} − {first} touches on the same splits.",
+            "",
+            "| figure | " + " | ".join(head) + f" | {last} − {first} |",
+            "| --- | " + " | ".join("---" for _ in head) + " | --- |",
+        ]
+        for f in SHOWN:
+            cells = [cell([s[f"touches{k}_{f}"] for s in splits]) for k in touches]
+            diff = [s[f"touches{last}_{f}"] - s[f"touches{first}_{f}"] for s in splits]
+            lines.append(f"| `{f}` | " + " | ".join(cells) + f" | {cell(diff, True)} |")
+        zero = [s[f"touches{first}_gzsl_h"] for s in splits]
+        enrolled = [s["osl_gzsl_h"] for s in splits]
+        gain = [b - a for a, b in zip(zero, enrolled, strict=True)]
+        seen = np.mean([s["osl_gzsl_seen"] for s in splits])
+        unseen = np.mean([s["osl_gzsl_unseen"] for s in splits])
+        lines += [
+            "",
+            "| `gzsl_h` zero-shot | after one enrolled touch | difference (paired) | "
+            "seen / unseen after it |",
+            "| --- | --- | --- | --- |",
+            f"| {cell(zero)} | {cell(enrolled)} | {cell(gain, True)} | {seen:.3f} / {unseen:.3f} |",
+            "",
+        ]
+    return lines
+
+
 def plot_touches(results: dict[str, Any], path: Path, title: str) -> None:
     """Each method's figures against the number of touches (mean and 95 % interval over
     splits), and its mixed figure after one enrolled touch per novel object."""
@@ -146,11 +198,10 @@ def plot_touches(results: dict[str, Any], path: Path, title: str) -> None:
     plt = _plt()
     touches = list(results["touches"])
     methods = list(results["methods"])
-    shown = ("known_acc", "nd_known_kept", "nd_novel_detected", "zsl", "gzsl_h")
     fig, axes = plt.subplots(1, len(methods), figsize=(5.2 * len(methods), 4.2), squeeze=False)
     for ax, m in zip(axes[0], methods, strict=True):
         entry = results["methods"][m]
-        for figure in shown:
+        for figure in SHOWN:
             keys = [f"touches{k}_{figure}" for k in touches]
             mean = np.array([entry["mean"].get(key, np.nan) for key in keys], float)
             ci = np.array([entry["ci95"].get(key, [np.nan, np.nan]) for key in keys], float)

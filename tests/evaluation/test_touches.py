@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from app.data.simulator import simulate_dataset
+from app.evaluation import metrics
 from app.evaluation.protocol import evaluate, evaluate_split
 from app.evaluation.report import write_report
 from app.evaluation.splits import make_zsl_splits
@@ -109,7 +110,20 @@ def test_the_report_draws_the_curves(dataset, tmp_path):
     written = write_report(results, tmp_path)
     png = tmp_path / "touches.png"
     assert png in written and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert "touches.png" in (tmp_path / "report.md").read_text()
+    report = (tmp_path / "report.md").read_text()
+    assert "touches.png" in report
+    # the table: each touch count's mean, and the paired 2 - 1 difference over the splits
+    splits = results["methods"]["best"]["splits"]
+    diff = [s["touches2_zsl"] - s["touches1_zsl"] for s in splits]
+    lo, hi = metrics.mean_interval(diff, bounds=(-1.0, 1.0))
+    one = results["methods"]["best"]["mean"]["touches1_zsl"]
+    assert "## Touches answered as one, and one enrolled touch" in report
+    section = report[report.index("## Touches answered as one") :]
+    row = next(line for line in section.splitlines() if line.startswith("| `zsl` | "))
+    assert row.startswith(f"| `zsl` | {one:.3f} [")
+    assert row.endswith(f"| {np.mean(diff):+.3f} [{lo:+.3f}, {hi:+.3f}] |")
+    gain = [s["osl_gzsl_h"] - s["touches1_gzsl_h"] for s in splits]
+    assert f"| {np.mean(gain):+.3f} [" in report
 
 
 def test_evaluate_split_without_touches_adds_none(dataset):
