@@ -54,8 +54,12 @@ class Vocabulary:
         return tuple(n for n in self.names if n not in self.retired)
 
     def values(self, key: str) -> dict[str, float]:
-        """The known values of the active attributes, by name."""
-        by_position = key_values(key, len(self.names))
+        """The known values of the active attributes, by name. A key may be longer than
+        this vocabulary: an attribute added after it was read (a worker plans on the
+        vocabulary it read first; a class registered in between may carry the newer
+        attribute's value). Those positions are not this vocabulary's to read; the job
+        that added the attribute relearns the attribute parts with them."""
+        by_position = key_values(key, len(self.names))[: len(self.names)]
         return {
             n: v
             for n, v in zip(self.names, by_position, strict=True)

@@ -44,6 +44,18 @@ def test_keys_hold_graded_and_unknown_values_and_keep_their_meaning_as_attribute
     assert not describes(vocab, vocab.key({"hard": 0.0})) and describes(vocab, key)
 
 
+def test_a_key_longer_than_the_vocabulary_read_keeps_its_newer_values():
+    # a worker planned on the vocabulary it read; a class registered since carries the
+    # value of an attribute added in between: its known attributes are read, the newer
+    # position left alone (and kept when the key is rewritten)
+    read = Vocabulary(names=("hard", "soft"))
+    newer_key = "1,0,0.5"  # "hard", "soft", then an attribute the read vocabulary lacks
+    assert read.values(newer_key) == {"hard": 1.0, "soft": 0.0}
+    np.testing.assert_array_equal(read.vector(newer_key), [1.0, 0.0])
+    assert describes(read, newer_key)
+    assert read.key({"soft": 1.0}, base=newer_key) == "1,1,0.5"
+
+
 def test_jsonable_makes_strict_json():
     out = repo.jsonable(
         {"a": np.float32(1.5), "b": float("nan"), "c": np.arange(2), "d": (np.inf,)}
