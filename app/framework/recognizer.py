@@ -121,22 +121,31 @@ class RecognitionBatch:
         with ``class_ids`` (class name → the store's id) every class named carries its
         ``class_id`` too. Built straight from the arrays: building pydantic models first cost
         more than the forward pass of a sample."""
-        names, kinds = self.class_names, self.class_kinds
+        names = self.class_names
         label = (
             [{"class_name": n} for n in names]
             if class_ids is None
             else [{"class_id": class_ids.get(n), "class_name": n} for n in names]
         )
+        return self.labelled_records(label, self.class_kinds)
+
+    def labelled_records(
+        self, label: Sequence[Mapping[str, Any]], kinds: Sequence[str]
+    ) -> list[dict[str, Any]]:
+        """``records`` from each class's label dict and kind, which a caller answering many
+        batches of one model (the service) builds once."""
         return [
-            dict(
-                label[idx[0]],
-                kind=kinds[idx[0]],
-                is_novel=novel,
-                novelty_score=score,
-                top_k=[
-                    dict(label[j], probability=q) for j, q in zip(idx, top_p, strict=True) if j >= 0
+            {
+                **label[idx[0]],
+                "kind": kinds[idx[0]],
+                "is_novel": novel,
+                "novelty_score": score,
+                "top_k": [
+                    {**label[j], "probability": q}
+                    for j, q in zip(idx, top_p, strict=True)
+                    if j >= 0
                 ],
-            )
+            }
             for idx, top_p, novel, score in zip(
                 self.top_index.tolist(),
                 self.top_probability.tolist(),

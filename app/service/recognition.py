@@ -103,27 +103,7 @@ class RecognitionService:
 
     def records(self, model: LoadedModel, results: RecognitionBatch) -> list[dict[str, Any]]:
         """``results.records(model.class_ids)``, from labels built once per model."""
-        label, kinds = self._model_labels(model, results)
-        return [
-            {
-                **label[idx[0]],
-                "kind": kinds[idx[0]],
-                "is_novel": novel,
-                "novelty_score": score,
-                "top_k": [
-                    {**label[j], "probability": q}
-                    for j, q in zip(idx, top_p, strict=True)
-                    if j >= 0
-                ],
-            }
-            for idx, top_p, novel, score in zip(
-                results.top_index.tolist(),
-                results.top_probability.tolist(),
-                results.is_novel.tolist(),
-                results.novelty_score.tolist(),
-                strict=True,
-            )
-        ]
+        return results.labelled_records(*self._model_labels(model, results))
 
     def _model_labels(self, model: LoadedModel, results: RecognitionBatch) -> tuple[list, list]:
         cached = self._labels
