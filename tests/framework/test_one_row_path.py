@@ -13,7 +13,6 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from app.data.dataset import TactileDataset
 from app.data.simulator import simulate_dataset
 from app.framework.recognizer import (
     ClassRegistry,
@@ -22,6 +21,7 @@ from app.framework.recognizer import (
     fuse_groups,
 )
 from app.framework.registry import METHODS, make_method
+from tests.framework.test_no_attributes import without_attributes
 
 FIELDS = ("top_index", "top_probability", "is_novel", "novelty_score")
 TOP_KS = (0, 1, 2, 3, 5, 10, 200)  # 200: more than any model's classes (padding)
@@ -154,18 +154,6 @@ def test_batch_dispatches_one_row_and_keeps_the_general_path_for_more():
 
 
 # ----------------------------------------------------------- every registered method
-
-
-def without_attributes(ds: TactileDataset) -> TactileDataset:
-    return TactileDataset(
-        samples=ds.samples,
-        labels=ds.labels,
-        trials=ds.trials,
-        class_attributes=np.zeros((ds.n_classes, 0), np.float32),
-        attribute_names=(),
-        class_names=ds.class_names,
-        name="no-attributes",
-    )
 
 
 @pytest.fixture(scope="module")
