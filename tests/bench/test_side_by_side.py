@@ -32,18 +32,26 @@ def test_floor_server_under_load_and_stopped(tmp_path) -> None:
     assert not alive, "the floor server outlived app_server"
 
 
-def test_ratios_and_targets_shape() -> None:
-    def phase(rps: float, p99: float) -> dict:
-        return {"rps": rps, "p99_ms": p99}
+def phase(rps: float, p99: float) -> dict:
+    return {"rps": rps, "p99_ms": p99}
 
+
+def single_phases(**more: dict) -> dict:
+    """The floor's, the scikit-learn service's and the service's single-sample phases, and
+    ``more``."""
+    return {
+        "floor_1_process": phase(4000, 10),
+        "floor_2_processes": phase(5000, 8),
+        "sklearn_1_process": phase(100, 400),
+        "service_1_process": phase(3600, 11),
+        "service_2_processes": phase(3000, 12),
+        **more,
+    }
+
+
+def test_ratios_and_targets_shape() -> None:
     absolute = {
-        "single": {
-            "floor_1_process": phase(4000, 10),
-            "floor_2_processes": phase(5000, 8),
-            "sklearn_1_process": phase(100, 400),
-            "service_1_process": phase(3600, 11),
-            "service_2_processes": phase(3000, 12),
-        },
+        "single": single_phases(),
         "batch_http": {  # 1,024 samples a request
             "service_1_process": {
                 "samples_per_s": 30720,
@@ -90,19 +98,8 @@ def test_median_over_rounds() -> None:
 
 
 def test_other_methods_get_their_ratios_and_targets() -> None:
-    def phase(rps: float, p99: float) -> dict:
-        return {"rps": rps, "p99_ms": p99}
-
     absolute = {
-        "single": {
-            "floor_1_process": phase(4000, 10),
-            "floor_2_processes": phase(5000, 8),
-            "sklearn_1_process": phase(100, 400),
-            "service_1_process": phase(3600, 11),
-            "service_2_processes": phase(3000, 12),
-            "paper_1_process": phase(2000, 20),
-            "paper_2_processes": phase(4500, 9),
-        },
+        "single": single_phases(paper_1_process=phase(2000, 20), paper_2_processes=phase(4500, 9)),
         "batch_http": {
             name: {"samples_per_s": 30720, "rps": 30, "cpu_us_per_request": {"server": 40960}}
             for name in ("service_1_process", "service_2_processes")
