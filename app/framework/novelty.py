@@ -156,11 +156,20 @@ def novelty_validation_split(
         raise DatasetError(f"novelty tuning needs at least 2 classes, got {k}")
     val_classes = rng.choice(k, size=n_val, replace=False)
     is_val = np.isin(dataset.labels, val_classes)
-    heldout = np.zeros(len(dataset), dtype=bool)
+    # each (class, trial) pair once, sorted by class then trial: one sort, not a pass over
+    # the samples per class
+    pairs, pair_of_sample = np.unique(
+        np.c_[dataset.labels, dataset.trials], axis=0, return_inverse=True
+    )
+    starts = np.searchsorted(pairs[:, 0], np.arange(k + 1))
+    chosen_pairs = []
     for c in np.setdiff1d(np.arange(k), val_classes):
-        trials = np.unique(dataset.trials[dataset.labels == c])
+        trials = pairs[starts[c] : starts[c + 1], 1]
         if len(trials) > holdout_trials:
             chosen = rng.choice(trials, size=holdout_trials, replace=False)
-            heldout |= np.isin(dataset.trials, chosen) & (dataset.labels == c)
+            chosen_pairs.append(starts[c] + np.searchsorted(trials, chosen))
+    heldout = np.zeros(len(dataset), dtype=bool)
+    if chosen_pairs:
+        heldout = np.isin(pair_of_sample.ravel(), np.concatenate(chosen_pairs))
     fit = ~is_val & ~heldout
     return np.flatnonzero(fit), np.flatnonzero(heldout), np.flatnonzero(is_val)

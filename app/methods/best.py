@@ -44,6 +44,7 @@ import time
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
 from app.data.dataset import DatasetError, TactileDataset
 from app.framework.errors import FrameworkError
@@ -113,6 +114,11 @@ class BestRecognizer(TactileRecognizer):
         Sect. VI-B splits, each with other validation objects and a probe model of its
         own, whose scores are pooled into one threshold choice (steadier than one
         split). A positive integer.
+    tuning_objects : int, default 100
+        The rounds stop early once their validation objects number at least this many
+        (one round at 1,000 known objects and more, all of them on PHAC-2's 60): a probe
+        model costs as much as the deployed one, and hundreds of validation objects
+        already steady the threshold. 0 runs every round.
     distance_components : int, default 64
         The distances of ``knn_weight`` and ``top_weight`` are measured on this many
         principal directions of the feature-weighted training samples plus the norm of
@@ -121,6 +127,18 @@ class BestRecognizer(TactileRecognizer):
         λ of the semantic autoencoder (Kodirov et al., 2017) that projects samples onto
         attribute space for zero-shot scores, beside DAP; 0 leaves DAP alone. A
         non-negative number.
+    forest_codes : int, default 32
+        The forest is grown as scikit-learn's extra-trees regressor on a random Gaussian
+        code of this many dimensions per class, its leaves then given the class distribution
+        of the training samples that reach them (``FlatForest.grow``): time and memory grow
+        with the samples, not with samples x classes. 0 grows scikit-learn's extra-trees
+        classifier instead, which keeps a class distribution in every node (out of memory
+        near 2,000 objects on 24 GB). A non-negative integer.
+    approximate_above : int, default 20000
+        Above this many training samples the nearest-sample distances of the novelty score
+        are found through an HNSW graph (``app.methods.neighbours``) instead of by
+        comparing each sample with all of them; 0 always compares exactly. A non-negative
+        integer.
     sae_temperature : float, default 10.0
         Weight of the autoencoder's cosine between a sample's projection and a novel
         class's attribute vector, added to DAP's log scores. A non-negative number.
@@ -164,6 +182,9 @@ class BestRecognizer(TactileRecognizer):
         "knn_weight": number(0, include_low=True, allow_bool=False),
         "top_weight": number(0, include_low=True, allow_bool=False),
         "tuning_rounds": integer(1),
+        "tuning_objects": integer(0, "be a non-negative integer (0 = every round)"),
+        "forest_codes": integer(0, "be a non-negative integer (0 = classifier)"),
+        "approximate_above": integer(0, "be a non-negative integer (0 = exact)"),
         "distance_components": integer(
             0, "be a non-negative integer (0 = exact)", allow_bool=False
         ),
@@ -185,7 +206,10 @@ class BestRecognizer(TactileRecognizer):
         novelty_val_fraction: float = 0.1,
         novelty_holdout_trials: int = 1,
         tuning_rounds: int = 3,
+        tuning_objects: int = 100,
         distance_components: int = 64,
+        forest_codes: int = 32,
+        approximate_above: int = 20000,
         sae_lambda: float = 400.0,
         sae_temperature: float = 10.0,
         n_jobs: int | None = 1,
@@ -203,7 +227,10 @@ class BestRecognizer(TactileRecognizer):
         self.novelty_val_fraction = novelty_val_fraction
         self.novelty_holdout_trials = novelty_holdout_trials
         self.tuning_rounds = tuning_rounds
+        self.tuning_objects = tuning_objects
         self.distance_components = distance_components
+        self.forest_codes = forest_codes
+        self.approximate_above = approximate_above
         self.sae_lambda = sae_lambda
         self.sae_temperature = sae_temperature
         self.n_jobs = n_jobs
@@ -225,6 +252,8 @@ class BestRecognizer(TactileRecognizer):
             int(self.seed),
             self.n_jobs,
             int(self.distance_components),
+            int(self.forest_codes),
+            int(self.approximate_above),
         )
 
     # ----------------------------------------------------------------- fitting
@@ -243,8 +272,13 @@ class BestRecognizer(TactileRecognizer):
         y = dataset.labels
 
         # Sect. VI-B: probe models fitted without validation objects and held-out trials, pooled.
-        known_scores, val_scores = [], []
+        bar = tqdm(
+            total=int(self.tuning_rounds) + 1, desc="best: probes, model", disable=not progress
+        )
+        known_scores, val_scores, val_objects = [], [], 0
         for r in range(int(self.tuning_rounds)):
+            if 0 < self.tuning_objects <= val_objects:
+                break
             fit_idx, known_idx, val_idx = novelty_validation_split(
                 dataset,
                 self.novelty_val_fraction,
@@ -256,6 +290,8 @@ class BestRecognizer(TactileRecognizer):
             probe = self._known_model(relabelled(dataset, fit_idx))
             known_scores.append(probe.scores(flatten(dataset.samples[known_idx]))[2])
             val_scores.append(probe.scores(flatten(dataset.samples[val_idx]))[2])
+            val_objects += len(np.unique(dataset.labels[val_idx]))
+            bar.update()
         if not known_scores:
             raise DatasetError(
                 "novelty tuning needs validation objects and held-out trials: give every known "
@@ -270,6 +306,8 @@ class BestRecognizer(TactileRecognizer):
         # The deployed parts, on every known class.
         t = time.perf_counter()
         self.known_ = self._known_model(dataset)
+        bar.update()
+        bar.close()
         z = self.known_.cues_model.scaled(flatten(dataset.samples))
         timings["known_model_s"] = time.perf_counter() - t
         t = time.perf_counter()
@@ -362,7 +400,7 @@ class BestRecognizer(TactileRecognizer):
         return self.attributes_.predict_proba(self.known_.cues_model.scaled(flatten(samples)))
 
     def _all_scores(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        if len(samples) <= self.small_batch_max:
+        if len(samples) <= self.small_batch_max and self.known_.cues_model.distances.index is None:
             if getattr(self, "_small_batch", None) is None:
                 self._small_batch = SmallBatchScorer(self)
             return self._small_batch.scores(flatten(samples))
@@ -407,6 +445,9 @@ class BestRecognizer(TactileRecognizer):
     def set_state(self, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
         ensure_threads_configured()  # the default thread limits, where no entry point chose them
         self.distance_components = 0  # bundles made before the parameter measure exact distances
+        self.forest_codes = 0  # and those made before it hold a classifier's forest
+        self.approximate_above = 0  # and no neighbour index
+        self.tuning_objects = 0
         self.sae_lambda = 0.0  # and those made before the autoencoder have none
         names = self._get_param_names()
         for key, value in meta["params"].items():

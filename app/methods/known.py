@@ -26,25 +26,46 @@ and docs/RESULTS.md).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numba import njit
 
 from app.data.dataset import TactileDataset
 from app.framework.scaling import RobustInputScaler, flatten
 from app.methods.forest import FlatForest
+from app.methods.neighbours import ApproximateNeighbours
 
 CUES = ("one_minus_maxp", "entropy", "neg_gap", "log_knn3", "log_knn1", "log_top")
 _KNN = 3
 _EPS = 1e-6
+_ROWS = 8192  # rows a blocked pass over the samples takes at a time
 
 
 def fisher_weights(z: np.ndarray, y: np.ndarray, n_classes: int) -> np.ndarray:
-    """Per-feature weights fisher^(1/4) / within-class spread (see the module docstring)."""
-    means = np.stack([z[y == c].mean(axis=0) for c in range(n_classes)])
+    """Per-feature weights fisher^(1/4) / within-class spread (see the module docstring).
+
+    One pass over the samples for the class means and one for the spreads, whatever the
+    number of classes (a mask per class would cost N x K)."""
+    means = class_means(z, y, n_classes)
     dof = max(len(z) - n_classes, 1)
-    within = np.sqrt(((z - means[y]) ** 2).sum(axis=0) / dof) + 1e-3
+    sq = np.zeros(z.shape[1])
+    for lo in range(0, len(z), _ROWS):
+        rows = slice(lo, lo + _ROWS)
+        sq += ((z[rows] - means[y[rows]]) ** 2).sum(axis=0)
+    within = np.sqrt(sq / dof) + 1e-3
     fisher = (means.std(axis=0) / within) ** 2
     return (fisher**0.25 / within).astype(np.float32)
+
+
+def class_means(z: np.ndarray, y: np.ndarray, n_classes: int) -> np.ndarray:
+    """(K, D) float64 mean of each class's rows of ``z`` (one sparse product)."""
+    from scipy.sparse import csr_matrix
+
+    y = np.asarray(y, np.int64)
+    counts = np.bincount(y, minlength=n_classes).astype(np.float64)
+    onehot = csr_matrix((1.0 / counts[y], (y, np.arange(len(y)))), shape=(n_classes, len(y)))
+    return np.asarray(onehot @ np.asarray(z, np.float64))
 
 
 class ForestCues:
@@ -88,19 +109,20 @@ class ForestCues:
         seed: int,
         n_jobs: int | None,
         components: int = 0,
+        codes: int = 0,
+        approximate_above: int = 0,
     ) -> ForestCues:
-        from sklearn.ensemble import ExtraTreesClassifier  # fitting only: loading stays light
-
+        """``codes``: ``FlatForest.grow``'s; ``approximate_above``: ``ReferenceDistances.fit``'s."""
         scaler = RobustInputScaler().fit(x)
         z = scaler.transform(x)
-        et = ExtraTreesClassifier(
-            n_estimators=n_estimators, max_features=max_features, random_state=seed, n_jobs=n_jobs
-        ).fit(z, y)
+        forest = FlatForest.grow(
+            z, y, n_classes, n_estimators, max_features, seed, n_jobs, codes=codes
+        )
         w = fisher_weights(z, y, n_classes)
-        distances = ReferenceDistances.fit(z * w, components)
+        distances = ReferenceDistances.fit(z * w, components, approximate_above)
         return cls(
             scaler,
-            FlatForest.from_sklearn(et),
+            forest,
             w,
             distances,
             y,
@@ -140,6 +162,8 @@ class ForestCues:
         out["weights"], out["reference"] = self.weights, self.reference
         if self.distances.basis is not None:
             out["basis"] = self.distances.basis
+        if self.distances.index is not None:
+            out["index"] = self.distances.index.to_bytes()
         out["reference_labels"], out["offsets"] = self.reference_labels, self.offsets
         return out
 
@@ -167,7 +191,9 @@ class ForestCues:
             scaler,
             forest,
             weights,
-            ReferenceDistances(reference, basis),
+            ReferenceDistances(
+                reference, basis, None if "index" not in arrays else arrays["index"]
+            ),
             arrays["reference_labels"],
             arrays["offsets"],
         )
@@ -188,9 +214,19 @@ class ReferenceDistances:
     outside the known objects' subspace (a novel object's signature) and costs a k-dim
     product instead of a D-dim one: on the 960-feature simulator 64 components make the
     products ~2.5x cheaper. Without a basis the distance is exact.
+
+    That distance is the Euclidean one between the points ``(P q, |q_res|)``
+    (``coordinates``), so an ``index`` (``ApproximateNeighbours``, or its bytes) over the
+    reference's points finds the nearest ones without comparing a query with all of them;
+    the nearest sample of one class is still found exactly, among that class's samples.
     """
 
-    def __init__(self, reference: np.ndarray, basis: np.ndarray | None = None) -> None:
+    def __init__(
+        self,
+        reference: np.ndarray,
+        basis: np.ndarray | None = None,
+        index: ApproximateNeighbours | np.ndarray | None = None,
+    ) -> None:
         self.reference = np.asarray(reference, np.float32)
         self.basis = None if basis is None else np.ascontiguousarray(basis, np.float32)
         if self.reference.ndim != 2 or (
@@ -200,16 +236,51 @@ class ReferenceDistances:
         self.center = self.reference.mean(axis=0, dtype=np.float64).astype(np.float32)
         self._ref, self._ref_res = self._split(self.reference)
         self._ref_sq = (self._ref**2).sum(axis=1)
+        self.index: ApproximateNeighbours | None = None
+        self._points: np.ndarray | None = None  # the reference's coordinates, with an index
+        if index is not None:
+            self._index(index)
+        self._groups: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     @classmethod
-    def fit(cls, reference: np.ndarray, components: int) -> ReferenceDistances:
-        """``components`` principal directions of the reference (0, or at least its rank: exact)."""
+    def fit(
+        cls, reference: np.ndarray, components: int, approximate_above: int = 0
+    ) -> ReferenceDistances:
+        """``components`` principal directions of the reference (0, or at least its rank:
+        exact); an approximate index when it holds more than ``approximate_above`` samples
+        (0: never)."""
         reference = np.asarray(reference, np.float32)
-        centred = reference - reference.mean(axis=0, dtype=np.float64)
-        if components <= 0 or components >= min(centred.shape):
-            return cls(reference)
-        _, _, vt = np.linalg.svd(centred, full_matrices=False)
-        return cls(reference, vt[:components].T)
+        basis = None
+        if 0 < components < min(reference.shape):
+            basis = _principal_directions(reference, components)
+        out = cls(reference, basis)
+        if 0 < approximate_above < len(reference):
+            out._index(ApproximateNeighbours.build)
+        return out
+
+    def _index(self, index: ApproximateNeighbours | np.ndarray | Callable) -> None:
+        """Search through ``index``: an index, its bytes, or a function that builds one from
+        the reference's coordinates."""
+        points = self._ref if self._ref_res is None else np.c_[self._ref, self._ref_res]
+        if isinstance(index, np.ndarray):
+            index = ApproximateNeighbours.from_bytes(index, *points.shape)
+        elif callable(index) and not isinstance(index, ApproximateNeighbours):
+            index = index(points)
+        self.index, self._points = index, points
+
+    def coordinates(self, q: np.ndarray) -> np.ndarray:
+        """(N, k + 1) points whose Euclidean distances are this class's distances ((N, D)
+        centred queries when exact)."""
+        p, res = self._split(q)
+        return p if res is None else np.concatenate([p, res[:, None]], axis=1)
+
+    def _class_groups(self, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The reference's points sorted by label, each label's first row and the order."""
+        if self._groups is None:
+            order = np.argsort(labels, kind="stable")
+            starts = np.searchsorted(labels[order], np.arange(int(labels.max()) + 2))
+            self._groups = (np.ascontiguousarray(self._points[order]), starts, order)
+        return self._groups
 
     def _split(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """(subspace coordinates, residual norms) of centred queries; no residual when exact."""
@@ -223,6 +294,12 @@ class ReferenceDistances:
     def nearest(self, q: np.ndarray, labels: np.ndarray, top: np.ndarray) -> np.ndarray:
         """(N, 3) float64 per query: the mean squared distance to its 3 nearest references, to
         the nearest one, and to the nearest one labelled ``top[i]`` (inf if none is)."""
+        if self.index is not None:
+            points = self.coordinates(q)
+            d2, _ = self.index.search(points, min(_KNN, len(self.reference)))
+            grouped, starts, _ = self._class_groups(np.asarray(labels, np.int64))
+            own = _nearest_in_class(points, grouped, starts, np.asarray(top, np.int64))
+            return np.stack([d2.mean(axis=1), d2[:, 0], own], axis=1)
         p, res = self._split(q)
         g = p @ self._ref.T
         no_res = np.zeros(0, np.float32)
@@ -280,6 +357,53 @@ def _nearest(g, q_sq, ref_sq, q_res, ref_res, labels, top, k):
     return out
 
 
+@njit(cache=True, nogil=True)
+def _nearest_in_class(points, grouped, starts, top):
+    # squared distance from each point to the nearest reference point of class top[i]
+    out = np.full(points.shape[0], np.inf)
+    for i in range(points.shape[0]):
+        c = top[i]
+        for j in range(starts[c], starts[c + 1]):
+            d = 0.0
+            for f in range(points.shape[1]):
+                r = points[i, f] - grouped[j, f]
+                d += r * r
+            out[i] = min(out[i], d)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _spacing_in_class(grouped, trials, starts):
+    # per sorted row, the squared distance to the nearest row of its class in another trial
+    out = np.full(grouped.shape[0], np.inf)
+    for c in range(starts.shape[0] - 1):
+        for i in range(starts[c], starts[c + 1]):
+            for j in range(starts[c], starts[c + 1]):
+                if trials[i] != trials[j]:
+                    d = 0.0
+                    for f in range(grouped.shape[1]):
+                        r = grouped[i, f] - grouped[j, f]
+                        d += r * r
+                    out[i] = min(out[i], d)
+    return out
+
+
+def _principal_directions(rows: np.ndarray, components: int) -> np.ndarray:
+    """(D, k) top principal directions of ``rows``: from the D x D scatter matrix,
+    accumulated in row blocks, when there are many more rows than columns (an SVD of the
+    centred rows would hold N x D float64 twice), else from that SVD."""
+    n, d = rows.shape
+    mean = rows.mean(axis=0, dtype=np.float64)
+    if n <= 4 * d:
+        return np.linalg.svd(rows - mean, full_matrices=False)[2][:components].T
+    scatter = np.zeros((d, d))
+    for lo in range(0, n, _ROWS):
+        block = rows[lo : lo + _ROWS] - mean
+        scatter += block.T @ block
+    _, vectors = np.linalg.eigh(scatter)
+    return vectors[:, ::-1][:, :components]
+
+
 def _knn(d2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean of the (up to) 3 smallest squared distances per row, and the smallest."""
     k = min(_KNN, d2.shape[1])
@@ -302,6 +426,9 @@ def _offsets(
     differs between the Sect. VI-B probe (one trial per class held out, fewer classes) and the
     deployed model (more trials and classes, so nearer neighbours for every query).
     """
+    if distances.index is not None:
+        knn3, knn1, own = _approximate_spacing(distances, y, trials)
+        return _median_offsets(knn3, knn1, own, y, n_classes)
     ref = distances.reference
     n = len(ref)
     knn3, knn1, own = np.empty(n), np.empty(n), np.empty(n)
@@ -311,13 +438,38 @@ def _offsets(
         d2[trials[rows, None] == trials[None, :]] = np.inf
         knn3[rows], knn1[rows] = _knn(d2)
         own[rows] = np.where(y[rows, None] == y[None, :], d2, np.inf).min(axis=1)
+    return _median_offsets(knn3, knn1, own, y, n_classes)
 
+
+def _approximate_spacing(
+    distances: ReferenceDistances, y: np.ndarray, trials: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``_offsets``' per-sample distances through the index: its nearest samples in other
+    trials (asking for as many more as a trial holds) and, exactly, within its class."""
+    _, per_trial = np.unique(trials, return_counts=True)
+    k = min(len(y), _KNN + int(per_trial.max()))
+    knn3, knn1 = np.empty(len(y)), np.empty(len(y))
+    for lo in range(0, len(y), _ROWS):
+        rows = slice(lo, lo + _ROWS)
+        d2, ids = distances.index.search(distances._points[rows], k)
+        d2[(ids < 0) | (trials[np.maximum(ids, 0)] == trials[rows, None])] = np.inf
+        d2.sort(axis=1)
+        knn3[rows], knn1[rows] = d2[:, :_KNN].mean(axis=1), d2[:, 0]
+    grouped, starts, order = distances._class_groups(np.asarray(y, np.int64))
+    own = np.empty(len(y))
+    own[order] = _spacing_in_class(grouped, np.asarray(trials, np.int64)[order], starts)
+    return knn3, knn1, own
+
+
+def _median_offsets(knn3, knn1, own, y, n_classes) -> np.ndarray:
     def median_log(values: np.ndarray, default: float) -> float:
         finite = values[np.isfinite(values)]
         return float(np.median(np.log(finite + _EPS))) if len(finite) else default
 
     overall = median_log(own, 0.0)
-    spacing = [median_log(own[y == c], overall) for c in range(n_classes)]
+    order = np.argsort(y, kind="stable")
+    by_class = np.split(own[order], np.searchsorted(y[order], np.arange(1, n_classes)))
+    spacing = [median_log(values, overall) for values in by_class]
     return np.r_[median_log(knn3, 0.0), median_log(knn1, 0.0), spacing]
 
 
@@ -341,6 +493,8 @@ class KnownModel:
         seed: int,
         n_jobs: int | None,
         components: int = 0,
+        codes: int = 0,
+        approximate_above: int = 0,
     ) -> KnownModel:
         cues = ForestCues.fit(
             flatten(dataset.samples),
@@ -352,6 +506,8 @@ class KnownModel:
             seed,
             n_jobs,
             components,
+            codes,
+            approximate_above,
         )
         return cls(cues, weights)
 
