@@ -613,8 +613,7 @@ class TactileRecognizer(ABC):
         top_k: int,
     ) -> RecognitionBatch:
         """``_rows`` for a batch of one row, bit for bit: the same comparison routes it and
-        the same numpy argsort (the same kernel on the same values: its order of ties is
-        numpy's, which no other selection could promise on every machine) ranks its row."""
+        the same ``ranked`` orders its row."""
         novel = scores > self.novelty_threshold
         reg = self.registry
         known_names = reg.known_names
@@ -623,7 +622,7 @@ class TactileRecognizer(ABC):
             row, offset = novel_p[0], len(known_names)
         else:
             row, offset = known_p[0], 0
-        order = (-row).argsort()[:k]
+        order = ranked(row[None], k)[0]
         value = row[order]
         if offset:
             order = order + offset
@@ -914,10 +913,30 @@ def same_vectors(vectors: np.ndarray, vector: np.ndarray) -> np.ndarray:
     return ((vectors == vector) | (np.isnan(vectors) & np.isnan(vector))).all(axis=1)
 
 
+def ranked(p: np.ndarray, k: int) -> np.ndarray:
+    """(N, min(k, K)) column indices of each row's k largest values, largest first and, among
+    equal values, the lower index first.
+
+    A row of many classes (30,000 known objects) is not sorted: a partition finds its k-th
+    largest value and only the values at least as large are ordered, O(K) instead of
+    O(K log K); the order is the same as a stable sort's."""
+    n, width = p.shape
+    k = min(k, width)
+    if width <= 8 * k + 64:
+        return np.argsort(-p, axis=1, kind="stable")[:, :k]
+    kth = np.partition(p, width - k, axis=1)[:, width - k]
+    out = np.empty((n, k), np.int64)
+    for i in range(n):
+        candidates = np.flatnonzero(p[i] >= kth[i])
+        out[i] = candidates[np.argsort(-p[i, candidates], kind="stable")[:k]]
+    return out
+
+
 def _top_k(p: np.ndarray, k: int, offset: int) -> tuple[np.ndarray, np.ndarray]:
-    """Class index (plus ``offset``) and probability of each row's k largest, best first; a
-    row of fewer than k classes is padded with index -1 and probability NaN."""
-    order = np.argsort(-p, axis=1)[:, :k]
+    """Class index (plus ``offset``) and probability of each row's k largest, best first
+    (``ranked``); a row of fewer than k classes is padded with index -1 and probability
+    NaN."""
+    order = ranked(p, k)
     index, value = order + offset, p[np.arange(len(p))[:, None], order]
     missing = k - order.shape[1]
     if missing > 0:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 #: links per node (faiss's M), candidates kept while building and while searching
-GRAPH_LINKS, BUILD_CANDIDATES, SEARCH_CANDIDATES = 32, 64, 64
+GRAPH_LINKS, BUILD_CANDIDATES, SEARCH_CANDIDATES = 32, 64, 32
 
 
 class ApproximateNeighbours:

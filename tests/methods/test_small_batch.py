@@ -39,7 +39,8 @@ def small(model, most: int = 10_000):
 
 def reference_batch(model, scores, known_p, novel_p, top_k) -> RecognitionBatch:
     """``TactileRecognizer._batch`` as it was before the one-classifier shortcut (commit
-    1ab2f22): every classifier's rows ranked from a masked copy."""
+    1ab2f22): every classifier's rows ranked from a masked copy (by a stable sort: equal
+    probabilities rank the lower class index first)."""
     novel = scores > model.novelty_threshold
     reg = model.registry
     n, k, n_known = len(scores), max(1, top_k), len(reg.known_names)
@@ -50,7 +51,7 @@ def reference_batch(model, scores, known_p, novel_p, top_k) -> RecognitionBatch:
         if not rows.any():
             continue
         p = probs[rows]
-        order = np.argsort(-p, axis=1)[:, :k]
+        order = np.argsort(-p, axis=1, kind="stable")[:, :k]
         top_index[rows, : order.shape[1]] = order + offset
         top_p[rows, : order.shape[1]] = np.take_along_axis(p, order, axis=1)
     return RecognitionBatch(

@@ -1,0 +1,166 @@
+"""The parts of ``best`` whose cost grows with the samples, not samples x objects: the forest
+grown on class codes, its sparse leaves, the approximate neighbour index against exact
+search, and the one-pass statistics that replaced a pass per class."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.data.simulator import simulate_dataset
+from app.framework import bundle
+from app.framework.novelty import novelty_validation_split
+from app.framework.registry import make_method
+from app.framework.scaling import RobustInputScaler, flatten
+from app.methods.forest import FlatForest, _leaf_distributions
+from app.methods.known import ReferenceDistances, _offsets, class_means, fisher_weights
+
+
+@pytest.fixture(scope="module")
+def sim():
+    """40 simulated objects, 8 trials each: 6 trials of each train, 2 test."""
+    ds = simulate_dataset(40, 8, seed=3)
+    test = (ds.trials % 8) >= 6
+    scaler = RobustInputScaler().fit(flatten(ds.samples[~test]))
+    z = scaler.transform(flatten(ds.samples))
+    return ds, z, test
+
+
+def test_leaf_distributions_are_each_leafs_class_shares():
+    rng = np.random.default_rng(0)
+    leaf, y = rng.integers(0, 9, 300), rng.integers(0, 5, 300)
+    rows, cols, values = _leaf_distributions(leaf, y, 5)
+    dense = np.zeros((9, 5))
+    np.add.at(dense, (leaf, y), 1.0)
+    dense /= dense.sum(axis=1, keepdims=True)
+    rebuilt = np.zeros((9, 5))
+    rebuilt[rows, cols] = values
+    np.testing.assert_allclose(rebuilt, dense, atol=1e-15)
+    # ordered by leaf then class, as FlatForest's compressed rows need
+    assert np.all(np.diff(rows * 5 + cols) > 0)
+
+
+def test_code_forest_leaves_are_pure_and_it_classifies_like_the_classifier(sim):
+    ds, z, test = sim
+    y = ds.labels
+    grown = FlatForest.grow(z[~test], y[~test], 40, 60, "sqrt", 0, 1, codes=32, trees_at_once=7)
+    assert grown.n_trees == 60  # grown 7 at a time, the last chunk smaller
+    # distinct samples end in leaves of one class: the training samples are recognised
+    assert (grown.predict_proba(z[~test]).argmax(axis=1) == y[~test]).all()
+    leaf_sizes = np.diff(grown.leaf_ptr)
+    assert (leaf_sizes == 1).all()
+    classifier = FlatForest.grow(z[~test], y[~test], 40, 60, "sqrt", 0, 1, codes=0)
+    acc = {
+        name: (f.predict_proba(z[test]).argmax(axis=1) == y[test]).mean()
+        for name, f in (("codes", grown), ("classifier", classifier))
+    }
+    assert acc["codes"] > 0.5 and abs(acc["codes"] - acc["classifier"]) < 0.15, acc
+    rows = grown.predict_proba(z[test])
+    np.testing.assert_allclose(rows.sum(axis=1), 1.0, atol=1e-12)
+    again = FlatForest.from_state(grown.get_state(), 40, z.shape[1])
+    assert again.predict_proba(z[test]).tobytes() == rows.tobytes()
+
+
+def test_code_forest_is_reproducible_from_its_seed(sim):
+    ds, z, test = sim
+    args = (z[~test], ds.labels[~test], 40, 12, "sqrt")
+    a = FlatForest.grow(*args, 5, 1, codes=16)
+    b = FlatForest.grow(*args, 5, 1, codes=16)
+    c = FlatForest.grow(*args, 6, 1, codes=16)
+    assert a.predict_proba(z[test]).tobytes() == b.predict_proba(z[test]).tobytes()
+    assert a.predict_proba(z[test]).tobytes() != c.predict_proba(z[test]).tobytes()
+
+
+def test_class_means_and_weights_match_a_mask_per_class(sim):
+    ds, z, _ = sim
+    y = ds.labels
+    expected = np.stack([z[y == c].mean(axis=0, dtype=np.float64) for c in range(40)])
+    np.testing.assert_allclose(class_means(z, y, 40), expected, rtol=1e-10, atol=1e-10)
+    w = fisher_weights(z, y, 40)
+    assert w.dtype == np.float32 and w.shape == (z.shape[1],) and (w > 0).all()
+
+
+@pytest.mark.parametrize("components", [0, 16])
+def test_index_finds_the_exact_neighbours_on_small_data(sim, components):
+    """Through the HNSW graph, the nearest reference is the exact one for nearly every
+    query; a distance it returns is never below the exact one (it is the distance to a
+    real reference sample), and the nearest sample of a class is exact."""
+    ds, z, test = sim
+    ref, q = z[~test], z[test]
+    labels = ds.labels[~test]
+    exact = ReferenceDistances.fit(ref, components)
+    approx = ReferenceDistances.fit(ref, components, approximate_above=10)
+    assert exact.index is None and approx.index is not None
+    top = np.random.default_rng(0).integers(0, 40, len(q))
+    e, a = exact.nearest(q, labels, top), approx.nearest(q, labels, top)
+    scale = np.maximum(e, 1e-3)
+    assert np.mean(np.isclose(a[:, 1], e[:, 1], rtol=1e-3)) >= 0.97
+    assert (a[:, :2] >= e[:, :2] - 1e-3 * scale[:, :2]).all()
+    np.testing.assert_allclose(a[:, 2], e[:, 2], rtol=1e-3, atol=1e-3)
+    # the per-class trial spacings and global offsets, through the graph and exactly
+    y, trials = labels, ds.trials[~test]
+    np.testing.assert_allclose(
+        _offsets(approx, y, trials, 40), _offsets(exact, y, trials, 40), atol=0.05
+    )
+
+
+def test_novelty_split_holds_out_whole_trials_per_class():
+    ds = simulate_dataset(30, 5, seed=1)
+    fit, known, val = novelty_validation_split(ds, 0.1, 1, seed=4)
+    assert len(np.intersect1d(fit, known)) == 0 and len(np.intersect1d(fit, val)) == 0
+    val_classes = np.unique(ds.labels[val])
+    assert len(val_classes) == 3 and not np.isin(ds.labels[fit], val_classes).any()
+    # one whole trial of every other class is held out, and only that one
+    for c in np.setdiff1d(np.arange(30), val_classes):
+        assert len(np.unique(ds.trials[known][ds.labels[known] == c])) == 1
+    assert len(fit) + len(known) + len(val) == len(ds)
+    again = novelty_validation_split(ds, 0.1, 1, seed=4)
+    assert all(np.array_equal(a, b) for a, b in zip((fit, known, val), again, strict=True))
+
+
+@pytest.fixture(scope="module")
+def indexed_model(sim):
+    ds, _, test = sim
+    train = ds.subset(np.flatnonzero(~test))
+    return make_method("best", n_estimators=20, tuning_rounds=1, approximate_above=50, seed=2).fit(
+        train
+    ), ds.samples[test]
+
+
+def test_a_model_with_an_index_answers_the_same_after_a_bundle_round_trip(indexed_model):
+    model, x = indexed_model
+    assert model.known_.cues_model.distances.index is not None
+    loaded = bundle.from_bytes(bundle.to_bytes(model))
+    assert loaded.known_.cues_model.distances.index is not None
+    for n in (1, len(x)):  # a single sample takes the general path too: no small-batch scorer
+        a, b = model.recognize_batch(x[:n]), loaded.recognize_batch(x[:n])
+        assert a.top_index.tobytes() == b.top_index.tobytes()
+        assert a.novelty_score.tobytes() == b.novelty_score.tobytes()
+    assert model._small_batch is None
+
+
+def test_a_damaged_index_is_refused(indexed_model):
+    model, _ = indexed_model
+    meta, arrays = model.get_state()
+    arrays["known/index"] = arrays["known/index"][:100]
+    fresh = make_method("best")
+    fresh.registry, fresh.input_shape = model.registry, model.input_shape
+    fresh.featurizer_, fresh.novelty_threshold = None, model.novelty_threshold
+    with pytest.raises(ValueError, match="neighbour index"):
+        fresh.set_state(meta, arrays)
+
+
+def test_a_bundle_without_the_new_parameters_loads_as_what_it_was_made_with(indexed_model):
+    model, _ = indexed_model
+    meta, arrays = model.get_state()
+    for name in ("forest_codes", "approximate_above", "tuning_objects"):
+        meta["params"].pop(name)
+    fresh = make_method("best")
+    fresh.registry, fresh.input_shape = model.registry, model.input_shape
+    fresh.set_state(meta, arrays)
+    params = fresh.get_params()
+    assert (params["forest_codes"], params["approximate_above"], params["tuning_objects"]) == (
+        0,
+        0,
+        0,
+    )
