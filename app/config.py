@@ -92,6 +92,13 @@ class Settings(BaseSettings):
         "or none (start without classes or attributes; the first model is trained once "
         "classes have samples).",
     )
+    base_model: Path | None = Field(
+        None,
+        description="A model bundle trained on the bootstrap dataset ('tactile-zsl train "
+        "--dataset D --out FILE'): on first start it becomes model version 1 instead of a "
+        "fit, which at tens of thousands of objects takes many minutes. Its known classes, "
+        "attributes and input shape must be the dataset's.",
+    )
     method: str = Field(DEFAULT_METHOD, description="Recognition method used for training.")
     method_params: dict[str, Any] = Field(
         default_factory=dict, description="JSON keyword arguments for the method (epochs, seed)."

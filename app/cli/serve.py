@@ -25,6 +25,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="bootstrap data: simulated, simulated:N, phac2:PATH, folder:DIR, biotac:DIR, or "
         "none to start without classes or attributes (TACTILE_DATASET, default simulated)",
     )
+    p.add_argument(
+        "--model",
+        help="a model bundle trained on --dataset ('tactile-zsl train'), stored as the first "
+        "model instead of training on first start (TACTILE_BASE_MODEL)",
+    )
     p.add_argument("--data-dir", help="folder for the SQLite store (TACTILE_DATA_DIR)")
     p.add_argument(
         "--no-worker",
@@ -51,6 +56,7 @@ def run(args: argparse.Namespace) -> int:
         "port": args.port,
         "processes": args.processes,
         "dataset": args.dataset,
+        "base_model": args.model,
         "data_dir": args.data_dir,
         "embedded_worker": False if args.no_worker else None,
     }

@@ -16,6 +16,7 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 from sqlalchemy import Engine
@@ -25,7 +26,8 @@ from app.config import Settings
 from app.data.biotac import BioTacDataset
 from app.data.dataset import TactileDataset
 from app.framework import bundle
-from app.framework.recognizer import TactileRecognizer
+from app.framework.errors import BundleError
+from app.framework.recognizer import RAW_TRIALS, TactileRecognizer
 from app.framework.registry import make_method
 from app.store import bundles, leases, migrate, repo
 from app.store.enums import ClassKind, Origin, VersionReason
@@ -51,6 +53,8 @@ def train_base(settings: Settings, progress: bool = True) -> tuple[TactileRecogn
 
     # raw trials stay raw: the model fits its featurizer on them and keeps it
     dataset = open_dataset(settings.dataset)
+    if settings.base_model is not None:
+        return trained_model(settings.base_model, dataset, settings.dataset), dataset
     what = "raw trials" if isinstance(dataset, BioTacDataset) else "samples"
     say(
         f"training the base model ({settings.method}) on '{settings.dataset}': "
@@ -58,6 +62,36 @@ def train_base(settings: Settings, progress: bool = True) -> tuple[TactileRecogn
     )
     model = make_method(settings.method, **settings.method_params).fit(dataset, progress=progress)
     return model, dataset
+
+
+def trained_model(path: Path, dataset: Dataset, spec: str) -> TactileRecognizer:
+    """The bundle at ``path``, checked against the bootstrap ``dataset`` it must have been
+    trained on (a BundleError naming the first difference)."""
+    model = bundle.load(path)
+    reg = model.registry
+    for what, theirs, ours in (
+        ("known classes", reg.known_names, list(dataset.class_names)),
+        ("attributes", list(reg.attribute_names), list(dataset.attribute_names)),
+    ):
+        if theirs != ours:
+            at = next(
+                (i for i, (a, b) in enumerate(zip(theirs, ours, strict=False)) if a != b), None
+            )
+            where = f"at position {at}" if at is not None else f"{len(theirs)} against {len(ours)}"
+            raise BundleError(
+                f"model bundle {path} was not trained on dataset '{spec}': its {what} differ "
+                f"({where})"
+            )
+    raw = isinstance(dataset, BioTacDataset)
+    if (model.input_kind == RAW_TRIALS) != raw or (
+        not raw and tuple(model.input_shape) != tuple(dataset.input_shape)
+    ):
+        raise BundleError(
+            f"model bundle {path} takes {model.input_kind} of shape {list(model.input_shape)}; "
+            f"dataset '{spec}' does not have them"
+        )
+    say(f"base model read from {path} ({model.method}, {len(reg.known_names)} known objects)")
+    return model
 
 
 def starts_empty(settings: Settings) -> bool:

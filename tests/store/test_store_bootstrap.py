@@ -5,6 +5,7 @@ from __future__ import annotations
 import threading
 
 import numpy as np
+import pytest
 from sqlalchemy import func, select
 
 from app.service.bootstrap import ensure_ready
@@ -94,3 +95,52 @@ def test_a_dataset_of_graded_and_unknown_values_is_stored_as_given(tmp_path, bes
         stored = np.stack([vocab.vector(c.attribute_key) for c in repo.list_classes(s)])
     np.testing.assert_array_equal(stored, values)  # NaN where not known, graded as given
     engine.dispose()
+
+
+def test_first_start_from_a_trained_bundle_does_not_train(settings, base_model, tmp_path):
+    """TACTILE_BASE_MODEL: the bundle becomes version 1 as it is (no fit), with the
+    dataset's classes and samples."""
+    from app.framework import bundle as bundle_format
+    from app.service.bootstrap import train_base
+
+    model, dataset = base_model
+    path = tmp_path / "base.bundle"
+    path.write_bytes(bundle_format.to_bytes(model))
+    from_file = settings.model_copy(update={"base_model": path})
+    read, read_dataset = train_base(from_file, progress=False)
+    assert read_dataset.class_names == dataset.class_names
+    x = dataset.samples[:20]
+    assert np.array_equal(read.recognize_batch(x).top_index, model.recognize_batch(x).top_index)
+    engine = make_engine(from_file.sqlalchemy_url)
+    sessions = make_sessionmaker(engine)
+    try:
+        assert ensure_ready(from_file, engine, sessions, progress=False) == 1
+        with sessions() as s:
+            stored = bundles.load_model(s, repo.active_version(s).bundle_sha256)
+            assert stored.registry.known_names == model.registry.known_names
+            assert s.scalar(select(func.count()).select_from(Sample)) == len(read_dataset)
+    finally:
+        engine.dispose()
+
+
+def test_a_bundle_of_another_dataset_is_refused_and_nothing_is_stored(settings, tmp_path):
+    from app.data.simulator import simulate_dataset
+    from app.framework import bundle as bundle_format
+    from app.framework.errors import BundleError
+    from app.framework.registry import make_method
+
+    other = simulate_dataset(5, 3, seed=9)
+    model = make_method("best", n_estimators=5, tuning_rounds=1).fit(other)
+    path = tmp_path / "other.bundle"
+    path.write_bytes(bundle_format.to_bytes(model))
+    from_file = settings.model_copy(update={"base_model": path})
+    engine = make_engine(from_file.sqlalchemy_url)
+    sessions = make_sessionmaker(engine)
+    try:
+        with pytest.raises(BundleError, match="not trained on dataset .*known classes differ"):
+            ensure_ready(from_file, engine, sessions, progress=False)
+        with sessions() as s:
+            assert repo.active_version_number(s) is None
+            assert s.scalar(select(func.count()).select_from(ObjectClass)) == 0
+    finally:
+        engine.dispose()
