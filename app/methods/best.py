@@ -297,6 +297,8 @@ class BestRecognizer(TactileRecognizer):
                 "novelty tuning needs validation objects and held-out trials: give every known "
                 "class at least 2 trials"
             )
+        bar.total = bar.n + 1  # the rounds left out once enough validation objects were pooled
+        bar.refresh()
         self.novelty_tuning = tune_threshold(
             np.concatenate(known_scores), np.concatenate(val_scores)
         )
