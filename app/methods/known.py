@@ -135,11 +135,17 @@ class ForestCues:
     def proba(self, z: np.ndarray) -> np.ndarray:
         return self.forest.predict_proba(z)
 
-    def cues(self, z: np.ndarray, proba: np.ndarray) -> np.ndarray:
-        """(N, len(CUES)) raw cues of scaled samples ``z`` with forest probabilities ``proba``."""
+    def cues(self, z: np.ndarray, proba: np.ndarray, entropy: bool = True) -> np.ndarray:
+        """(N, len(CUES)) raw cues of scaled samples ``z`` with forest probabilities ``proba``;
+        the entropy column is 0 without ``entropy`` (a log of all K classes per sample, for a
+        cue that ``best`` weighs 0)."""
         # the two largest of each row: a partition, not a sort of K values
         top = np.partition(proba, max(proba.shape[1] - 2, 0), axis=1)
-        entropy = -(proba * np.log(np.clip(proba, 1e-12, None))).sum(axis=1)
+        entropy = (
+            -(proba * np.log(np.clip(proba, 1e-12, None))).sum(axis=1)
+            if entropy
+            else np.zeros(len(proba))
+        )
         gap = top[:, -1] - (top[:, -2] if proba.shape[1] > 1 else 0.0)
         best = proba.argmax(axis=1)
         near = self.distances.nearest(z * self.weights, self.reference_labels, best)
@@ -516,7 +522,8 @@ class KnownModel:
         """(scaled inputs, known-class probabilities, novelty scores)."""
         z = self.cues_model.scaled(x_flat)
         p = self.cues_model.proba(z)
-        return z, p, self.cues_model.cues(z, p) @ self.weights
+        entropy = bool(self.weights[CUES.index("entropy")] != 0)
+        return z, p, self.cues_model.cues(z, p, entropy) @ self.weights
 
     def get_state(self) -> dict[str, np.ndarray]:
         return self.cues_model.get_state()
