@@ -288,8 +288,8 @@ class BestRecognizer(TactileRecognizer):
             if len(known_idx) == 0 or len(val_idx) == 0:
                 continue
             probe = self._known_model(relabelled(dataset, fit_idx))
-            known_scores.append(probe.scores(flatten(dataset.samples[known_idx]))[2])
-            val_scores.append(probe.scores(flatten(dataset.samples[val_idx]))[2])
+            known_scores.append(probe.novelty(flatten(dataset.samples[known_idx])))
+            val_scores.append(probe.novelty(flatten(dataset.samples[val_idx])))
             val_objects += len(np.unique(dataset.labels[val_idx]))
             bar.update()
         if not known_scores:
@@ -363,7 +363,7 @@ class BestRecognizer(TactileRecognizer):
         return cues.proba(cues.scaled(flatten(samples)))
 
     def _novelty_score(self, samples: np.ndarray) -> np.ndarray:
-        return self.known_.scores(flatten(samples))[2]
+        return self.known_.novelty(flatten(samples))
 
     def _novel_proba(self, samples: np.ndarray) -> np.ndarray:
         cues = self.known_.cues_model

@@ -525,6 +525,14 @@ class KnownModel:
         entropy = bool(self.weights[CUES.index("entropy")] != 0)
         return z, p, self.cues_model.cues(z, p, entropy) @ self.weights
 
+    def novelty(self, x_flat: np.ndarray, block: int = 1024) -> np.ndarray:
+        """The novelty scores alone, ``block`` samples at a time: a block's posteriors are
+        block x K (at 30,000 known objects all held-out samples at once would be tens of GB)."""
+        out = np.empty(len(x_flat))
+        for lo in range(0, len(x_flat), block):
+            out[lo : lo + block] = self.scores(x_flat[lo : lo + block])[2]
+        return out
+
     def get_state(self) -> dict[str, np.ndarray]:
         return self.cues_model.get_state()
 
