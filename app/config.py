@@ -79,6 +79,13 @@ class Settings(BaseSettings):
     promotion_threshold: int = Field(
         10, ge=1, description="Real samples after which a novel class becomes a known class."
     )
+    refit_memory_limit_mb: int = Field(
+        0,
+        ge=0,
+        description="Memory a full refit (a promotion, a withdrawal from the known part) may "
+        "take: it runs in a child process of its own, stopped above this many MiB (its jobs "
+        "fail with that reason; the active model stays). 0: half of the machine's memory.",
+    )
     keep_versions: int = Field(
         100,
         ge=0,

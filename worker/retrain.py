@@ -34,12 +34,12 @@ from app.config import Settings
 from app.data.biotac import BioTacDataset
 from app.data.dataset import TactileDataset
 from app.framework.recognizer import RAW_TRIALS, ClassRegistry, TactileRecognizer
-from app.framework.registry import make_method
 from app.service.bootstrap import FIRST_MODEL_SAMPLES
 from app.store import repo
 from app.store.enums import ClassKind, JobKind, JobStatus, Origin, SampleForm, VersionReason
 from app.store.models import Job, ModelVersion, ObjectClass, Sample
 from app.store.vocabulary import Vocabulary, describes
+from worker.refit import default_memory_limit, fit_in_child
 
 # enrolled samples get trial ids far above any dataset's, one trial per sample
 ENROLLED_TRIAL_OFFSET = 1_000_000_000
@@ -288,7 +288,9 @@ def build(
     vocabulary = plan.vocabulary
     if plan.rebuild in (Rebuild.FULL, Rebuild.ATTRIBUTES, Rebuild.NOVEL_PART):
         if plan.rebuild is Rebuild.FULL:
-            model = make_method(settings.method, **settings.method_params).fit(known)
+            # off the serving path: a child process under a memory limit (worker/refit.py)
+            limit = settings.refit_memory_limit_mb * 2**20 or default_memory_limit()
+            model = fit_in_child(settings.method, settings.method_params, known, limit)
         elif plan.rebuild is Rebuild.ATTRIBUTES:
             model = model.with_attributes(known)
         else:

@@ -314,3 +314,32 @@ def test_old_versions_are_pruned_and_the_kept_ones_still_roll_back(client, app, 
     assert client.post("/v1/models/4/activate").status_code == 200
     assert client.post("/v1/recognize", json={"samples": [sample]}).json()["model_version"] == 4
     assert check_store(settings.sqlalchemy_url) == []
+
+
+def test_a_promotion_whose_refit_runs_out_of_memory_fails_clearly_and_the_model_stays(
+    client, app, worker, dataset
+):
+    """The refit runs in a child process (worker/refit.py); killed for memory, its jobs fail
+    with that reason, the class stays novel, the active model keeps answering, and the next
+    sample with room for the refit promotes it."""
+    settings = app.state.service.settings
+    settings.promotion_threshold = 2
+    cid = register(client, dataset, "heavy")["class"]["id"]
+    worker.run_once()
+    add_sample(client, cid, dataset.samples[0] + 0.01)
+    worker.run_once()
+    active = client.get("/v1/models/active").json()["version"]
+    settings.refit_memory_limit_mb = 20  # far below what a fit takes
+    last = add_sample(client, cid, dataset.samples[1] + 0.01)
+    assert worker.run_once() == 1
+    failed = job(client, last["job"]["id"])
+    assert failed["status"] == "failed"
+    assert "RefitMemoryError" in failed["error"] and "memory limit of 20 MiB" in failed["error"]
+    assert client.get("/v1/models/active").json()["version"] == active
+    assert client.get(f"/v1/classes/{cid}").json()["kind"] == "novel"
+    answer = client.post("/v1/recognize", json={"samples": [dataset.samples[2].tolist()]})
+    assert answer.status_code == 200
+    settings.refit_memory_limit_mb = 0  # half of the machine's memory
+    add_sample(client, cid, dataset.samples[3] + 0.01)
+    assert worker.run_once() == 1
+    assert client.get(f"/v1/classes/{cid}").json()["kind"] == "known"

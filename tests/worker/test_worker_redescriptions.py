@@ -100,7 +100,7 @@ def test_best_takes_new_attributes_without_fitting_again(best_service, best_base
     def no_fit(*args, **kwargs):
         raise AssertionError("new attributes of a novel class must not fit the model again")
 
-    monkeypatch.setattr(retrain, "make_method", no_fit)
+    monkeypatch.setattr(retrain, "fit_in_child", no_fit)
     vectors = unused_vectors(dataset, 3)
     redescribe(client, mug, vectors[2])
     assert worker.run_once() == 1

@@ -150,7 +150,7 @@ def test_best_withdraws_from_its_novel_part_without_fitting_again(
     def no_fit(*args, **kwargs):
         raise AssertionError("a withdrawal from the novel part must not fit the model again")
 
-    monkeypatch.setattr(retrain, "make_method", no_fit)
+    monkeypatch.setattr(retrain, "fit_in_child", no_fit)
     withdraw(client, f"/v1/classes/{mug}/samples/{shots['mug'][0]}")
     withdraw(client, f"/v1/classes/{bowl}")
     assert worker.run_once() == 2
