@@ -115,14 +115,16 @@ def test_bundles_carry_the_parameter_names_they_always_had():
         "novelty_pca_dims", "novelty_space", "novelty_val_fraction",
     }  # fmt: skip
     assert list(method_class("best")().get_params()) == [
-        "seed", "n_estimators", "max_features", "attribute_C", "dap_clip", "shot_temperature",
-        "knn_weight", "top_weight", "novelty_val_fraction", "novelty_holdout_trials",
+        "seed", "n_estimators", "max_features", "attribute_C", "attribute_samples", "dap_clip",
+        "shot_temperature", "knn_weight", "top_weight", "novelty_val_fraction",
+        "novelty_holdout_trials",
         "tuning_rounds", "tuning_objects", "distance_components", "forest_codes",
         "approximate_above", "sae_lambda", "sae_temperature", "n_jobs", "featurizer_params",
     ]  # fmt: skip
-    # tuning_objects, forest_codes and approximate_above came with the forest grown on class
-    # codes; a bundle without them loads as what it was made with (0: every tuning round, a
-    # classifier's forest, exact distances; tests/methods/test_scale_parts.py)
+    # tuning_objects, forest_codes, approximate_above and attribute_samples came with the
+    # forest grown on class codes; a bundle without them loads as what it was made with (0:
+    # every tuning round, a classifier's forest, exact distances, every sample;
+    # tests/methods/test_scale_parts.py)
 
 
 def test_a_constructor_with_kwargs_is_refused():

@@ -153,14 +153,10 @@ def test_a_damaged_index_is_refused(indexed_model):
 def test_a_bundle_without_the_new_parameters_loads_as_what_it_was_made_with(indexed_model):
     model, _ = indexed_model
     meta, arrays = model.get_state()
-    for name in ("forest_codes", "approximate_above", "tuning_objects"):
+    names = ("forest_codes", "approximate_above", "tuning_objects", "attribute_samples")
+    for name in names:
         meta["params"].pop(name)
     fresh = make_method("best")
     fresh.registry, fresh.input_shape = model.registry, model.input_shape
     fresh.set_state(meta, arrays)
-    params = fresh.get_params()
-    assert (params["forest_codes"], params["approximate_above"], params["tuning_objects"]) == (
-        0,
-        0,
-        0,
-    )
+    assert [fresh.get_params()[name] for name in names] == [0, 0, 0, 0]
