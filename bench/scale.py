@@ -1,0 +1,283 @@
+"""Scale in objects: what the default method costs, and how well it recognises, from 60 to
+30,000 known objects of the built-in simulator.
+
+    .venv/bin/python -m bench.scale [--sizes 60,300,1000,3000,10000,30000] [--max N]
+                                    [--novel 20] [--trials 10] [--seed 0]
+                                    [--out results/scale/]
+
+For each size N (up to ``--max``) a child process of its own (so each peak RSS is that
+size's alone) simulates ``simulate_dataset(N + novel, trials, seed)``: the first N objects
+are known, the last ``--novel`` are novel. Two whole trials per known object are held out.
+The child fits ``best`` (its defaults, ``n_jobs`` = the cores) on the rest and measures:
+
+- ``fit_s`` and ``fit_peak_gb``: the fit's wall time and the process's peak RSS while it
+  ran (read every 0.1 s; the dataset is in memory already), ``bundle_mb``;
+- ``enrol_ms``: ``add_novel_classes`` of one class by attribute vector (median of 5), and
+  ``one_shot_ms``: ``add_one_shot`` of one sample to a zero-shot class (median of 5);
+- ``recognise_1_us``: ``recognize_batch`` of one sample (median of 300 different samples),
+  ``batch_per_sample_us`` and ``throughput_per_s`` for batches of 1,024;
+- ``known_acc``: top-1 among the known objects on the held-out trials, beside ``nn1_acc``,
+  a 1-nearest-neighbour classifier on the same scaled inputs (a reference that tells the
+  method's loss from the simulator's objects crowding together), and ``zsl_acc``: the
+  novel objects' samples among the novel classes enrolled by their attribute vectors;
+- ``vectors_distinct`` (distinct attribute vectors among the N known objects) and
+  ``novel_vectors_taken`` (novel objects whose vector a known object has: the service
+  answers such an enrolment with a 409).
+
+It writes ``scale.json`` (one record per size, with the machine and the commit), prints a
+Markdown table, and draws ``scale.png``: each cost against N on log-log axes, with its
+fitted exponent (least-squares slope of log cost on log N) in the legend.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+COSTS = (
+    "fit_s",
+    "fit_peak_gb",
+    "bundle_mb",
+    "enrol_ms",
+    "one_shot_ms",
+    "recognise_1_us",
+    "batch_per_sample_us",
+)
+BLOCK = 1024
+
+
+def _rss_gb() -> float:
+    with open("/proc/self/status") as f:
+        return int(f.read().split("VmRSS:")[1].split()[0]) / 1e6
+
+
+def measure(n: int, novel: int, trials: int, seed: int) -> dict:
+    """Every figure of one size, in this process (``--one``)."""
+    from app.data.simulator import simulate_dataset
+    from app.framework import bundle
+    from app.framework.registry import make_method
+    from app.framework.scaling import RobustInputScaler, flatten
+
+    ds = simulate_dataset(n + novel, trials, seed=seed)
+    held = (ds.trials % trials) >= trials - 2
+    known = ds.labels < n
+    train = ds.subset(np.flatnonzero(known & ~held)).select_classes(np.arange(n))
+    x_test, y_test = ds.samples[known & held], ds.labels[known & held]
+    x_novel, y_novel = ds.samples[~known], ds.labels[~known] - n
+    vectors = ds.class_attributes
+    known_vectors = {tuple(v) for v in vectors[:n].astype(int).tolist()}
+    del ds
+
+    peak = [_rss_gb()]
+    done = threading.Event()
+
+    def watch() -> None:
+        while not done.wait(0.1):
+            peak[0] = max(peak[0], _rss_gb())
+
+    threading.Thread(target=watch, daemon=True).start()
+    t = time.perf_counter()
+    model = make_method("best", seed=seed, n_jobs=os.cpu_count()).fit(train, progress=True)
+    out: dict = {"objects": n, "fit_s": time.perf_counter() - t}
+    done.set()
+    out["fit_peak_gb"] = max(peak[0], _rss_gb())
+    out["bundle_mb"] = len(bundle.to_bytes(model)) / 1e6
+
+    novel_names = [f"novel-{i}" for i in range(novel)]
+    out["novel_vectors_taken"] = sum(tuple(v) in known_vectors for v in vectors[n:].astype(int))
+    out["vectors_distinct"] = len(known_vectors)
+    free = [i for i in range(novel) if tuple(vectors[n + i].astype(int)) not in known_vectors]
+    free = [
+        i
+        for i in free
+        if tuple(vectors[n + i]) not in {tuple(vectors[n + j]) for j in free if j < i}
+    ]
+    enrol, shot = [], []
+    for i in free[:5]:
+        t = time.perf_counter()
+        one = model.add_novel_classes([novel_names[i]], vectors[n + i : n + i + 1])
+        enrol.append(time.perf_counter() - t)
+        t = time.perf_counter()
+        one.add_one_shot(novel_names[i], x_novel[y_novel == i][:1])
+        shot.append(time.perf_counter() - t)
+    out["enrol_ms"] = float(np.median(enrol)) * 1e3 if enrol else None
+    out["one_shot_ms"] = float(np.median(shot)) * 1e3 if shot else None
+    if free:
+        with_novel = model.add_novel_classes(
+            [novel_names[i] for i in free], vectors[n + np.array(free)]
+        )
+        rows = np.isin(y_novel, free)
+        p = with_novel.novel_proba(x_novel[rows])
+        out["zsl_acc"] = float((np.asarray(free)[p.argmax(axis=1)] == y_novel[rows]).mean())
+    else:
+        out["zsl_acc"] = None
+
+    correct = 0
+    for lo in range(0, len(x_test), BLOCK):
+        p = model.known_proba(x_test[lo : lo + BLOCK])
+        correct += int((p.argmax(axis=1) == y_test[lo : lo + BLOCK]).sum())
+    out["known_acc"] = correct / len(x_test)
+    out["nn1_acc"] = _nearest_neighbour_accuracy(
+        RobustInputScaler().fit(flatten(train.samples)), train, x_test, y_test
+    )
+
+    times = []
+    for i in range(300):
+        sample = x_test[(i * 7919) % len(x_test)][None]
+        t = time.perf_counter()
+        model.recognize_batch(sample)
+        times.append(time.perf_counter() - t)
+    out["recognise_1_us"] = float(np.median(times)) * 1e6
+    batch = x_test[:BLOCK]
+    model.recognize_batch(batch)
+    t = time.perf_counter()
+    model.recognize_batch(batch)
+    per = (time.perf_counter() - t) / len(batch)
+    out["batch_per_sample_us"], out["throughput_per_s"] = per * 1e6, 1.0 / per
+    return out
+
+
+def _nearest_neighbour_accuracy(scaler, train, x_test, y_test) -> float:
+    """1-NN on the scaled inputs, blocked (memory linear in the samples)."""
+    from app.framework.scaling import flatten
+
+    ref = scaler.transform(flatten(train.samples)).astype(np.float32)
+    ref_sq = (ref**2).sum(axis=1)
+    q = scaler.transform(flatten(x_test)).astype(np.float32)
+    correct = 0
+    for lo in range(0, len(q), 256):
+        block = q[lo : lo + 256]
+        d2 = ref_sq[None, :] - 2.0 * block @ ref.T
+        correct += int((train.labels[d2.argmin(axis=1)] == y_test[lo : lo + 256]).sum())
+    return correct / len(q)
+
+
+def exponents(records: list[dict]) -> dict[str, float | None]:
+    """Per cost, the least-squares slope of log cost on log N (None below 2 sizes)."""
+    out = {}
+    for cost in COSTS:
+        pts = [(r["objects"], r[cost]) for r in records if r.get(cost)]
+        if len(pts) < 2:
+            out[cost] = None
+            continue
+        n, c = np.log(np.array(pts, float)).T
+        out[cost] = float(np.polyfit(n, c, 1)[0])
+    return out
+
+
+def table(records: list[dict], slopes: dict) -> str:
+    cols = ("objects", *COSTS, "throughput_per_s", "known_acc", "nn1_acc", "zsl_acc")
+    cols += ("vectors_distinct", "novel_vectors_taken")
+    lines = ["| " + " | ".join(cols) + " |", "|" + " --- |" * len(cols)]
+    for r in records:
+        cells = [
+            "–" if r.get(c) is None else f"{r[c]:.3g}" if isinstance(r[c], float) else str(r[c])
+            for c in cols
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    fitted = [f"{slopes[c]:.2f}" if slopes.get(c) is not None else "–" for c in COSTS]
+    lines.append("| exponent | " + " | ".join(fitted) + " |" + " |" * (len(cols) - len(COSTS) - 1))
+    return "\n".join(lines)
+
+
+def plot(records: list[dict], slopes: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    for cost in COSTS:
+        pts = [(r["objects"], r[cost]) for r in records if r.get(cost)]
+        if pts:
+            n, c = zip(*pts, strict=True)
+            slope = slopes.get(cost)
+            ax.loglog(n, c, "o-", label=f"{cost} (N^{slope:.2f})" if slope else cost)
+    ax.set_xlabel("known objects N")
+    ax.set_ylabel("cost (units in the name)")
+    ax.set_title("best on the simulator: cost against the number of known objects")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def machine() -> dict:
+    commit = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+    ).stdout.strip()
+    pages = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    return {
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "cpus": os.cpu_count(),
+        "memory_gb": round(pages / 1e9, 1),
+        "python": platform.python_version(),
+        "commit": commit,
+    }
+
+
+def parse(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--sizes", default="60,300,1000,3000,10000,30000")
+    p.add_argument("--max", type=int, default=None, help="stop after this size")
+    p.add_argument("--novel", type=int, default=20)
+    p.add_argument("--trials", type=int, default=10)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default="results/scale")
+    p.add_argument("--one", type=int, help=argparse.SUPPRESS)  # a child's own size
+    args = p.parse_args(argv)
+    try:
+        args.sizes = sorted({int(s) for s in args.sizes.split(",") if s.strip()})
+    except ValueError:
+        p.error(f"--sizes must be integers separated by commas, got {args.sizes!r}")
+    if not args.sizes or args.sizes[0] < 2:
+        p.error("every size must be at least 2 known objects")
+    if args.max is not None:
+        if args.max < args.sizes[0]:
+            p.error(f"--max {args.max} is below the smallest size {args.sizes[0]}")
+        args.sizes = [s for s in args.sizes if s <= args.max]
+    if args.novel < 1 or args.trials < 4:
+        p.error("--novel must be at least 1 and --trials at least 4 (2 are held out)")
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse(argv)
+    if args.one is not None:
+        print(json.dumps(measure(args.one, args.novel, args.trials, args.seed)))
+        return 0
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    records = []
+    for n in args.sizes:
+        print(f"scale: {n} known objects ...", file=sys.stderr, flush=True)
+        cmd = [sys.executable, "-m", "bench.scale", "--one", str(n)]
+        cmd += ["--novel", str(args.novel), "--trials", str(args.trials), "--seed", str(args.seed)]
+        done = subprocess.run(cmd, stdout=subprocess.PIPE, text=True)
+        if done.returncode != 0:
+            print(f"scale: {n} objects failed (exit {done.returncode})", file=sys.stderr)
+            break
+        records.append(json.loads(done.stdout.strip().splitlines()[-1]))
+        slopes = exponents(records)
+        report = {"machine": machine(), "sizes": records, "exponents": slopes}
+        (out / "scale.json").write_text(json.dumps(report, indent=2))
+    if not records:
+        return 1
+    print(table(records, slopes))
+    plot(records, slopes, out / "scale.png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,55 @@
+"""bench/scale.py at tiny sizes: every figure of every size, the exponents, the PNG, and
+clear refusals of bad arguments. The figures themselves mean nothing at this size."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+FIELDS = (
+    "objects", "fit_s", "fit_peak_gb", "bundle_mb", "enrol_ms", "one_shot_ms",
+    "recognise_1_us", "batch_per_sample_us", "throughput_per_s", "known_acc", "nn1_acc",
+    "zsl_acc", "vectors_distinct", "novel_vectors_taken",
+)  # fmt: skip
+
+
+def run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "bench.scale", *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
+    done = run("--sizes", "12,24,40", "--max", "24", "--novel", "4", "--trials", "4",
+               "--out", str(tmp_path))  # fmt: skip
+    assert done.returncode == 0, done.stderr[-3000:]
+    report = json.loads((tmp_path / "scale.json").read_text())
+    assert [r["objects"] for r in report["sizes"]] == [12, 24]  # --max stops before 40
+    for r in report["sizes"]:
+        assert set(FIELDS) <= set(r)
+        assert r["fit_s"] > 0 and r["fit_peak_gb"] > 0 and r["recognise_1_us"] > 0
+        for acc in ("known_acc", "nn1_acc", "zsl_acc"):
+            assert 0.0 <= r[acc] <= 1.0
+        assert r["vectors_distinct"] <= r["objects"]
+    assert set(report["exponents"]) >= {"fit_s", "fit_peak_gb", "recognise_1_us"}
+    assert report["machine"]["cpus"] >= 1 and report["machine"]["commit"]
+    assert done.stdout.startswith("| objects | fit_s |") and "| exponent |" in done.stdout
+    assert (tmp_path / "scale.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_bad_arguments_exit_2_with_a_message(tmp_path):
+    for args, words in (
+        (("--sizes", "1,10"), "at least 2 known objects"),
+        (("--sizes", "ten"), "--sizes must be integers"),
+        (("--sizes", "60,300", "--max", "10"), "below the smallest size"),
+        (("--trials", "3"), "--trials at least 4"),
+    ):
+        done = run(*args, "--out", str(tmp_path))
+        assert done.returncode == 2 and words in done.stderr, (args, done.stderr)
