@@ -915,17 +915,24 @@ def same_vectors(vectors: np.ndarray, vector: np.ndarray) -> np.ndarray:
 
 def ranked(p: np.ndarray, k: int) -> np.ndarray:
     """(N, min(k, K)) column indices of each row's k largest values, largest first and, among
-    equal values, the lower index first.
+    equal values, the lower index first (the order of a stable sort).
 
-    A row of many classes (30,000 known objects) is not sorted: a partition finds its k-th
-    largest value and only the values at least as large are ordered, O(K) instead of
-    O(K log K); the order is the same as a stable sort's."""
+    A row of many classes (30,000 known objects) is not sorted: for a few places (k <= 8)
+    the largest is taken k times (``argmax`` gives the first of equal values), each a pass
+    over the row, O(k K); for more, a partition finds the k-th largest value and only the
+    values at least as large are sorted."""
     n, width = p.shape
     k = min(k, width)
     if width <= 8 * k + 64:
         return np.argsort(-p, axis=1, kind="stable")[:, :k]
-    kth = np.partition(p, width - k, axis=1)[:, width - k]
     out = np.empty((n, k), np.int64)
+    if k <= 8:
+        rows, left = np.arange(n), np.array(p, np.float64)  # a copy: the places taken go
+        for j in range(k):
+            out[:, j] = left.argmax(axis=1)
+            left[rows, out[:, j]] = -np.inf
+        return out
+    kth = np.partition(p, width - k, axis=1)[:, width - k]
     for i in range(n):
         candidates = np.flatnonzero(p[i] >= kth[i])
         out[i] = candidates[np.argsort(-p[i, candidates], kind="stable")[:k]]

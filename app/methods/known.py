@@ -139,21 +139,28 @@ class ForestCues:
         """(N, len(CUES)) raw cues of scaled samples ``z`` with forest probabilities ``proba``;
         the entropy column is 0 without ``entropy`` (a log of all K classes per sample, for a
         cue that ``best`` weighs 0)."""
-        # the two largest of each row: a partition, not a sort of K values
-        top = np.partition(proba, max(proba.shape[1] - 2, 0), axis=1)
+        # the two largest of each row: the largest, then the largest of the rest (two passes;
+        # a sort or partition of K mostly-zero values costs many times that)
+        rows, best = np.arange(len(proba)), proba.argmax(axis=1)
+        first = proba[rows, best]
+        if proba.shape[1] > 1:
+            proba[rows, best] = -np.inf
+            second = proba.max(axis=1)
+            proba[rows, best] = first  # the caller's posteriors, as they were
+        else:
+            second = np.zeros(len(proba))
         entropy = (
             -(proba * np.log(np.clip(proba, 1e-12, None))).sum(axis=1)
             if entropy
             else np.zeros(len(proba))
         )
-        gap = top[:, -1] - (top[:, -2] if proba.shape[1] > 1 else 0.0)
-        best = proba.argmax(axis=1)
+        gap = first - second
         near = self.distances.nearest(z * self.weights, self.reference_labels, best)
         log_d = np.log(near + _EPS)
         off = self.offsets
         return np.stack(
             [
-                1.0 - top[:, -1],
+                1.0 - first,
                 entropy,
                 -gap,
                 log_d[:, 0] - off[0],
