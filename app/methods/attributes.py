@@ -69,6 +69,9 @@ class LinearAttributeModel:
         # to float64 cost more than the product, and logits need no more precision.
         self._weights_t32 = np.ascontiguousarray(self.weights.T, np.float32)
 
+    def __deepcopy__(self, memo: dict) -> LinearAttributeModel:
+        return self  # never changed after its fit: models derived by enrolment share it
+
     @classmethod
     def fit(
         cls, z: np.ndarray, targets: np.ndarray, C: float, max_iter: int = 1000

@@ -160,3 +160,18 @@ def test_a_bundle_without_the_new_parameters_loads_as_what_it_was_made_with(inde
     fresh.registry, fresh.input_shape = model.registry, model.input_shape
     fresh.set_state(meta, arrays)
     assert [fresh.get_params()[name] for name in names] == [0, 0, 0, 0]
+
+
+def test_enrolment_shares_the_fitted_parts_instead_of_copying_them(indexed_model):
+    """Enrolment derives a new model by deep copy; the known part (reference samples, index,
+    forest) and the attribute model are never changed after a fit, so both models hold the
+    same objects, and the base still answers as before."""
+    model, x = indexed_model
+    before = model.recognize_batch(x)
+    vector = np.zeros((1, len(model.registry.attribute_names)), np.float32)
+    vector[0, :3] = 1
+    enrolled = model.add_novel_classes(["new"], vector).add_one_shot("new", x[:1])
+    assert enrolled.known_ is model.known_ and enrolled.attributes_ is model.attributes_
+    assert enrolled.registry is not model.registry and model.registry.novel_names == []
+    after = model.recognize_batch(x)
+    assert after.top_index.tobytes() == before.top_index.tobytes()

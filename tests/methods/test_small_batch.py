@@ -16,6 +16,7 @@ from app.data.dataset import TactileDataset
 from app.data.simulator import simulate_dataset
 from app.framework.recognizer import RecognitionBatch
 from app.framework.registry import make_method
+from app.methods.known import KnownModel
 from app.methods.small_batch import _row_sum
 
 FIELDS = ("top_index", "top_probability", "is_novel", "novelty_score")
@@ -201,8 +202,9 @@ def test_without_attributes_classes_from_samples_match(data):
 def test_a_weighted_entropy_cue_is_computed_as_the_general_path_does(models, data):
     """``best`` weighs the entropy cue 0, so the small path skips it; with a weight it is
     computed, with the same bits."""
-    model = copy.deepcopy(models["one-shot"])
-    model.known_.weights = model.known_.weights + np.r_[0.0, 0.3, 0.0, 0.0, 0.0, 0.0]
+    model = copy.deepcopy(models["one-shot"])  # shares the fitted known part: give it its own
+    weights = model.known_.weights + np.r_[0.0, 0.3, 0.0, 0.0, 0.0, 0.0]
+    model.known_ = KnownModel(model.known_.cues_model, weights)
     model._small_batch = None
     x, fast = queries(data[0], seed=4), small(model)
     for n in SIZES:
@@ -257,8 +259,10 @@ def test_a_copied_model_scores_alike(models, data):
 def test_a_scaler_without_log_compression_matches(models, data):
     """The kernels scale raw inputs when the scaler does not log-compress (``best`` always
     does; the scaler allows it)."""
-    model = copy.deepcopy(models["one-shot"])
-    model.known_.cues_model.scaler.log_compress = False
+    model = copy.deepcopy(models["one-shot"])  # shares the fitted known part: give it its own
+    cues = copy.deepcopy(model.known_.cues_model)
+    cues.scaler.log_compress = False
+    model.known_ = KnownModel(cues, model.known_.weights)
     model._small_batch = None
     x, fast = queries(data[0], seed=7), small(model)
     for n in SIZES:
