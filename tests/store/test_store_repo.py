@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import time
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
-from sqlalchemy import func, select, update
+from sqlalchemy import delete, event, func, literal_column, select, update
 from sqlalchemy.exc import IntegrityError, OperationalError
 
 from app.framework.errors import BundleError
@@ -74,20 +76,68 @@ def test_bundles_are_content_addressed(store):
         assert repo.bundle_data(s, a) == b"same bytes"
 
 
-def test_large_bundles_read_back_exactly_in_slices(store):
-    """Read in slices (so no driver holds the GIL for a whole bundle); sizes around the
-    slice boundary, and the empty bundle, come back byte for byte."""
-    _, sessions = store
+@contextlib.contextmanager
+def statements(engine) -> Iterator[list[str]]:
+    """The SQL statements ``engine`` sends while the block runs."""
+    sent: list[str] = []
+
+    def note(conn, cursor, statement, parameters, context, executemany):
+        sent.append(statement)
+
+    event.listen(engine, "before_cursor_execute", note)
+    try:
+        yield sent
+    finally:
+        event.remove(engine, "before_cursor_execute", note)
+
+
+def test_bundles_of_any_size_read_back_exactly_with_one_statement(store):
+    """One statement per bundle, whatever its size (a statement per 256 kB slice cost the
+    square of the size on SQLite); sizes around PostgreSQL's row slices, several MB, and
+    the empty bundle come back byte for byte."""
+    engine, sessions = store
     rng = np.random.default_rng(0)
     n = repo.BUNDLE_READ_BYTES
-    sizes = [0, 1, n - 1, n, n + 1, 3 * n + 12345]
+    sizes = [0, 1, n - 1, n, n + 1, 3 * n + 12345, 6 * 2**20 + 7]
     with sessions.begin() as s:
-        stored = {size: (rng.bytes(size), None) for size in sizes}
-        stored = {size: (data, repo.store_bundle(s, data)) for size, (data, _) in stored.items()}
+        stored = [(data, repo.store_bundle(s, data)) for data in map(rng.bytes, sizes)]
     with sessions() as s:
-        for data, sha in stored.values():
-            assert repo.bundle_data(s, sha) == data
-        assert repo.bundle_data(s, "0" * 64) is None
+        s.connection()  # checked out (and pinged) before anything is counted
+        for data, sha in stored:
+            with statements(engine) as sent:
+                assert repo.bundle_data(s, sha) == data
+            assert len(sent) == 1, (len(data), sent)
+        with statements(engine) as sent:
+            assert repo.bundle_data(s, "0" * 64) is None
+        assert len(sent) == 1
+
+
+def test_a_sqlite_bundle_replaced_between_lookup_and_read_is_read_by_its_hash(tmp_path):
+    """SQLite finds a bundle's row, then reads its bytes by row id; a row written between
+    the two (here: the bundle deleted and another stored, which takes its row id) must not
+    read as a damaged bundle."""
+    engine = db.make_engine(f"sqlite:///{tmp_path / 'store.db'}")
+    Bundle.__table__.create(engine)
+    sessions = db.make_sessionmaker(engine)
+    with sessions.begin() as s:
+        gone = repo.store_bundle(s, b"read while it was deleted" * 1000)
+        rowid = s.scalar(select(literal_column("rowid")).where(Bundle.sha256 == gone))
+    taken = []
+
+    def meanwhile(conn, cursor, statement, parameters, context, executemany):
+        if "rowid" in statement and not taken:
+            with sessions.begin() as other:
+                other.execute(delete(Bundle).where(Bundle.sha256 == gone))
+                taken.append(repo.store_bundle(other, b"stored meanwhile" * 1000))
+
+    event.listen(engine, "after_cursor_execute", meanwhile)
+    with sessions() as s:
+        assert repo.bundle_data(s, gone) is None
+    event.remove(engine, "after_cursor_execute", meanwhile)
+    with sessions() as s:
+        assert s.scalar(select(literal_column("rowid")).where(Bundle.sha256 == taken[0])) == rowid
+        assert repo.bundle_data(s, taken[0]) == b"stored meanwhile" * 1000
+    engine.dispose()
 
 
 def test_a_damaged_bundle_is_an_error_that_says_so(store):
