@@ -54,6 +54,9 @@ class Worker:
         self.id = leases.new_holder_id()
         self.on_activate = on_activate
         self._cache: tuple[int, TactileRecognizer] | None = None  # last model built or loaded
+        # parts of the versions loaded, by SHA-256: a version built elsewhere is loaded by
+        # reading only the parts not held (an enrollment changes none of the large ones)
+        self._parts = bundles.PartCache()
         # parts unchanged since the last version are not encoded again
         self._encoder = bundle.PartEncoder()
         # kept heads' parts, so pruning reads new heads only
@@ -194,6 +197,9 @@ class Worker:
                 return
             version = self._commit(s, base.version if base else None, new, split, plan, ok)
         self._cache = (version, new)
+        # the parts the new version shares stay; an enrollment's model holds those very
+        # arrays (99.2 of 99.4 MB for the default method at 1,000 objects), not copies
+        self._parts.keep_only(set(split[1]))
         log.info("model version %d is active", version)
         if self.on_activate:
             self.on_activate(version, new)
@@ -228,7 +234,7 @@ class Worker:
 
     def _load(self, s: Session, version: int, sha256: str) -> TactileRecognizer:
         if self._cache is None or self._cache[0] != version:
-            self._cache = (version, bundles.load_model(s, sha256))
+            self._cache = (version, bundles.load_model(s, sha256, self._parts))
         return self._cache[1]
 
 

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.framework import bundle
 from app.framework.errors import BundleError
 from app.framework.recognizer import TactileRecognizer
 from app.service.metrics import Metrics
@@ -128,18 +129,35 @@ class ModelHolder(Poller):
     def serve(self, version: int, recognizer: TactileRecognizer) -> bool:
         """Serve a model this process has built (the embedded worker's) as ``version``
         without reading it back from the store, if that is still the active version;
-        otherwise load the active one. True when swapped."""
+        otherwise load the active one. True when swapped.
+
+        The cached parts that ``version`` shares stay cached, so the next version, built
+        by another process, is loaded by reading only the parts they lack; the rest go.
+        Until that load they are held beside the built model's own copies (the worker
+        loaded its own base): ~100 MB for the default method at 1,000 objects."""
         with self._load_lock:
             with self._sessions() as s:
                 current = repo.active_version_number(s) == version
                 class_ids = repo.class_ids_by_name(s) if current else {}
+                shared = self._part_shas(s, version) if current else set()
             if current:
                 self._damaged = None
                 self.degraded = None
                 self._swap(version, recognizer, class_ids)
-                self._parts.keep_only(set())  # the cached parts belong to no served model now
+                self._parts.keep_only(shared)
                 return True
         return self.refresh()  # activated again meanwhile (a rollback)
+
+    @staticmethod
+    def _part_shas(s: Session, version: int) -> set[str]:
+        """The parts of ``version``'s bundle, from its head (kilobytes); none when the head
+        cannot be read, as the served model does not need it."""
+        row = repo.get_version(s, version)
+        try:
+            head = repo.bundle_data(s, row.bundle_sha256) if row is not None else None
+            return set(bundle.part_refs(head).values()) if head is not None else set()
+        except BundleError:
+            return set()
 
     def _swap(self, version: int, recognizer: TactileRecognizer, class_ids: dict[str, int]) -> None:
         # One sample through the model before it is served: the compiled forest walk
