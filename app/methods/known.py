@@ -372,17 +372,22 @@ def _nearest(g, q_sq, ref_sq, q_res, ref_res, labels, top, k):
 
 
 @njit(cache=True, nogil=True)
+def _squared(a, i, b, j):
+    # squared Euclidean distance between row i of a and row j of b
+    d = 0.0
+    for f in range(a.shape[1]):
+        r = a[i, f] - b[j, f]
+        d += r * r
+    return d
+
+
+@njit(cache=True, nogil=True)
 def _nearest_in_class(points, grouped, starts, top):
     # squared distance from each point to the nearest reference point of class top[i]
     out = np.full(points.shape[0], np.inf)
     for i in range(points.shape[0]):
-        c = top[i]
-        for j in range(starts[c], starts[c + 1]):
-            d = 0.0
-            for f in range(points.shape[1]):
-                r = points[i, f] - grouped[j, f]
-                d += r * r
-            out[i] = min(out[i], d)
+        for j in range(starts[top[i]], starts[top[i] + 1]):
+            out[i] = min(out[i], _squared(points, i, grouped, j))
     return out
 
 
@@ -394,11 +399,7 @@ def _spacing_in_class(grouped, trials, starts):
         for i in range(starts[c], starts[c + 1]):
             for j in range(starts[c], starts[c + 1]):
                 if trials[i] != trials[j]:
-                    d = 0.0
-                    for f in range(grouped.shape[1]):
-                        r = grouped[i, f] - grouped[j, f]
-                        d += r * r
-                    out[i] = min(out[i], d)
+                    out[i] = min(out[i], _squared(grouped, i, grouped, j))
     return out
 
 
