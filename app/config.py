@@ -79,6 +79,15 @@ class Settings(BaseSettings):
     promotion_threshold: int = Field(
         10, ge=1, description="Real samples after which a novel class becomes a known class."
     )
+    grow_fraction: float = Field(
+        0.25,
+        ge=0,
+        description="A promotion (a novel class reaching promotion_threshold samples, or a "
+        "known class's new samples) is learnt into the known part without a full refit, by "
+        "methods that can (best), while the samples so learnt since the last full refit stay "
+        "within this share of that refit's samples; beyond it, or at 0, the whole model is "
+        "fitted again.",
+    )
     refit_memory_limit_mb: int = Field(
         0,
         ge=0,

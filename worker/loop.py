@@ -173,7 +173,15 @@ class Worker:
                 model = self._load(s, base.version, base.bundle_sha256)
                 threshold = self.settings.promotion_threshold
                 keep = FIRST_MODEL_SAMPLES if starts_empty(self.settings) else threshold
-                plan = make_plan(s, base, model, jobs, threshold, keep_known=keep)
+                plan = make_plan(
+                    s,
+                    base,
+                    model,
+                    jobs,
+                    threshold,
+                    keep_known=keep,
+                    grow_fraction=self.settings.grow_fraction,
+                )
             refit = plan.rebuild in (Rebuild.FULL, Rebuild.ATTRIBUTES)
             known = known_dataset(s, plan) if refit else None
         # the session is closed: no transaction stays open while training runs

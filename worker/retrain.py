@@ -52,6 +52,8 @@ class Rebuild(StrEnum):
     INCREMENTAL = "incremental"  # the plan's new classes and samples added to the base
     NOVEL_PART = "novel part"  # the base's novel classes dropped, every live one added anew
     ATTRIBUTES = "attributes"  # the attribute parts refitted, every live novel class added anew
+    KNOWN_GROWN = "known grown"  # promoted classes (and known ones' new samples) learnt into
+    # the base's known part without a refit, every live novel class added anew
     FULL = "full"  # fitted again on the stored samples, every live novel class added
 
 
@@ -64,6 +66,9 @@ class Plan:
     new_classes: list[ObjectClass] = field(default_factory=list)
     new_samples: dict[str, list[Sample]] = field(default_factory=dict)
     promote: list[ObjectClass] = field(default_factory=list)
+    # what a known-grown rebuild learns: class name -> the stored samples its known part lacks
+    grow: dict[str, list[Sample]] = field(default_factory=dict)
+    grow_keys: dict[str, str] = field(default_factory=dict)  # their descriptions (keys)
     # promoted classes left with fewer than ``promotion_threshold`` samples: novel again
     demote: list[ObjectClass] = field(default_factory=list)
     novel: list[ObjectClass] = field(default_factory=list)  # every novel class of the new model
@@ -87,11 +92,15 @@ def make_plan(
     claimed: list[Job],
     threshold: int,
     keep_known: int | None = None,
+    grow_fraction: float = 0.0,
 ) -> Plan:
     """``threshold``: samples that promote a novel class; a known enrolled class left with
     fewer than ``keep_known`` (default: ``threshold``) is novel again. A service started
     empty keeps its known classes from ``FIRST_MODEL_SAMPLES`` samples on, as its first
-    model took them."""
+    model took them. ``grow_fraction``: a promotion (or a known class's new samples) is
+    learnt into the base's known part without a refit while the samples so learnt since
+    the last full fit stay within this share of that fit's samples, for methods that can
+    (``learns_known_incrementally``); 0 always refits."""
     keep_known = threshold if keep_known is None else keep_known
     plan = Plan(vocabulary=repo.vocabulary(s))
     claimed_ids = {j.id for j in claimed}
@@ -153,6 +162,7 @@ def make_plan(
     in_base = set(base.sample_ids)
     in_model = []
     full = False  # the model must be fitted again
+    grows = False  # ... or its known part grown, when nothing else needs the refit
     for cls in classes:
         if cls.origin == Origin.ENROLLED and cls.id not in live_classes:
             continue  # failed, or queued for a later round
@@ -163,14 +173,17 @@ def make_plan(
             cls.origin == Origin.DATASET or len(rows) >= keep_known
         ):
             # a promoted class the base lacks as known, or with samples it has not seen
-            full |= cls.name not in reg.known_names or bool(missing)
+            if cls.name not in reg.known_names:
+                plan.grow[cls.name], plan.grow_keys[cls.name] = rows, cls.attribute_key
+            elif missing:
+                plan.grow[cls.name] = missing
         elif cls.kind == ClassKind.KNOWN:  # withdrawals took it below what keeps it known
             plan.demote.append(cls)
             plan.novel.append(cls)
             full = True
         elif len(rows) >= threshold:
             plan.promote.append(cls)
-            full = True
+            plan.grow[cls.name], plan.grow_keys[cls.name] = rows, cls.attribute_key
         else:
             plan.novel.append(cls)
             if cls.name not in reg.all_names:
@@ -184,6 +197,9 @@ def make_plan(
     known_part |= bool(plan.demote)
     attributes = known_values or not same_vocabulary  # what the attribute parts learnt changed
     stale = known_part or novel_part or attributes  # the base holds what the store changed
+    if plan.grow:
+        grows = _may_grow(model, plan.grow, grow_fraction) and not (known_part or attributes)
+        full |= not grows
     if (
         full
         or known_part
@@ -191,6 +207,8 @@ def make_plan(
         or (attributes and not model.attributes_separable)
     ):
         plan.rebuild = Rebuild.FULL
+    elif grows:
+        plan.rebuild = Rebuild.KNOWN_GROWN
     elif attributes:
         plan.rebuild = Rebuild.ATTRIBUTES
     elif novel_part:
@@ -199,11 +217,21 @@ def make_plan(
         plan.rebuild = Rebuild.INCREMENTAL
     # Changed attributes make the base hold a class as it no longer is, as a withdrawal
     # does; asked for by PATCH, that is an update.
-    if plan.promote or (full and not stale):
+    if plan.promote or ((full or grows) and not stale):
         plan.reason = VersionReason.PROMOTION
     elif stale and not redescribed and not attributes:
         plan.reason = VersionReason.WITHDRAWAL
     return plan
+
+
+def _may_grow(model: TactileRecognizer, grow: dict[str, list[Sample]], fraction: float) -> bool:
+    """Whether the base model may learn ``grow``'s samples into its known part (see
+    ``make_plan``'s ``grow_fraction``)."""
+    if not model.learns_known_incrementally or fraction <= 0:
+        return False
+    fitted = int(model.metrics.get("n_train_samples", 0))
+    grown = int(model.metrics.get("n_grown_samples", 0))
+    return grown + sum(len(rows) for rows in grow.values()) <= fraction * fitted
 
 
 def make_first_plan(s: Session, claimed: list[Job]) -> Plan:
@@ -286,13 +314,20 @@ def build(
     base's attribute parts on ``known``; a novel-part rebuild starts from the base's known
     part alone. The first model of a service started empty has no base (``model`` None)."""
     vocabulary = plan.vocabulary
-    if plan.rebuild in (Rebuild.FULL, Rebuild.ATTRIBUTES, Rebuild.NOVEL_PART):
+    if plan.rebuild in (
+        Rebuild.FULL,
+        Rebuild.ATTRIBUTES,
+        Rebuild.NOVEL_PART,
+        Rebuild.KNOWN_GROWN,
+    ):
         if plan.rebuild is Rebuild.FULL:
             # off the serving path: a child process under a memory limit (worker/refit.py)
             limit = settings.refit_memory_limit_mb * 2**20 or default_memory_limit()
             model = fit_in_child(settings.method, settings.method_params, known, limit)
         elif plan.rebuild is Rebuild.ATTRIBUTES:
             model = model.with_attributes(known)
+        elif plan.rebuild is Rebuild.KNOWN_GROWN:
+            model = _grown(plan, model.without_novel_classes())
         else:
             model = model.without_novel_classes()
         new_classes = plan.novel
@@ -319,6 +354,15 @@ def build(
     for name, rows in new_samples.items():
         model = model.add_one_shot(name, _samples(model, rows))
     return model
+
+
+def _grown(plan: Plan, model: TactileRecognizer) -> TactileRecognizer:
+    """``model`` with the plan's promoted classes and known classes' new samples learnt into
+    its known part (``with_known_samples``); a class new to it keeps its description."""
+    return model.with_known_samples(
+        {name: _samples(model, rows) for name, rows in plan.grow.items()},
+        {name: plan.vocabulary.vector(key) for name, key in plan.grow_keys.items()},
+    )
 
 
 def known_dataset(s: Session, plan: Plan) -> TactileDataset | BioTacDataset:

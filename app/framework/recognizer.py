@@ -261,6 +261,9 @@ class TactileRecognizer(ABC):
     #: training samples (``with_attributes``): a grown vocabulary or a class's new values
     #: then need no full retrain
     attributes_separable: ClassVar[bool] = False
+    #: True where known classes can be added, or given more samples, without a refit
+    #: (``with_known_samples``): a promotion then needs no full retrain
+    learns_known_incrementally: ClassVar[bool] = False
     #: the method's own defaults for featurizer options its ``featurizer_params`` leaves
     #: out (the featurizer's defaults for the rest); documented with that parameter
     _featurizer_defaults: ClassVar[dict[str, Any]] = {}
@@ -793,6 +796,75 @@ class TactileRecognizer(ABC):
         new.registry.novel_samples[class_name] = x if prev is None else np.concatenate([prev, x])
         new._refit_novel(**options)
         return new
+
+    def with_known_samples(
+        self,
+        samples: Mapping[str, np.ndarray],
+        attribute_vectors: Mapping[str, Any] | None = None,
+    ) -> Self:
+        """Known classes learnt without a refit: a new recognizer in which every class named
+        in ``samples`` (name -> its samples, as for ``add_one_shot``) is known and has learnt
+        those samples. A known class gains them; a novel class is promoted (with the
+        attribute vector it was enrolled with); a new name becomes a known class, described
+        by ``attribute_vectors[name]`` (not known, NaN, where the method takes graded
+        attributes and none is given). The other novel classes stay. Only for methods with
+        ``learns_known_incrementally``; the result differs from a model fitted on everything
+        by what the method's ``_grow_known`` documents."""
+        self._require_fitted()
+        if not self.learns_known_incrementally:
+            raise UnsupportedOperationError(
+                f"method '{self.method}' cannot learn known classes without a refit; fit it "
+                "again instead"
+            )
+        if not isinstance(samples, Mapping) or not samples:
+            raise FrameworkError("give at least one class: a mapping of class name -> samples")
+        vectors = dict(attribute_vectors or {})
+        reg = self.registry
+        new = copy.deepcopy(self)
+        nreg = new.registry
+        known = list(reg.known_names)
+        added: list[np.ndarray] = []
+        grown: list[tuple[int, np.ndarray]] = []  # (known class index, its samples)
+        for name, x in samples.items():
+            name = str(name)
+            if not name.strip():
+                raise DuplicateClassError("a class name must not be empty")
+            if name in vectors and name in reg.known_names:
+                raise FrameworkError(f"class '{name}' is known already: it keeps its attributes")
+            if name in reg.novel_names:
+                i = nreg.novel_names.index(name)
+                vector = nreg.novel_attributes[i]
+                nreg.novel_names = nreg.novel_names[:i] + nreg.novel_names[i + 1 :]
+                nreg.novel_attributes = np.delete(nreg.novel_attributes, i, axis=0)
+                nreg.novel_samples.pop(name, None)
+            elif name not in reg.known_names:
+                if name in vectors:
+                    vector = self.validate_attribute_vectors([vectors[name]])[0]
+                elif self.graded_attributes or not self.has_attributes:
+                    vector = np.full(len(reg.attribute_names), np.nan, np.float32)
+                else:
+                    raise AttributeVectorError(f"new known class '{name}' needs its attributes")
+            if name not in known:
+                known.append(name)
+                added.append(np.asarray(vector, np.float32)[None])
+            grown.append((known.index(name), self.validate_samples(x)))
+        nreg.known_names = known
+        if added:
+            nreg.known_attributes = np.concatenate([reg.known_attributes, *added]).astype(
+                np.float32
+            )
+        new._grow_known(
+            np.concatenate([x for _, x in grown]),
+            np.concatenate([np.full(len(x), c, np.int64) for c, x in grown]),
+        )
+        new._refit_novel()
+        return new
+
+    def _grow_known(self, samples: np.ndarray, labels: np.ndarray) -> None:
+        """Learn ``samples`` of known classes ``labels`` (indices into the registry's known
+        classes, which already lists any new ones); ``learns_known_incrementally`` methods
+        override it."""
+        raise UnsupportedOperationError(f"method '{self.method}' cannot grow its known part")
 
     def without_novel_classes(self) -> Self:
         """A new recognizer with the known part only: no novel class, no one-shot sample.

@@ -166,6 +166,7 @@ class BestRecognizer(TactileRecognizer):
     novel_part_separable = True  # enrolments never touch the forest or the attribute models
     graded_attributes = True  # soft targets for DAP, imputed values for the autoencoder
     attributes_separable = True  # a new vocabulary refits the attribute models, not the forest
+    learns_known_incrementally = True  # promotion counts samples into the forest's leaves
     learns_classes_from_samples = True  # one-shot signatures need no attribute
     _featurizer_defaults = {"n_offsets": 1}  # see featurizer_params
     #: batches of at most this many samples take ``SmallBatchScorer`` (the same bits with a
@@ -364,6 +365,28 @@ class BestRecognizer(TactileRecognizer):
             self.known_.cues_model.scaled(flatten(dataset.samples)), dataset.labels
         )
         self.metrics = {**self.metrics, "n_attributes": len(self.registry.attribute_names)}
+
+    def _grow_known(self, samples: np.ndarray, labels: np.ndarray) -> None:
+        """Known classes learnt without a refit (a promotion): the forest keeps its splits, and
+        the samples join the novelty cues'
+        reference samples (``KnownModel.with_samples``); leaves the samples reach are grown
+        further on the samples there, seen and new. The scaler, the feature weights, the
+        novelty threshold and the attribute parts stay as fitted: the attribute classifiers
+        and the autoencoder never see a promoted class's samples until the next full fit.
+        ``metrics["n_grown_samples"]`` counts the samples learnt so since that fit."""
+        grown = int(self.metrics.get("n_grown_samples", 0))
+        self.known_ = self.known_.with_samples(
+            flatten(samples),
+            labels,
+            len(self.registry.known_names),
+            self.max_features,
+            int(self.seed) + grown,  # another draw of split points for every promotion
+        )
+        self.metrics = {
+            **self.metrics,
+            "n_known_classes": len(self.registry.known_names),
+            "n_grown_samples": grown + len(samples),
+        }
 
     def _reset_novel(self) -> None:
         n_known = len(self.registry.known_names)

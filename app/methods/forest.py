@@ -34,6 +34,9 @@ _KEYS = (
     "leaf_class",
     "leaf_value",
 )
+#: optional state: training samples per leaf (weights of ``with_samples``); bundles made
+#: before it lack it, and each leaf then counts as one sample
+_COUNTS = "leaf_count"
 
 
 class FlatForest:
@@ -52,6 +55,11 @@ class FlatForest:
         self.leaf_ptr = np.asarray(arrays["leaf_ptr"], np.int64)
         self.leaf_class = np.asarray(arrays["leaf_class"], np.int32)
         self.leaf_value = np.asarray(arrays["leaf_value"], np.float64)
+        n_leaves = len(self.leaf_ptr) - 1
+        counts = arrays.get(_COUNTS)
+        self.leaf_count = (
+            np.ones(n_leaves, np.int32) if counts is None else np.asarray(counts, np.int32)
+        )
         self.n_classes = int(n_classes)
         self.n_features = int(n_features)
         self._nodes: np.ndarray | None = None  # the walk's packed node records, built on first use
@@ -85,6 +93,8 @@ class FlatForest:
             or (np.diff(self.leaf_ptr) < 0).any()
         ):
             raise ValueError("forest leaf distributions are inconsistent")
+        if self.leaf_count.shape != (len(self.leaf_ptr) - 1,) or (self.leaf_count < 1).any():
+            raise ValueError("forest leaf sample counts do not match its leaves")
         if len(self.leaf_class) and (
             self.leaf_class.min() < 0 or self.leaf_class.max() >= self.n_classes
         ):
@@ -106,10 +116,11 @@ class FlatForest:
         arrays = _ForestArrays()
         for est in forest.estimators_:
             t = est.tree_
-            values = t.value[t.children_left < 0, 0, :].astype(np.float64)
+            leaf = t.children_left < 0
+            values = t.value[leaf, 0, :].astype(np.float64)
             values /= np.maximum(values.sum(axis=1, keepdims=True), 1e-300)
             rows, cols = np.nonzero(values)
-            arrays.add(t, rows, cols, values[rows, cols])
+            arrays.add(t, rows, cols, values[rows, cols], t.n_node_samples[leaf])
         return cls(arrays.done(), len(classes), int(forest.n_features_in_))
 
     @classmethod
@@ -167,10 +178,122 @@ class FlatForest:
             for j, est in enumerate(et.estimators_):
                 t = est.tree_
                 leaf_number = np.cumsum(t.children_left < 0) - 1  # node -> its leaf's ordinal
-                rows, cols, values = _leaf_distributions(leaf_number[reached[:, j]], y, n_classes)
-                arrays.add(t, rows, cols, values)
+                reached_leaf = leaf_number[reached[:, j]]
+                rows, cols, values = _leaf_distributions(reached_leaf, y, n_classes)
+                n_leaves = int(leaf_number[-1]) + 1
+                arrays.add(t, rows, cols, values, np.bincount(reached_leaf, minlength=n_leaves))
             del et, reached
         return cls(arrays.done(), n_classes, x.shape[1])
+
+    def with_samples(
+        self,
+        x: np.ndarray,
+        y: np.ndarray,
+        n_classes: int,
+        seen_x: np.ndarray,
+        seen_y: np.ndarray,
+        max_features: Any,
+        seed: int,
+    ) -> FlatForest:
+        """A forest that has also learnt samples ``x`` (N, D) of classes ``y`` (in 0 …
+        ``n_classes``-1, ``n_classes`` at least this forest's), without growing it again.
+
+        ``seen_x``, ``seen_y``: the samples it was grown on (or those it has learnt since).
+        In every tree, a leaf that the new samples reach is grown further on its own samples,
+        seen and new, by scikit-learn's ``ExtraTreeClassifier`` (``max_features`` as grown),
+        until its leaves are pure; a leaf that stays one class only counts the new samples.
+        The splits above those leaves were chosen without the new samples, so the result
+        differs from a forest grown on everything (bounded in tests/methods/test_grow_known.py).
+        """
+        from sklearn.tree import ExtraTreeClassifier
+
+        y, seen_y = np.asarray(y, np.int64), np.asarray(seen_y, np.int64)
+        if n_classes < self.n_classes or len(y) != len(x) or len(seen_y) != len(seen_x):
+            raise ValueError("with_samples needs one class per sample and no fewer classes")
+        if len(y) and (y.min() < 0 or y.max() >= n_classes):
+            raise ValueError(f"sample classes must lie in 0 … {n_classes - 1}")
+        x, seen_x = self._inputs(x), self._inputs(seen_x)
+        new_leaf, seen_leaf = self.apply(x), self.apply(seen_x)  # (N, trees) leaf nodes
+        feature, threshold = self.feature.copy(), self.threshold.copy()
+        left, right, leaf_of_node = self.left.copy(), self.right.copy(), self.leaf_of_node.copy()
+        n_nodes, n_leaves = len(feature), len(self.leaf_count)
+        # leaf entries to add, as (leaf, class, samples); old ones as value x count
+        old_rows = np.repeat(np.arange(n_leaves), np.diff(self.leaf_ptr))
+        rows = [old_rows]
+        cols = [self.leaf_class.astype(np.int64)]
+        mass = [self.leaf_value * self.leaf_count[old_rows]]
+        counts = [self.leaf_count.astype(np.int64)]
+        extra = {k: [] for k in ("feature", "threshold", "left", "right", "leaf_of_node")}
+        rng = np.random.default_rng(seed)
+        for t in range(self.n_trees):
+            reached = _members(new_leaf[:, t])
+            column = seen_leaf[:, t]
+            near = np.flatnonzero(np.isin(column, list(reached)))
+            seen_at = {n: near[i] for n, i in _members(column[near]).items()}
+            for node, members in reached.items():
+                here = seen_at.get(node, np.zeros(0, np.int64))
+                labels = np.concatenate([seen_y[here], y[members]])
+                leaf = int(self.leaf_of_node[node])
+                sub = None
+                if len(np.unique(labels)) > 1:
+                    local = ExtraTreeClassifier(
+                        max_features=max_features, random_state=int(rng.integers(2**31))
+                    ).fit(np.concatenate([seen_x[here], x[members]]), labels)
+                    sub = local.tree_ if local.tree_.node_count > 1 else None
+                if sub is None:  # one class, or no split separates them: count them in
+                    found, k = np.unique(y[members], return_counts=True)
+                    rows.append(np.full(len(found), leaf))
+                    cols.append(found)
+                    mass.append(k.astype(np.float64))
+                    counts[0][leaf] += len(members)
+                    continue
+                # graft: the leaf becomes the subtree's root, its other nodes go at the end
+                base = n_nodes - 1  # subtree node i > 0 -> global base + i
+                is_leaf = sub.children_left < 0
+                glob = np.r_[node, base + np.arange(1, sub.node_count)]
+                leaf_ids = np.full(sub.node_count, -1, np.int64)
+                leaf_ids[is_leaf] = n_leaves + np.arange(int(is_leaf.sum()))
+                feat = np.where(is_leaf, -1, sub.feature)
+                lft = np.where(is_leaf, -1, glob[np.maximum(sub.children_left, 0)])
+                rgt = np.where(is_leaf, -1, glob[np.maximum(sub.children_right, 0)])
+                feature[node], threshold[node] = feat[0], sub.threshold[0]
+                left[node], right[node], leaf_of_node[node] = lft[0], rgt[0], -1
+                extra["feature"].append(feat[1:])
+                extra["threshold"].append(sub.threshold[1:])
+                extra["left"].append(lft[1:])
+                extra["right"].append(rgt[1:])
+                extra["leaf_of_node"].append(leaf_ids[1:])
+                value = sub.value[is_leaf, 0, :]
+                lr, lc = np.nonzero(value)
+                share = value[lr, lc] / value[lr].sum(axis=1)
+                n_here = sub.n_node_samples[is_leaf]
+                rows.append(n_leaves + lr)
+                cols.append(local.classes_[lc])
+                mass.append(share * n_here[lr])
+                counts.append(n_here.astype(np.int64))
+                n_nodes += sub.node_count - 1
+                n_leaves += int(is_leaf.sum())
+        rows_all, cols_all = np.concatenate(rows), np.concatenate(cols)
+        mass_all = np.concatenate(mass)
+        order = np.lexsort((cols_all, rows_all))
+        rows_all, cols_all, mass_all = rows_all[order], cols_all[order], mass_all[order]
+        first = np.r_[True, (rows_all[1:] != rows_all[:-1]) | (cols_all[1:] != cols_all[:-1])]
+        mass_all = np.add.reduceat(mass_all, np.flatnonzero(first))
+        rows_all, cols_all = rows_all[first], cols_all[first]
+        leaf_count = np.concatenate(counts)
+        arrays = {
+            "feature": np.concatenate([feature, *extra["feature"]]),
+            "threshold": np.concatenate([threshold, *extra["threshold"]]),
+            "left": np.concatenate([left, *extra["left"]]),
+            "right": np.concatenate([right, *extra["right"]]),
+            "roots": self.roots,
+            "leaf_of_node": np.concatenate([leaf_of_node, *extra["leaf_of_node"]]),
+            "leaf_ptr": np.r_[0, np.cumsum(np.bincount(rows_all, minlength=len(leaf_count)))],
+            "leaf_class": cols_all.astype(np.int32),
+            "leaf_value": mass_all / np.bincount(rows_all, weights=mass_all)[rows_all],
+            _COUNTS: leaf_count.astype(np.int32),
+        }
+        return FlatForest(arrays, n_classes, self.n_features)
 
     # --------------------------------------------------------------- inference
     def _inputs(self, x: np.ndarray) -> np.ndarray:
@@ -231,7 +354,7 @@ class FlatForest:
 
     # ------------------------------------------------------------ persistence
     def get_state(self) -> dict[str, np.ndarray]:
-        return {k: getattr(self, k) for k in _KEYS}
+        return {**{k: getattr(self, k) for k in _KEYS}, _COUNTS: self.leaf_count}
 
     @classmethod
     def from_state(
@@ -248,13 +371,23 @@ class _ForestArrays:
     """Node and leaf arrays of trees flattened one after another (``FlatForest``'s state)."""
 
     def __init__(self) -> None:
-        self.parts: dict[str, list[np.ndarray]] = {k: [] for k in _KEYS if k != "leaf_ptr"}
+        self.parts: dict[str, list[np.ndarray]] = {
+            k: [] for k in (*_KEYS, _COUNTS) if k != "leaf_ptr"
+        }
         self.counts: list[np.ndarray] = []
         self.offset = self.n_leaves = 0
 
-    def add(self, tree: Any, rows: np.ndarray, cols: np.ndarray, values: np.ndarray) -> None:
+    def add(
+        self,
+        tree: Any,
+        rows: np.ndarray,
+        cols: np.ndarray,
+        values: np.ndarray,
+        leaf_count: np.ndarray,
+    ) -> None:
         """A scikit-learn ``tree_`` and its leaves' class distributions: nonzero entries
-        (leaf ordinal ``rows``, class ``cols``, ``values``), ordered by leaf then class."""
+        (leaf ordinal ``rows``, class ``cols``, ``values``), ordered by leaf then class, and
+        the training samples that reach each leaf."""
         n, off = tree.node_count, self.offset
         is_leaf = tree.children_left < 0
         leaves = int(is_leaf.sum())
@@ -269,6 +402,7 @@ class _ForestArrays:
         p["leaf_of_node"].append(ids)
         p["leaf_class"].append(np.asarray(cols, np.int32))
         p["leaf_value"].append(np.asarray(values, np.float64))
+        p[_COUNTS].append(np.maximum(np.asarray(leaf_count), 1).astype(np.int32))
         self.counts.append(np.bincount(rows, minlength=leaves))
         self.offset += n
         self.n_leaves += leaves
@@ -277,6 +411,13 @@ class _ForestArrays:
         out = {k: np.concatenate(v) for k, v in self.parts.items()}
         out["leaf_ptr"] = np.r_[0, np.cumsum(np.concatenate(self.counts))].astype(np.int64)
         return out
+
+
+def _members(nodes: np.ndarray) -> dict[int, np.ndarray]:
+    """Node -> the row indices of ``nodes`` that hold it."""
+    order = np.argsort(nodes, kind="stable")
+    found, starts = np.unique(nodes[order], return_index=True)
+    return {int(n): part for n, part in zip(found, np.split(order, starts[1:]), strict=True)}
 
 
 def _leaf_distributions(

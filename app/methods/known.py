@@ -129,6 +129,45 @@ class ForestCues:
             _offsets(distances, np.asarray(y), np.asarray(trials), n_classes),
         )
 
+    def with_samples(
+        self, x: np.ndarray, y: np.ndarray, n_classes: int, max_features, seed: int
+    ) -> ForestCues:
+        """These cues with samples ``x`` (N, D) of classes ``y`` learnt without a refit
+        (``FlatForest.with_samples``): the scaler, the feature weights, the distance basis and
+        the global offsets stay as fitted; the samples join the reference (and its index), and
+        a new class's trial spacing is measured among its own samples, each taken as a trial
+        of its own (the median of the known classes' spacings for a class of one sample)."""
+        z = self.scaled(x)
+        zw = z * self.weights
+        y = np.asarray(y, np.int64)
+        distances = self.distances.with_points(zw)
+        spacing = []
+        fallback = float(np.median(self.offsets[2:]))
+        for c in range(self.forest.n_classes, n_classes):
+            pts = distances.coordinates(zw[y == c]).astype(np.float64)
+            if len(pts) < 2:
+                spacing.append(fallback)
+                continue
+            d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(axis=2)
+            np.fill_diagonal(d2, np.inf)
+            spacing.append(float(np.median(np.log(d2.min(axis=1) + _EPS))))
+        return ForestCues(
+            self.scaler,
+            self.forest.with_samples(
+                z,
+                y,
+                n_classes,
+                self.reference / self.weights,  # the scaled samples it has learnt
+                self.reference_labels,
+                max_features,
+                seed,
+            ),
+            self.weights,
+            distances,
+            np.concatenate([self.reference_labels, y]),
+            np.r_[self.offsets, spacing],
+        )
+
     def scaled(self, x: np.ndarray) -> np.ndarray:
         return self.scaler.transform(x)
 
@@ -174,6 +213,7 @@ class ForestCues:
         out = {f"forest/{k}": v for k, v in self.forest.get_state().items()}
         out.update({f"scaler/{k}": v for k, v in self.scaler.get_state().items()})
         out["weights"], out["reference"] = self.weights, self.reference
+        out["center"] = self.distances.center  # a grown reference's mean is not its centre
         if self.distances.basis is not None:
             out["basis"] = self.distances.basis
         if self.distances.index is not None:
@@ -206,7 +246,10 @@ class ForestCues:
             forest,
             weights,
             ReferenceDistances(
-                reference, basis, None if "index" not in arrays else arrays["index"]
+                reference,
+                basis,
+                None if "index" not in arrays else arrays["index"],
+                center=arrays.get("center"),  # absent in bundles made before growth: the mean
             ),
             arrays["reference_labels"],
             arrays["offsets"],
@@ -240,6 +283,7 @@ class ReferenceDistances:
         reference: np.ndarray,
         basis: np.ndarray | None = None,
         index: ApproximateNeighbours | np.ndarray | None = None,
+        center: np.ndarray | None = None,
     ) -> None:
         self.reference = np.asarray(reference, np.float32)
         self.basis = None if basis is None else np.ascontiguousarray(basis, np.float32)
@@ -247,7 +291,15 @@ class ReferenceDistances:
             self.basis is not None and self.basis.shape[0] != self.reference.shape[1]
         ):
             raise ValueError("novelty reference samples and distance basis do not match")
-        self.center = self.reference.mean(axis=0, dtype=np.float64).astype(np.float32)
+        # the reference mean; given when samples join a fitted reference, whose residual norms
+        # (and index) depend on it
+        self.center = (
+            self.reference.mean(axis=0, dtype=np.float64).astype(np.float32)
+            if center is None
+            else np.asarray(center, np.float32)
+        )
+        if self.center.shape != (self.reference.shape[1],):
+            raise ValueError("novelty reference centre does not match the inputs")
         self._ref, self._ref_res = self._split(self.reference)
         self._ref_sq = (self._ref**2).sum(axis=1)
         self.index: ApproximateNeighbours | None = None
@@ -270,6 +322,18 @@ class ReferenceDistances:
         out = cls(reference, basis)
         if 0 < approximate_above < len(reference):
             out._index(ApproximateNeighbours.build)
+        return out
+
+    def with_points(self, q: np.ndarray) -> ReferenceDistances:
+        """These distances with the reference samples ``q`` (N, D) added: same basis and
+        centre, and the index (if any) a copy with their points added."""
+        out = ReferenceDistances(
+            np.concatenate([self.reference, np.asarray(q, np.float32)]),
+            self.basis,
+            center=self.center,
+        )
+        if self.index is not None:
+            out._index(self.index.with_points(self.coordinates(q)))
         return out
 
     def _index(self, index: ApproximateNeighbours | np.ndarray | Callable) -> None:
@@ -539,6 +603,13 @@ class KnownModel:
         # derives share it, instead of copying the reference samples and the index (300 MB
         # at 10,000 objects) for every class or sample enrolled.
         return self
+
+    def with_samples(
+        self, x_flat: np.ndarray, y: np.ndarray, n_classes: int, max_features, seed: int
+    ) -> KnownModel:
+        """A new model with these samples learnt without a refit (``ForestCues.with_samples``)."""
+        cues = self.cues_model.with_samples(x_flat, y, n_classes, max_features, seed)
+        return KnownModel(cues, self.weights)
 
     def novelty(self, x_flat: np.ndarray, block: int = 1024) -> np.ndarray:
         """The novelty scores alone, ``block`` samples at a time: a block's posteriors are

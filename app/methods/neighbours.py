@@ -40,6 +40,14 @@ class ApproximateNeighbours:
         index.add(points)
         return cls(index, *points.shape)
 
+    def with_points(self, points: np.ndarray) -> ApproximateNeighbours:
+        """A copy of this index with ``points`` added after its own (ids continue)."""
+        import faiss
+
+        index = faiss.clone_index(self.index)
+        index.add(np.ascontiguousarray(points, np.float32))
+        return ApproximateNeighbours(index, index.ntotal, index.d)
+
     def search(self, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         """(squared distances (N, k) float64 ascending, ids (N, k); -1 and inf where the
         index holds fewer than k points)."""

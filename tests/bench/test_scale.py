@@ -10,7 +10,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 FIELDS = (
-    "objects", "fit_s", "fit_peak_gb", "bundle_mb", "enrol_ms", "one_shot_ms",
+    "objects", "fit_s", "fit_peak_gb", "bundle_mb", "enrol_ms", "one_shot_ms", "promote_s",
     "recognise_1_us", "batch_per_sample_us", "throughput_per_s", "known_acc", "nn1_acc",
     "zsl_acc", "vectors_distinct", "novel_vectors_taken",
 )  # fmt: skip
@@ -35,6 +35,7 @@ def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
     for r in report["sizes"]:
         assert set(FIELDS) <= set(r)
         assert r["fit_s"] > 0 and r["fit_peak_gb"] > 0 and r["recognise_1_us"] > 0
+        assert 0 < r["promote_s"] < r["fit_s"]
         for acc in ("known_acc", "nn1_acc", "zsl_acc"):
             assert 0.0 <= r[acc] <= 1.0
         assert r["vectors_distinct"] <= r["objects"]

@@ -197,7 +197,7 @@ def test_promotion_to_known_after_threshold_real_samples(client, app, worker, da
     worker.run_once()
     assert client.get(f"/v1/classes/{cid}").json()["kind"] == "novel"
     last = add_sample(client, cid, dataset.samples[1] + 0.01)
-    assert worker.run_once() == 1  # reaches the threshold: full retrain
+    assert worker.run_once() == 1  # reaches the threshold: full retrain (``paper``)
     assert job(client, last["job"]["id"])["status"] == "succeeded"
     cls = client.get(f"/v1/classes/{cid}").json()
     assert cls["kind"] == "known" and cls["in_active_model"] is True and cls["n_samples"] == 2
@@ -206,6 +206,31 @@ def test_promotion_to_known_after_threshold_real_samples(client, app, worker, da
     assert {"name": "promoted", "kind": "known"} in active["classes"]
     assert sum(c["kind"] == "known" for c in active["classes"]) == dataset.n_classes + 1
     assert app.state.service.holder.current.recognizer.registry.known_names[-1] == "promoted"
+
+
+def test_promotions_grow_the_known_part_until_the_share_then_refit(best_service, best_base):
+    """With ``best``, promotions are learnt without a refit while the samples so learnt stay within
+    ``grow_fraction`` of the fitted ones (the model counts them); the one beyond refits
+    everything (a fresh fit has learnt nothing so)."""
+    client, app, worker = best_service
+    dataset = best_base[1]
+    settings = app.state.service.settings
+    settings.promotion_threshold = 2
+    fitted = app.state.service.holder.current.recognizer.metrics["n_train_samples"]
+    settings.grow_fraction = 3.5 / fitted  # room for one promotion of 2 samples, not two
+    for name, rows in (("first", (0, 1)), ("second", (2, 3))):
+        cid = register(client, dataset, name, rows[0])["class"]["id"]
+        worker.run_once()
+        for r in rows:
+            add_sample(client, cid, dataset.samples[r] + 0.01)
+        worker.run_once()
+        assert client.get(f"/v1/classes/{cid}").json()["kind"] == "known"
+        assert client.get("/v1/models/active").json()["reason"] == "promotion"
+        served = app.state.service.holder.current.recognizer
+        if name == "first":
+            assert served.metrics["n_grown_samples"] == 2
+    assert "n_grown_samples" not in served.metrics  # beyond the share: fitted again
+    assert served.registry.known_names[-2:] == ["first", "second"]
 
 
 def test_rollback_then_retrain_brings_enrollments_back(client, worker, dataset):
@@ -324,6 +349,7 @@ def test_a_promotion_whose_refit_runs_out_of_memory_fails_clearly_and_the_model_
     sample with room for the refit promotes it."""
     settings = app.state.service.settings
     settings.promotion_threshold = 2
+    settings.grow_fraction = 0  # every promotion refits
     cid = register(client, dataset, "heavy")["class"]["id"]
     worker.run_once()
     add_sample(client, cid, dataset.samples[0] + 0.01)
