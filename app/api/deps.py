@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import hmac
 import json
@@ -28,6 +29,7 @@ from app.service.metrics import Metrics
 from app.service.recognition import RecognitionService
 from app.store import repo
 from app.store.bundles import ExportCache
+from app.words.interpret import TextInterpreter
 
 # async: trivial dependencies then run on the event loop, not in the thread pool
 
@@ -362,3 +364,13 @@ AdminAccess = Depends(require_admin)
 JsonBody = Depends(require_json)  # 415 for a body that is not JSON
 IdempotencyDep = Annotated[Idempotency, Depends(get_idempotency)]
 PageDep = Annotated[Page, Depends(get_page)]
+
+
+@functools.cache
+def get_interpreter() -> TextInterpreter:
+    """The process's reader of descriptions in words; its sentence-embedding model loads on
+    the first text that needs it."""
+    return TextInterpreter()
+
+
+InterpreterDep = Annotated[TextInterpreter, Depends(get_interpreter)]

@@ -8,6 +8,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, StringConstraints, model_validator
 
 from app.store.enums import ClassKind, JobKind, JobStatus, Origin, VersionReason
+from app.words.interpret import MAX_TEXT
 
 # One tactile sample: a [C, T] tactile image or a flat [D] feature vector.
 SampleData = list[list[float]] | list[float]
@@ -81,12 +82,50 @@ class AttributeChanged(BaseModel):
     )
 
 
+class TextIn(Strict):
+    """A description of an object in a person's own words."""
+
+    text: str = Field(
+        description='What the object feels like, in words: graded ("slightly rough", '
+        '"very hard"), negated ("not hard"), synonyms and paraphrases ("spongy", '
+        '"slick", "soaks up water"), or just a name ("steel vase"). At most '
+        f"{MAX_TEXT} characters.",
+        examples=["a soft, spongy foam block that soaks up water"],
+    )
+
+
+class ReadingOut(BaseModel):
+    """One attribute value read from a text, and the words that gave it."""
+
+    attribute: str
+    value: float = Field(description="In [0, 1]: 1 has it, 0 has not, between: somewhat.")
+    words: str = Field(description="The part of the text that gave the value.")
+    source: str = Field(
+        description="`word`: a word about the feel; `implied`: what a word says of its "
+        'opposite ("soft": not hard); `material`: what such material usually is '
+        '("steel": cool); `embedding`: a word the lexicon lacks, matched by the sentence-'
+        "embedding model."
+    )
+
+
+class TextRead(BaseModel):
+    values: dict[str, float] = Field(
+        description="Attribute -> value, for the attributes the text speaks of; the others are "
+        "absent (not known), never 0.",
+        examples=[{"soft": 0.9, "hard": 0.1, "squishy": 0.9, "absorbent": 0.9}],
+    )
+    readings: list[ReadingOut]
+    not_mentioned: list[str] = Field(description="Attributes in use the text says nothing of.")
+
+
 # --------------------------------------------------------------------- classes
 class ClassDescription(Strict):
     """How an operator describes an object: by attribute names (a list: these it has, every
     other it has not), by values (a mapping of names to values in [0, 1], or null for not
     known; attributes left out are not known, or, in a `PATCH`, keep their value), or by a
-    vector in `GET /v1/attributes` order (null: not known). At least one value above 0."""
+    vector in `GET /v1/attributes` order (null: not known), or in words (`description`: the
+    values read from it, `POST /v1/attributes/interpret`), alone or beside values it must not
+    contradict. At least one value above 0."""
 
     attributes: list[str] | dict[str, AttributeValue | None] | None = Field(
         None,
@@ -99,11 +138,20 @@ class ClassDescription(Strict):
         description="A value in [0, 1] (or null: not known) per attribute, in "
         "`GET /v1/attributes` order.",
     )
+    description: str | None = Field(
+        None,
+        description="The object in words; the class keeps the text and the values read from "
+        f"it. At most {MAX_TEXT} characters. Values given beside it win where the text says "
+        "nothing; where both speak of an attribute they must agree (within 0.5).",
+        examples=["a soft, spongy foam block that soaks up water", "steel vase"],
+    )
 
     @model_validator(mode="after")
     def _one_description(self) -> ClassDescription:
-        if (self.attributes is None) == (self.attribute_vector is None):
-            raise ValueError("give exactly one of 'attributes' or 'attribute_vector'")
+        if self.attributes is not None and self.attribute_vector is not None:
+            raise ValueError("give one of 'attributes' or 'attribute_vector', not both")
+        if self.attributes is None and self.attribute_vector is None and self.description is None:
+            raise ValueError("give 'attributes', 'attribute_vector' or 'description'")
         return self
 
 
@@ -128,10 +176,11 @@ class ClassCreate(ClassDescription):
     def _one_description(self) -> ClassCreate:
         described = [f for f in ("attributes", "attribute_vector") if getattr(self, f) is not None]
         shown = [f for f in ("samples", "trials") if getattr(self, f) is not None]
-        if len(described) > 1 or len(shown) > 1 or not (described or shown):
+        worded = self.description is not None
+        if len(described) > 1 or len(shown) > 1 or not (described or shown or worded):
             raise ValueError(
-                "give one of 'attributes' or 'attribute_vector' (a description), one of "
-                "'samples' or 'trials' (the object's touches), or one of each"
+                "give one of 'attributes' or 'attribute_vector' and/or 'description' (a "
+                "description), one of 'samples' or 'trials' (the object's touches), or both"
             )
         return self
 
@@ -146,6 +195,10 @@ class ClassOut(BaseModel):
         description="Every known value, by attribute name; attributes not known are absent.",
     )
     n_samples: int = Field(description="Real tactile samples stored for the class.")
+    description: str | None = Field(None, description="Its description in words, if any.")
+    description_readings: list[ReadingOut] | None = Field(
+        None, description="The values read from `description`, with the words behind each."
+    )
     created_at: datetime
     in_active_model: bool = Field(description="Whether the model now serving covers the class.")
 

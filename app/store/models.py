@@ -95,6 +95,9 @@ class ObjectClass(Base):
     origin: Mapped[str] = mapped_column(String(10))  # Origin
     # the description, one token per attribute position: "1,0,0.5,,1" (app.store.vocabulary)
     attribute_key: Mapped[str] = mapped_column(String(2600), index=True)
+    # a description in words, and what was read from it (app.words.interpret)
+    description: Mapped[str | None] = mapped_column(Text)
+    description_readings: Mapped[list | None] = mapped_column(JSON)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     promoted_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
     # set when an operator withdraws a wrongly enrolled class: it leaves every later

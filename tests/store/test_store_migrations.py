@@ -15,7 +15,7 @@ from app.store import migrate
 from app.store.db import make_engine
 from tests.service_fixtures import fresh_postgres_database, postgres_url, require_postgres
 
-HEAD = "0007"
+HEAD = "0008"
 PG_URL = postgres_url()
 
 TABLES = {

@@ -9,13 +9,24 @@ from app.api.deps import (
     AdminAccess,
     Enroller,
     IdempotencyDep,
+    InterpreterDep,
     JsonBody,
     MetricsDep,
     ReadAccess,
     SessionDep,
 )
+from app.api.descriptions import read_text, readings_out
 from app.api.problems import Problem
-from app.api.schemas import AttributeChanged, AttributeCreate, AttributeList, AttributeOut, JobOut
+from app.api.schemas import (
+    AttributeChanged,
+    AttributeCreate,
+    AttributeList,
+    AttributeOut,
+    JobOut,
+    ReadingOut,
+    TextIn,
+    TextRead,
+)
 from app.service.keys import Principal
 from app.store import repo
 from app.store.enums import ClassKind, JobKind, Origin
@@ -41,6 +52,29 @@ def list_attributes(session: SessionDep) -> AttributeList:
 
 
 @router.post(
+    "/interpret",
+    response_model=TextRead,
+    dependencies=[ReadAccess, JsonBody],
+    responses=problems.responses(409, 415, 422, 503),
+)
+def interpret_text(body: TextIn, session: SessionDep, interpreter: InterpreterDep) -> TextRead:
+    """Read attribute values from a description in words, as registering a class with a
+    `description` would, without storing anything: graded ("slightly rough" 0.6, "very hard"
+    1), negated ("not hard" 0), through synonyms, paraphrases and materials ("spongy",
+    "slick", "soaks up water", "steel"), each with the words that gave it. Attributes the
+    text says nothing of are absent, never 0. A 422 names the closest attributes when the
+    text names none; the first text a process reads loads the sentence-embedding model
+    (about 5 s)."""
+    vocab = repo.vocabulary(session)
+    read = read_text(body.text, vocab, interpreter, "text")
+    return TextRead(
+        values={a: r.value for a, r in read.items()},
+        readings=readings_out(read),
+        not_mentioned=[a for a in vocab.active if a not in read],
+    )
+
+
+@router.post(
     "",
     status_code=202,
     response_model=AttributeChanged,
@@ -54,9 +88,11 @@ def add_attribute(
     response: Response,
     idempotency: IdempotencyDep,
     principal: Enroller,
+    interpreter: InterpreterDep,
 ) -> AttributeChanged:
     """Add an attribute to the vocabulary, after the existing ones (existing vectors keep
-    their meaning), with its value for the classes it is known for. It is in
+    their meaning), with its value for the classes it is known for; a class described in
+    words and given no value here gets the value read from its text, if it speaks of it. It is in
     `GET /v1/attributes` and accepted by registration and `PATCH` at once; the served model
     learns it when the job succeeds (`best` refits only its attribute classifiers, the
     paper's pipeline is fitted again with G's wider input). Classes given no value are
@@ -78,10 +114,25 @@ def add_attribute(
         classes[n].id: grown.key({body.name: v}, base=classes[n].attribute_key)
         for n, v in body.values.items()
     }
+    worded = {}  # class id -> (class, its reading of the new word)
+    for cls in classes.values():
+        if cls.description and cls.name not in body.values:
+            reading = interpreter.value_of(cls.description, body.name)
+            if reading is not None:
+                worded[cls.id] = (cls, reading)
+                keys[cls.id] = grown.key({body.name: reading.value}, base=cls.attribute_key)
     _check_distinct(session, grown, keys, f"values.{body.name}")
     with idempotency.writing(session, recheck=lambda: _check_new(session, body.name)):
         attribute = repo.add_attribute(session, body.name)
         repo.describe(session, keys)
+        for cls, r in worded.values():
+            read = ReadingOut(attribute=r.attribute, value=r.value, words=r.words, source=r.source)
+            repo.set_description(
+                session,
+                cls,
+                cls.description,
+                [*(cls.description_readings or []), read.model_dump()],
+            )
         out = _queue(session, JobKind.ADD_ATTRIBUTE, attribute, principal)
         idempotency.accept(session, out, out.job.id, response)
     metrics.enrollments.labels("attribute").inc()

@@ -8,6 +8,7 @@ from app.api.deps import (
     Enroller,
     Idempotency,
     IdempotencyDep,
+    InterpreterDep,
     JsonBody,
     MetricsDep,
     ModelDep,
@@ -18,7 +19,7 @@ from app.api.deps import (
     SessionDep,
     SettingsDep,
 )
-from app.api.descriptions import description_key, field_of
+from app.api.descriptions import description_key, field_of, read_text, readings_out
 from app.api.problems import Problem, blame, not_found
 from app.api.routes.samples import one_sample
 from app.api.schemas import (
@@ -59,6 +60,8 @@ def class_out(
         attributes=[n for n, v in values.items() if v >= 0.5],
         attribute_values=values,
         n_samples=n_samples,
+        description=cls.description,
+        description_readings=cls.description_readings,
         created_at=cls.created_at,
         in_active_model=served,
     )
@@ -109,20 +112,24 @@ def register_class(
     response: Response,
     idempotency: IdempotencyDep,
     principal: Enroller,
+    interpreter: InterpreterDep,
 ) -> ClassCreated:
-    """Register a novel class by its attributes (zero-shot). The class and its job are
+    """Register a novel class by its attributes (zero-shot), or in words (`description`:
+    the class keeps the text and the values read from it). The class and its job are
     committed before the 202; poll the job until the class is in the active model.
     Registering a class whose registration failed again, with the same attributes,
     queues a new attempt. Registering a withdrawn class's name again gives that class
     back (same id) with the new attributes and none of its old samples. With an
     ``Idempotency-Key``, a retry gets the first answer."""
     idempotency.replay(session)
+    vocab = repo.vocabulary(session)
+    read = _read(body, vocab, interpreter)
     if body.samples is not None or body.trials is not None:
         return _register_from_samples(
-            body, session, model, settings, metrics, response, idempotency, principal
+            body, session, model, settings, metrics, response, idempotency, principal, read
         )
     field = field_of(body)
-    key = description_key(body, repo.vocabulary(session))
+    key = description_key(body, vocab, read=read)
     cls = _failed_registration(session, body.name, key)
     if cls is None:
         _check_unique(session, body.name, key, field)
@@ -137,6 +144,7 @@ def register_class(
                 if withdrawn is not None
                 else repo.add_class(session, body.name, key)
             )
+        repo.set_description(session, cls, body.description, _stored(read))
         job = repo.add_job(session, JobKind.REGISTER_CLASS, cls.id, requested_by=principal.id)
         out = _class_accepted(session, cls, job, model)
         idempotency.accept(session, out, job.id, response)
@@ -160,6 +168,7 @@ def redescribe_class(
     response: Response,
     idempotency: IdempotencyDep,
     principal: Enroller,
+    interpreter: InterpreterDep,
 ) -> ClassCreated:
     """Correct the attributes an enrolled class was described by (say, *hard* where the
     object is *soft*), keeping the samples robots enrolled for it: a list of names or a
@@ -167,8 +176,9 @@ def redescribe_class(
     rest. Committed before the 202; the served model describes the class anew when the job
     succeeds (the novel classes rebuilt, or the attribute classifiers refitted for a known
     class). A class of the training dataset keeps its values for the dataset's attributes;
-    a mapping sets its values for attributes added since. With an ``Idempotency-Key``, a
-    retry gets the first answer."""
+    a mapping sets its values for attributes added since. A `description` replaces the
+    class's text and sets the values read from it, as a mapping does. With an
+    ``Idempotency-Key``, a retry gets the first answer."""
     idempotency.replay(session)
     cls = repo.get_class(session, class_id)
     if cls is None:
@@ -177,7 +187,8 @@ def redescribe_class(
     field = field_of(body)
     if cls.origin == Origin.DATASET:
         _check_dataset_values(cls, body, vocab)
-    key = description_key(body, vocab, base=cls.attribute_key)
+    read = _read(body, vocab, interpreter)
+    key = description_key(body, vocab, base=cls.attribute_key, read=read)
     if cls.origin == Origin.ENROLLED:
         _check_unique_vector(session, key, field, other_than=cls.id)
     # a concurrent registration of this vector (or a retry with this key) may win
@@ -185,6 +196,8 @@ def redescribe_class(
         session, recheck=lambda: _check_unique_vector(session, key, field, cls.id)
     ):
         repo.redescribe_class(session, cls, key)
+        if body.description is not None:
+            repo.set_description(session, cls, body.description, _stored(read))
         job = repo.add_job(session, JobKind.UPDATE_CLASS, cls.id, requested_by=principal.id)
         out = _class_accepted(session, cls, job, model)
         idempotency.accept(session, out, job.id, response)
@@ -201,13 +214,18 @@ def _register_from_samples(
     response: Response,
     idempotency: Idempotency,
     principal: Principal,
+    read: dict | None,
 ) -> ClassCreated:
     """A class learnt from the samples or trials sent with it, described or not: the class,
     its samples (one ``add_sample`` job each) and its registration in one commit."""
     method = model.recognizer if model is not None else method_class(settings.method)
     field = "trials" if body.trials is not None else "samples"
-    described = body.attributes is not None or body.attribute_vector is not None
-    key = description_key(body, repo.vocabulary(session)) if described else ""
+    described = (
+        body.attributes is not None
+        or body.attribute_vector is not None
+        or body.description is not None
+    )
+    key = description_key(body, repo.vocabulary(session), read=read) if described else ""
     if model is not None and model.recognizer.has_attributes and not described:
         if not method.graded_attributes:
             raise Problem(
@@ -238,6 +256,7 @@ def _register_from_samples(
             if withdrawn is not None
             else repo.add_class(session, body.name, key)
         )
+        repo.set_description(session, cls, body.description, _stored(read))
         for item in kept:
             row = repo.add_sample(session, cls.id, item)
             repo.add_job(session, JobKind.ADD_SAMPLE, cls.id, row.id, requested_by=principal.id)
@@ -338,6 +357,17 @@ def _enrolled_class(session: Session, class_id: int, done: str) -> ObjectClass:
             "class_id",
         )
     return cls
+
+
+def _read(body: ClassDescription, vocab: Vocabulary, interpreter) -> dict | None:
+    """The readings of the body's description (None without one)."""
+    if body.description is None:
+        return None
+    return read_text(body.description, vocab, interpreter, "description")
+
+
+def _stored(read: dict | None) -> list[dict] | None:
+    return None if read is None else [r.model_dump() for r in readings_out(read)]
 
 
 def _check_dataset_values(cls: ObjectClass, body: ClassDescription, vocab: Vocabulary) -> None:

@@ -305,6 +305,15 @@ def withdraw_sample(session: Session, row: Sample) -> None:
     session.flush()
 
 
+def set_description(
+    session: Session, cls: ObjectClass, text: str | None, readings: list[dict] | None
+) -> None:
+    """The class's description in words and what was read from it (None: described by
+    values alone; a registration by values clears an old text)."""
+    cls.description, cls.description_readings = text, readings
+    session.flush()
+
+
 def redescribe_class(session: Session, cls: ObjectClass, key: str) -> None:
     """New attributes for a live class; its samples stay (the worker's next round)."""
     cls.attribute_key = key
