@@ -182,12 +182,14 @@ class TactileClient:
         attributes: list[str] | dict[str, float | None] | None = None,
         attribute_vector: list[float | None] | None = None,
         wait: float = 0,
+        description: str | None = None,
     ) -> dict[str, Any]:
         """Register a never-touched object by its attribute names, by names with values in
-        [0, 1] (``{"soft": 0.5}``; others not known) or by a vector (None: not known);
-        returns its job (``class_id`` names the class), after up to ``wait`` seconds for it
-        to finish."""
-        body = {"name": name, **_attributes_body(attributes, attribute_vector)}
+        [0, 1] (``{"soft": 0.5}``; others not known), by a vector (None: not known), or in
+        words (``description="a soft, spongy foam block"``; values given beside it must
+        agree with it); returns its job (``class_id`` names the class), after up to ``wait``
+        seconds for it to finish."""
+        body = {"name": name, **_attributes_body(attributes, attribute_vector, description)}
         job = self._send(
             "POST", "/v1/classes", json=body, idempotency_key=str(uuid.uuid4())
         ).json()["job"]
@@ -199,17 +201,24 @@ class TactileClient:
         attributes: list[str] | dict[str, float | None] | None = None,
         attribute_vector: list[float | None] | None = None,
         wait: float = 0,
+        description: str | None = None,
     ) -> dict[str, Any]:
         """Correct the attributes a class was registered with, keeping its samples (names
         with values set those and keep the rest; for a dataset class, its values for
-        attributes added since); returns its job, after up to ``wait`` seconds."""
+        attributes added since), or replace its description in words; returns its job,
+        after up to ``wait`` seconds."""
         job = self._send(
             "PATCH",
             f"/v1/classes/{int(class_id)}",
-            json=_attributes_body(attributes, attribute_vector),
+            json=_attributes_body(attributes, attribute_vector, description),
             idempotency_key=str(uuid.uuid4()),
         ).json()["job"]
         return self.job(job["id"], wait) if wait else job
+
+    def interpret(self, text: str) -> dict[str, Any]:
+        """The attribute values the service reads from ``text`` (nothing is stored):
+        ``{"values": {attribute: value}, "readings": [...], "not_mentioned": [...]}``."""
+        return self._send("POST", "/v1/attributes/interpret", json={"text": text}).json()
 
     def add_attribute(
         self, name: str, values: dict[str, float] | None = None, wait: float = 0
@@ -332,14 +341,18 @@ def _npy(samples: Any) -> bytes:
 def _attributes_body(
     attributes: list[str] | dict[str, float | None] | None,
     attribute_vector: list[float | None] | None,
+    description: str | None = None,
 ) -> dict[str, Any]:
-    if (attributes is None) == (attribute_vector is None):
-        raise ValueError("give either attributes or attribute_vector")
-    return (
-        {"attributes": attributes}
-        if attributes is not None
-        else {"attribute_vector": attribute_vector}
-    )
+    if attributes is not None and attribute_vector is not None:
+        raise ValueError("give attributes or attribute_vector, not both")
+    if attributes is None and attribute_vector is None and description is None:
+        raise ValueError("give attributes, attribute_vector or description")
+    body: dict[str, Any] = {} if description is None else {"description": description}
+    if attributes is not None:
+        body["attributes"] = attributes
+    if attribute_vector is not None:
+        body["attribute_vector"] = attribute_vector
+    return body
 
 
 def _detail(r: httpx.Response) -> str:

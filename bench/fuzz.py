@@ -55,6 +55,7 @@ NEEDS: dict[str, str | None] = {
     "POST /v1/describe": "read",
     "GET /v1/attributes": "read",
     "POST /v1/attributes": "admin",
+    "POST /v1/attributes/interpret": "read",
     "DELETE /v1/attributes/{name}": "admin",
     "GET /v1/classes": "read",
     "POST /v1/classes": "enroll",

@@ -21,13 +21,25 @@ branch_labels = None
 depends_on = None
 
 
+COLUMNS = (("description", sa.Text()), ("description_readings", sa.JSON()))
+
+
+def _columns() -> set[str]:
+    return {c["name"] for c in sa.inspect(op.get_bind()).get_columns("classes")}
+
+
+# Plain ALTER TABLE on both databases (SQLite adds and, from 3.35, drops columns itself).
+# SQLite runs DDL outside the migration's transaction, so a downgrade refused further down
+# (0004's check) leaves these columns dropped: each step does only what is not done yet.
 def upgrade() -> None:
-    with op.batch_alter_table("classes") as batch:
-        batch.add_column(sa.Column("description", sa.Text(), nullable=True))
-        batch.add_column(sa.Column("description_readings", sa.JSON(), nullable=True))
+    present = _columns()
+    for name, kind in COLUMNS:
+        if name not in present:
+            op.add_column("classes", sa.Column(name, kind, nullable=True))
 
 
 def downgrade() -> None:
-    with op.batch_alter_table("classes") as batch:
-        batch.drop_column("description_readings")
-        batch.drop_column("description")
+    present = _columns()
+    for name, _ in reversed(COLUMNS):
+        if name in present:
+            op.drop_column("classes", name)

@@ -201,3 +201,22 @@ def test_an_operator_adds_an_attribute_and_describes_a_class_with_it(best_servic
         robot.add_attribute(dataset.attribute_names[0])
     retired = robot.retire_attribute("sticky")
     assert retired["kind"] == "retire_attribute"
+
+
+def test_an_operator_describes_an_object_in_words(best_service):
+    client, _, worker = best_service
+    robot = TactileClient(http=client, retries=0)
+    read = robot.interpret("slightly rough and not hard")
+    assert read["values"]["rough"] == 0.6 and read["values"]["hard"] == 0.0
+    job = robot.register_class("mat", description="a thick, bumpy rubber mat")
+    worker.run_once()
+    assert robot.job(job["id"])["status"] == "succeeded"
+    redo = robot.redescribe_class(job["class_id"], description="a thin bumpy mat")
+    worker.run_once()
+    assert robot.job(redo["id"])["status"] == "succeeded"
+    cls = client.get(f"/v1/classes/{job['class_id']}").json()
+    assert cls["description"] == "a thin bumpy mat" and cls["attribute_values"]["thick"] < 0.5
+    with pytest.raises(ServiceError, match="422.*closest"):
+        robot.interpret("a present for my aunt")
+    with pytest.raises(ValueError, match="give attributes, attribute_vector or description"):
+        robot.register_class("nothing")
