@@ -21,7 +21,9 @@ The child fits ``best`` (its defaults, ``n_jobs`` = the cores) on the rest and m
 - ``known_acc``: top-1 among the known objects on the held-out trials, beside ``nn1_acc``,
   a 1-nearest-neighbour classifier on the same scaled inputs (a reference that tells the
   method's loss from the simulator's objects crowding together), and ``zsl_acc``: the
-  novel objects' samples among the novel classes enrolled by their attribute vectors;
+  novel objects' samples among the novel classes enrolled by their attribute vectors, and
+  ``zsl_by_novel``: the same for the first 10, 100 and 1,000 novel objects (as many as
+  ``--novel`` gives), with how many of them could be enrolled (a vector not yet taken);
 - ``vectors_distinct`` (distinct attribute vectors among the N known objects) and
   ``novel_vectors_taken`` (novel objects whose vector a known object has: the service
   answers such an enrolment with a 409).
@@ -56,6 +58,7 @@ COSTS = (
     "batch_per_sample_us",
 )
 BLOCK = 1024
+NOVEL_COUNTS = (10, 100, 1000)  # zsl_by_novel: the first this many novel objects
 
 
 def _rss_gb() -> float:
@@ -98,12 +101,12 @@ def measure(n: int, novel: int, trials: int, seed: int) -> dict:
     novel_names = [f"novel-{i}" for i in range(novel)]
     out["novel_vectors_taken"] = sum(tuple(v) in known_vectors for v in vectors[n:].astype(int))
     out["vectors_distinct"] = len(known_vectors)
-    free = [i for i in range(novel) if tuple(vectors[n + i].astype(int)) not in known_vectors]
-    free = [
-        i
-        for i in free
-        if tuple(vectors[n + i]) not in {tuple(vectors[n + j]) for j in free if j < i}
-    ]
+    free, seen = [], set(known_vectors)  # novel objects whose vector nobody has yet
+    for i in range(novel):
+        v = tuple(vectors[n + i].astype(int).tolist())
+        if v not in seen:
+            free.append(i)
+            seen.add(v)
     enrol, shot = [], []
     for i in free[:5]:
         t = time.perf_counter()
@@ -131,6 +134,20 @@ def measure(n: int, novel: int, trials: int, seed: int) -> dict:
         out["zsl_acc"] = float((np.asarray(free)[p.argmax(axis=1)] == y_novel[rows]).mean())
     else:
         out["zsl_acc"] = None
+    out["zsl_by_novel"] = {}
+    for count in NOVEL_COUNTS:  # zero-shot as the novel objects grow in number
+        chosen = [i for i in free if i < count]
+        if count > novel or not chosen:
+            continue
+        many = model.add_novel_classes(
+            [novel_names[i] for i in chosen], vectors[n + np.array(chosen)]
+        )
+        rows = np.isin(y_novel, chosen)
+        p = many.novel_proba(x_novel[rows])
+        out["zsl_by_novel"][str(count)] = {
+            "enrolled": len(chosen),
+            "zsl": float((np.asarray(chosen)[p.argmax(axis=1)] == y_novel[rows]).mean()),
+        }
 
     correct = 0
     for lo in range(0, len(x_test), BLOCK):

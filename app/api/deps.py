@@ -74,26 +74,34 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
             session.close()
 
 
-def current_model(request: Request) -> LoadedModel:
+async def current_model(request: Request) -> LoadedModel:
     """The snapshot a request works with from start to end, even if a swap happens."""
     model = service(request).holder.current
     if model is None:
-        raise _no_model(service(request))
+        raise await _no_model(service(request))
     return model
 
 
-def _no_model(state: ServiceState) -> Problem:
-    """409 saying what is missing for a service started empty, else 503 (loading)."""
+async def _no_model(state: ServiceState) -> Problem:
+    """409 saying what is missing for a service started empty, else 503 (loading). The
+    store query of a service started empty runs in the thread pool, off the event loop."""
     if starts_empty(state.settings):
-        with state.sessions() as s:
-            missing = first_model_missing(s)
-        if missing:
-            return Problem(409, missing, "model")
+        return await run_in_threadpool(_what_is_missing, state)
+    return _loading()
+
+
+def _loading() -> Problem:
     return Problem(503, "no model is loaded yet; try again shortly", "model", {"Retry-After": "5"})
 
 
+def _what_is_missing(state: ServiceState) -> Problem:
+    with state.sessions() as s:
+        missing = first_model_missing(s)
+    return Problem(409, missing, "model") if missing else _loading()
+
+
 async def get_model(request: Request) -> LoadedModel:
-    return current_model(request)
+    return await current_model(request)
 
 
 async def get_optional_model(request: Request) -> LoadedModel | None:
@@ -210,7 +218,7 @@ async def get_recognizing(request: Request) -> Recognizing:
     authorize(request, header(request, API_KEY_HEADER), "read", state)
     model = state.holder.current  # current_model(request), the state at hand
     if model is None:
-        raise _no_model(state)
+        raise await _no_model(state)
     return Recognizing(model, state.recognition)
 
 

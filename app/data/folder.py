@@ -5,8 +5,11 @@
   [0, 1], an empty cell meaning not known; attribute columns may be absent.
 - ``samples.npy``: float array ``(N, *input_shape)``, input shape (D,) or (C, T).
 - ``samples.csv``: header ``object,trial``, N rows in samples.npy order: the object's name
-  and an integer trial id. Samples that share a trial id are one exploration and are never
-  split between training and test; a trial id belongs to one object.
+  and an integer trial id. Samples of one object that share a trial id are one
+  exploration and are never split between training and test. Trials may be numbered per
+  object (trial 1 of every object, as PHAC-2 and most recordings number them) or across
+  the file; a trial is the pair (object, trial), and trial ids numbered per object are
+  renumbered across the dataset in the order the pairs first appear.
 
 Every error is a DatasetFileError naming the file, the row (the CSV line, header = 1; the
 sample index in samples.npy) and the field. See docs/DATASETS.md.
@@ -218,7 +221,6 @@ def _read_sample_rows(path: Path, objects: Sequence[str]) -> tuple[np.ndarray, n
         )
     index = {name: k for k, name in enumerate(objects)}
     labels, trials = [], []
-    owner: dict[int, tuple[str, int]] = {}
     for line, row in rows[1:]:
         if len(row) != 2:
             raise DatasetFileError(path, f"has {len(row)} cells where the header has 2", row=line)
@@ -233,18 +235,17 @@ def _read_sample_rows(path: Path, objects: Sequence[str]) -> tuple[np.ndarray, n
             raise DatasetFileError(
                 path, f"trial {trial!r} is not an integer", row=line, field="trial"
             ) from None
-        first = owner.setdefault(t, (name, line))
-        if first[0] != name:
-            raise DatasetFileError(
-                path,
-                f"trial {t} is of object {first[0]!r} at row {first[1]}; "
-                "a trial explores one object",
-                row=line,
-                field="trial",
-            )
         labels.append(index[name])
         trials.append(t)
-    return np.array(labels, dtype=np.int64), np.array(trials, dtype=np.int64)
+    labels_a, trials_a = np.array(labels, dtype=np.int64), np.array(trials, dtype=np.int64)
+    pairs = np.unique(np.stack([trials_a, labels_a], axis=1), axis=0)
+    if len(np.unique(pairs[:, 0])) < len(pairs):  # ids numbered per object: one per pair
+        _, first, ids = np.unique(
+            np.stack([labels_a, trials_a], axis=1), axis=0, return_index=True, return_inverse=True
+        )
+        order = np.argsort(np.argsort(first))  # pairs numbered in the order they appear
+        trials_a = order[ids.ravel()].astype(np.int64)
+    return labels_a, trials_a
 
 
 def write_folder(dataset: TactileDataset, path: str | Path, overwrite: bool = False) -> Path:

@@ -27,7 +27,7 @@ def run(*args: str) -> subprocess.CompletedProcess:
 
 
 def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
-    done = run("--sizes", "12,24,40", "--max", "24", "--novel", "4", "--trials", "4",
+    done = run("--sizes", "12,24,40", "--max", "24", "--novel", "12", "--trials", "4",
                "--out", str(tmp_path))  # fmt: skip
     assert done.returncode == 0, done.stderr[-3000:]
     report = json.loads((tmp_path / "scale.json").read_text())
@@ -39,6 +39,8 @@ def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
         for acc in ("known_acc", "nn1_acc", "zsl_acc"):
             assert 0.0 <= r[acc] <= 1.0
         assert r["vectors_distinct"] <= r["objects"]
+        assert 0 < r["zsl_by_novel"]["10"]["enrolled"] <= 10  # 100 and 1,000: beyond --novel
+        assert set(r["zsl_by_novel"]) == {"10"} and 0 <= r["zsl_by_novel"]["10"]["zsl"] <= 1
     assert set(report["exponents"]) >= {"fit_s", "fit_peak_gb", "recognise_1_us"}
     assert report["machine"]["cpus"] >= 1 and report["machine"]["commit"]
     assert done.stdout.startswith("| objects | fit_s |") and "| exponent |" in done.stdout
