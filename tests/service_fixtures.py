@@ -343,3 +343,18 @@ def best_service(tmp_path, best_base):
                 on_activate=app.state.service.holder.serve,
             ),
         )
+
+
+@pytest.fixture
+def best_stores_service(settings, best_base):
+    """(client, app, worker) of a ``best`` service on each store (``settings``)."""
+    from app.api.main import create_app
+    from worker import Worker
+
+    app = create_app(
+        settings.model_copy(update={"method": "best", "method_params": BEST_PARAMS}),
+        trainer=lambda: best_base,
+    )
+    with TestClient(app) as client:
+        state = app.state.service
+        yield client, app, Worker(state.settings, state.sessions, on_activate=state.holder.serve)

@@ -9,26 +9,15 @@ import time
 
 import numpy as np
 import pytest
-from fastapi.testclient import TestClient
 
 from app.store import repo
 from app.store.models import Attribute, Job
-from tests.service_fixtures import BEST_PARAMS, problem, wait_for_job
+from tests.service_fixtures import problem, wait_for_job
 
 
 @pytest.fixture
-def service(settings, best_base):
-    """(client, app, worker) of a ``best`` service on each store."""
-    from app.api.main import create_app
-    from worker import Worker
-
-    app = create_app(
-        settings.model_copy(update={"method": "best", "method_params": BEST_PARAMS}),
-        trainer=lambda: best_base,
-    )
-    with TestClient(app) as client:
-        state = app.state.service
-        yield client, app, Worker(state.settings, state.sessions, on_activate=state.holder.serve)
+def service(best_stores_service):
+    return best_stores_service
 
 
 def names(client) -> list[str]:

@@ -6,26 +6,15 @@ on each store; the worker learns a class described in words."""
 from __future__ import annotations
 
 import pytest
-from fastapi.testclient import TestClient
 
-from tests.service_fixtures import BEST_PARAMS, problem
+from tests.service_fixtures import problem
 
 SPONGE = "a soft, spongy foam block that soaks up water"
 
 
 @pytest.fixture
-def service(settings, best_base):
-    """(client, app, worker) of a ``best`` service on each store."""
-    from app.api.main import create_app
-    from worker import Worker
-
-    app = create_app(
-        settings.model_copy(update={"method": "best", "method_params": BEST_PARAMS}),
-        trainer=lambda: best_base,
-    )
-    with TestClient(app) as client:
-        state = app.state.service
-        yield client, app, Worker(state.settings, state.sessions, on_activate=state.holder.serve)
+def service(best_stores_service):
+    return best_stores_service
 
 
 def classes(client) -> list[dict]:
