@@ -140,9 +140,9 @@ def test_bad_client_settings_are_refused(tmp_path):
         TactileClient("http://127.0.0.1:1", retries=-1)
     with pytest.raises(ValueError, match="no model_file"):
         TactileClient("http://127.0.0.1:1").sync_model()
-    with pytest.raises(ValueError, match="either attributes or attribute_vector"):
+    with pytest.raises(ValueError, match="give attributes, attribute_vector or description"):
         TactileClient("http://127.0.0.1:1").register_class("x")
-    with pytest.raises(ValueError, match="either attributes or attribute_vector"):
+    with pytest.raises(ValueError, match="attributes or attribute_vector, not both"):
         TactileClient("http://127.0.0.1:1").redescribe_class(1, ["hard"], [1, 0])
 
 
