@@ -47,6 +47,11 @@ def readings_out(readings: dict[str, Reading]) -> list[ReadingOut]:
     ]
 
 
+def stored_readings(readings: dict[str, Reading] | None) -> list[dict] | None:
+    """Readings as a class keeps them (``classes.description_readings``)."""
+    return None if readings is None else [r.model_dump() for r in readings_out(readings)]
+
+
 def description_key(
     body: ClassDescription,
     vocab: Vocabulary,

@@ -131,12 +131,7 @@ class TextInterpreter:
         """Attribute -> its ``Reading``, for the attributes of ``vocabulary`` the text speaks
         of. EmptyText, TextTooLong, or NothingRecognised (naming the closest attributes)."""
         vocab = self._check(text, vocabulary)
-        found: dict[str, Reading] = {}
-        for clause in self._clauses(text):
-            for reading in self._read_clause(text, clause, vocab):
-                old = found.get(reading.attribute)
-                if old is None or _RANK[reading.source] > _RANK[old.source]:
-                    found[reading.attribute] = reading
+        found = self._read(text, vocab)
         if not found:
             closest = self.closest(text, vocab)
             raise NothingRecognised(
@@ -149,10 +144,7 @@ class TextInterpreter:
     def value_of(self, text: str, attribute: str) -> Reading | None:
         """The reading of one attribute (say, one just added to the vocabulary), or None
         when the text says nothing of it."""
-        try:
-            return self.interpret(text, [attribute]).get(attribute)
-        except NothingRecognised:
-            return None
+        return self._read(text, self._check(text, [attribute])).get(attribute)
 
     def closest(self, text: str, vocabulary: Sequence[str], k: int = 3) -> list[str]:
         """The ``k`` attributes whose names lie nearest the whole text in the embedding."""
@@ -162,6 +154,17 @@ class TextInterpreter:
         return [vocab[i] for i in order[:k]]
 
     # ----------------------------------------------------------------- helpers
+    def _read(self, text: str, vocab: list[str]) -> dict[str, Reading]:
+        """Every attribute of ``vocab`` the text speaks of, by the strongest source."""
+        names = {s: a for a in vocab for s in _name_stems(a)}  # a vocabulary word's forms
+        found: dict[str, Reading] = {}
+        for clause in self._clauses(text):
+            for reading in self._read_clause(text, clause, vocab, names):
+                old = found.get(reading.attribute)
+                if old is None or _RANK[reading.source] > _RANK[old.source]:
+                    found[reading.attribute] = reading
+        return found
+
     def _check(self, text: str, vocabulary: Sequence[str]) -> list[str]:
         if not isinstance(text, str) or not text.strip():
             raise EmptyText("the description is empty")
@@ -192,15 +195,19 @@ class TextInterpreter:
         return out
 
     def _read_clause(
-        self, text: str, clause: list[tuple[str, int, int]], vocab: list[str]
+        self,
+        text: str,
+        clause: list[tuple[str, int, int]],
+        vocab: list[str],
+        names: dict[str, str],
     ) -> list[Reading]:
         words = [w for w, _, _ in clause]
         stems = [_stem(w) for w in words]
-        names = {s: a for a in vocab for s in _name_stems(a)}
         out: list[Reading] = []
         used = [False] * len(words)
         i = 0
         while i < len(words):
+            named = names.get(words[i], names.get(stems[i]))  # a vocabulary word, by its name
             hit = None
             for n in range(min(self._longest, len(words) - i), 0, -1):
                 for phrase in (" ".join(words[i : i + n]), " ".join(stems[i : i + n])):
@@ -209,19 +216,15 @@ class TextInterpreter:
                         break
                 if hit:
                     break
-            if hit is None and (words[i] in names or stems[i] in names):
-                attr = names.get(words[i], names.get(stems[i]))
-                hit = (1, ({attr: 1.0}, 1.0))
-            if hit is None:
+            if hit is None and named is None:
                 i += 1
                 continue
-            n, (values, strength) = hit
+            n, (values, strength) = hit or (1, ({named: 1.0}, 1.0))
             for j in range(i, i + n):
                 used[j] = True
             out.extend(self._graded(text, clause, i, n, values, strength, vocab))
-            named = names.get(words[i], names.get(stems[i])) if n == 1 else None
-            if named is not None and named not in values:  # a vocabulary word the lexicon
-                out.extend(self._graded(text, clause, i, 1, {named: 1.0}, 1.0, vocab))  # reads
+            if n == 1 and named is not None and named not in values:  # the lexicon reads the
+                out.extend(self._graded(text, clause, i, 1, {named: 1.0}, 1.0, vocab))  # word too
             i += n
         left = [
             k

@@ -15,7 +15,7 @@ from app.api.deps import (
     ReadAccess,
     SessionDep,
 )
-from app.api.descriptions import read_text, readings_out
+from app.api.descriptions import read_text, readings_out, stored_readings
 from app.api.problems import Problem
 from app.api.schemas import (
     AttributeChanged,
@@ -23,7 +23,6 @@ from app.api.schemas import (
     AttributeList,
     AttributeOut,
     JobOut,
-    ReadingOut,
     TextIn,
     TextRead,
 )
@@ -126,13 +125,8 @@ def add_attribute(
         attribute = repo.add_attribute(session, body.name)
         repo.describe(session, keys)
         for cls, r in worded.values():
-            read = ReadingOut(attribute=r.attribute, value=r.value, words=r.words, source=r.source)
-            repo.set_description(
-                session,
-                cls,
-                cls.description,
-                [*(cls.description_readings or []), read.model_dump()],
-            )
+            readings = [*(cls.description_readings or []), *stored_readings({r.attribute: r})]
+            repo.set_description(session, cls, cls.description, readings)
         out = _queue(session, JobKind.ADD_ATTRIBUTE, attribute, principal)
         idempotency.accept(session, out, out.job.id, response)
     metrics.enrollments.labels("attribute").inc()

@@ -19,7 +19,7 @@ from app.api.deps import (
     SessionDep,
     SettingsDep,
 )
-from app.api.descriptions import description_key, field_of, read_text, readings_out
+from app.api.descriptions import description_key, field_of, read_text, stored_readings
 from app.api.problems import Problem, blame, not_found
 from app.api.routes.samples import one_sample
 from app.api.schemas import (
@@ -144,7 +144,7 @@ def register_class(
                 if withdrawn is not None
                 else repo.add_class(session, body.name, key)
             )
-        repo.set_description(session, cls, body.description, _stored(read))
+        repo.set_description(session, cls, body.description, stored_readings(read))
         job = repo.add_job(session, JobKind.REGISTER_CLASS, cls.id, requested_by=principal.id)
         out = _class_accepted(session, cls, job, model)
         idempotency.accept(session, out, job.id, response)
@@ -197,7 +197,7 @@ def redescribe_class(
     ):
         repo.redescribe_class(session, cls, key)
         if body.description is not None:
-            repo.set_description(session, cls, body.description, _stored(read))
+            repo.set_description(session, cls, body.description, stored_readings(read))
         job = repo.add_job(session, JobKind.UPDATE_CLASS, cls.id, requested_by=principal.id)
         out = _class_accepted(session, cls, job, model)
         idempotency.accept(session, out, job.id, response)
@@ -256,7 +256,7 @@ def _register_from_samples(
             if withdrawn is not None
             else repo.add_class(session, body.name, key)
         )
-        repo.set_description(session, cls, body.description, _stored(read))
+        repo.set_description(session, cls, body.description, stored_readings(read))
         for item in kept:
             row = repo.add_sample(session, cls.id, item)
             repo.add_job(session, JobKind.ADD_SAMPLE, cls.id, row.id, requested_by=principal.id)
@@ -364,10 +364,6 @@ def _read(body: ClassDescription, vocab: Vocabulary, interpreter) -> dict | None
     if body.description is None:
         return None
     return read_text(body.description, vocab, interpreter, "description")
-
-
-def _stored(read: dict | None) -> list[dict] | None:
-    return None if read is None else [r.model_dump() for r in readings_out(read)]
 
 
 def _check_dataset_values(cls: ObjectClass, body: ClassDescription, vocab: Vocabulary) -> None:
