@@ -273,13 +273,9 @@ class FlatForest:
                 counts.append(n_here.astype(np.int64))
                 n_nodes += sub.node_count - 1
                 n_leaves += int(is_leaf.sum())
-        rows_all, cols_all = np.concatenate(rows), np.concatenate(cols)
-        mass_all = np.concatenate(mass)
-        order = np.lexsort((cols_all, rows_all))
-        rows_all, cols_all, mass_all = rows_all[order], cols_all[order], mass_all[order]
-        first = np.r_[True, (rows_all[1:] != rows_all[:-1]) | (cols_all[1:] != cols_all[:-1])]
-        mass_all = np.add.reduceat(mass_all, np.flatnonzero(first))
-        rows_all, cols_all = rows_all[first], cols_all[first]
+        rows_all, cols_all, shares = _leaf_distributions(
+            np.concatenate(rows), np.concatenate(cols), n_classes, np.concatenate(mass)
+        )
         leaf_count = np.concatenate(counts)
         arrays = {
             "feature": np.concatenate([feature, *extra["feature"]]),
@@ -290,7 +286,7 @@ class FlatForest:
             "leaf_of_node": np.concatenate([leaf_of_node, *extra["leaf_of_node"]]),
             "leaf_ptr": np.r_[0, np.cumsum(np.bincount(rows_all, minlength=len(leaf_count)))],
             "leaf_class": cols_all.astype(np.int32),
-            "leaf_value": mass_all / np.bincount(rows_all, weights=mass_all)[rows_all],
+            "leaf_value": shares,
             _COUNTS: leaf_count.astype(np.int32),
         }
         return FlatForest(arrays, n_classes, self.n_features)
@@ -421,14 +417,17 @@ def _members(nodes: np.ndarray) -> dict[int, np.ndarray]:
 
 
 def _leaf_distributions(
-    leaf: np.ndarray, y: np.ndarray, n_classes: int
+    leaf: np.ndarray, y: np.ndarray, n_classes: int, mass: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(leaf, class, share) of the classes of the samples reaching each leaf, sparse and
-    ordered by leaf then class: one pass over the samples, whatever the number of classes."""
-    pairs, counts = np.unique(leaf.astype(np.int64) * n_classes + y, return_counts=True)
+    ordered by leaf then class: one pass over the samples, whatever the number of classes.
+    ``mass``: what each (leaf, class) entry weighs (default: one sample each); entries of
+    the same pair add up."""
+    pairs, at = np.unique(leaf.astype(np.int64) * n_classes + y, return_inverse=True)
+    weight = np.bincount(at.ravel(), weights=mass, minlength=len(pairs))
     rows, cols = np.divmod(pairs, n_classes)
-    totals = np.bincount(rows, weights=counts)
-    return rows, cols, counts / totals[rows]
+    totals = np.bincount(rows, weights=weight)
+    return rows, cols, weight / totals[rows]
 
 
 # ---------------------------------------------------------------- compiled walk
