@@ -238,11 +238,10 @@ def _read_sample_rows(path: Path, objects: Sequence[str]) -> tuple[np.ndarray, n
         labels.append(index[name])
         trials.append(t)
     labels_a, trials_a = np.array(labels, dtype=np.int64), np.array(trials, dtype=np.int64)
-    pairs = np.unique(np.stack([trials_a, labels_a], axis=1), axis=0)
-    if len(np.unique(pairs[:, 0])) < len(pairs):  # ids numbered per object: one per pair
-        _, first, ids = np.unique(
-            np.stack([labels_a, trials_a], axis=1), axis=0, return_index=True, return_inverse=True
-        )
+    pairs, first, ids = np.unique(
+        np.stack([labels_a, trials_a], axis=1), axis=0, return_index=True, return_inverse=True
+    )
+    if len(np.unique(pairs[:, 1])) < len(pairs):  # ids numbered per object: one per pair
         order = np.argsort(np.argsort(first))  # pairs numbered in the order they appear
         trials_a = order[ids.ravel()].astype(np.int64)
     return labels_a, trials_a

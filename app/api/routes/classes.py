@@ -126,7 +126,7 @@ def register_class(
     read = _read(body, vocab, interpreter)
     if body.samples is not None or body.trials is not None:
         return _register_from_samples(
-            body, session, model, settings, metrics, response, idempotency, principal, read
+            body, session, model, settings, metrics, response, idempotency, principal, vocab, read
         )
     field = field_of(body)
     key = description_key(body, vocab, read=read)
@@ -214,6 +214,7 @@ def _register_from_samples(
     response: Response,
     idempotency: Idempotency,
     principal: Principal,
+    vocab: Vocabulary,
     read: dict | None,
 ) -> ClassCreated:
     """A class learnt from the samples or trials sent with it, described or not: the class,
@@ -225,7 +226,7 @@ def _register_from_samples(
         or body.attribute_vector is not None
         or body.description is not None
     )
-    key = description_key(body, repo.vocabulary(session), read=read) if described else ""
+    key = description_key(body, vocab, read=read) if described else ""
     if model is not None and model.recognizer.has_attributes and not described:
         if not method.graded_attributes:
             raise Problem(
