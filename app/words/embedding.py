@@ -19,7 +19,7 @@ class EmbeddingModelError(RuntimeError):
 
 
 class SentenceEmbedder:
-    """L2-normalised 384-d vectors of phrases; the model loads on first use (about 5 s and
+    """L2-normalised 384-d vectors of phrases; the model loads on first use (about 4 s and
     0.5 GB on a 2-core machine, ``bench/text_model.py``)."""
 
     def __init__(self) -> None:

@@ -63,7 +63,7 @@ def interpret_text(body: TextIn, session: SessionDep, interpreter: InterpreterDe
     "slick", "soaks up water", "steel"), each with the words that gave it. Attributes the
     text says nothing of are absent, never 0. A 422 names the closest attributes when the
     text names none; the first text a process reads loads the sentence-embedding model
-    (about 5 s)."""
+    (about 4 s)."""
     vocab = repo.vocabulary(session)
     read = read_text(body.text, vocab, interpreter, "text")
     return TextRead(
