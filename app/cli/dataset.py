@@ -111,6 +111,7 @@ def summarize(data: Any) -> dict[str, Any]:
         "samples": len(data),
         "samples_per_object": {"min": int(per_object.min()), "max": int(per_object.max())},
         "input_shape": list(data.input_shape),
+        "procedures": list(data.procedures),
         "attributes": _attributes(data.attribute_names, data.attribute_values),
     }
 

@@ -8,6 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from app.data.procedures import ProcedureError, block, check_procedures
+
 
 class DatasetError(ValueError):
     """A dataset is empty, inconsistent or malformed."""
@@ -78,6 +80,11 @@ class TactileDataset:
     attribute_names: the M attribute names, in column order.
     class_names: the K class names.
     object_ids: the K external object ids (PHAC-2 ids, or 0 … K-1 for simulated data).
+    procedures: the exploratory procedures a sample holds, in order (PHAC-2's squeeze, hold,
+        slide and move down), or () where the dataset does not name them. A sample's first
+        axis splits into ``len(procedures)`` equal blocks, one per procedure
+        (``app.data.procedures``): rows ``[j * r, (j + 1) * r)`` of an image or features
+        ``[j * d, (j + 1) * d)`` of a flat vector.
     """
 
     samples: np.ndarray
@@ -88,6 +95,7 @@ class TactileDataset:
     class_names: tuple[str, ...]
     object_ids: tuple[int, ...] = field(default=())
     name: str = "dataset"
+    procedures: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         samples = np.ascontiguousarray(self.samples, dtype=np.float32)
@@ -100,6 +108,7 @@ class TactileDataset:
         object.__setattr__(self, "class_attributes", attrs)
         object.__setattr__(self, "attribute_names", tuple(self.attribute_names))
         object.__setattr__(self, "class_names", tuple(self.class_names))
+        object.__setattr__(self, "procedures", tuple(str(p) for p in self.procedures))
         if not self.object_ids:
             object.__setattr__(self, "object_ids", tuple(range(len(self.class_names))))
         else:
@@ -134,6 +143,11 @@ class TactileDataset:
             names = self.attribute_names
             dup = sorted({a for a in names if names.count(a) > 1})
             raise DatasetError(f"attribute names must be unique; repeated: {', '.join(dup)}")
+        if self.procedures:
+            try:
+                check_procedures(self.procedures, self.input_shape)
+            except ProcedureError as exc:
+                raise DatasetError(f"dataset '{self.name}': {exc}") from None
         if len(self.object_ids) != k:
             raise DatasetError(f"object_ids must have {k} entries, got {len(self.object_ids)}")
         if self.labels.min() < 0 or self.labels.max() >= k:
@@ -214,6 +228,7 @@ class TactileDataset:
             class_names=self.class_names,
             object_ids=self.object_ids,
             name=self.name,
+            procedures=self.procedures,
         )
 
     def with_attributes(
@@ -230,6 +245,7 @@ class TactileDataset:
             class_names=self.class_names,
             object_ids=self.object_ids,
             name=self.name,
+            procedures=self.procedures,
         )
 
     def select_classes(self, classes: np.ndarray | list[int]) -> TactileDataset:
@@ -249,4 +265,20 @@ class TactileDataset:
             class_names=tuple(self.class_names[i] for i in classes),
             object_ids=tuple(self.object_ids[i] for i in classes),
             name=self.name,
+            procedures=self.procedures,
+        )
+
+    def procedure_view(self, j: int) -> TactileDataset:
+        """The same samples with only procedure ``j``'s block (``procedures[j]``)."""
+        rows = block(self.procedures, self.input_shape, j)
+        return TactileDataset(
+            samples=self.samples[:, rows],
+            labels=self.labels,
+            trials=self.trials,
+            class_attributes=self.attribute_values,
+            attribute_names=self.attribute_names,
+            class_names=self.class_names,
+            object_ids=self.object_ids,
+            name=f"{self.name}/{self.procedures[j]}",
+            procedures=(self.procedures[j],),
         )

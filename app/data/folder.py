@@ -10,6 +10,10 @@
   object (trial 1 of every object, as PHAC-2 and most recordings number them) or across
   the file; a trial is the pair (object, trial), and trial ids numbered per object are
   renumbered across the dataset in the order the pairs first appear.
+- ``procedures.txt`` (optional): the exploratory procedures a sample holds along its first
+  axis, one name per line in order; samples then have shape ``(P, ...)`` (or a first axis
+  of P equal blocks, ``app.data.procedures``), and a model fitted on them answers samples
+  that lack some procedures.
 
 Every error is a DatasetFileError naming the file, the row (the CSV line, header = 1; the
 sample index in samples.npy) and the field. See docs/DATASETS.md.
@@ -27,10 +31,12 @@ from pathlib import Path
 import numpy as np
 
 from app.data.dataset import DatasetFileError, TactileDataset
+from app.data.procedures import ProcedureError, check_procedures
 
 OBJECTS_FILE = "objects.csv"
 SAMPLES_NPY = "samples.npy"
 SAMPLES_CSV = "samples.csv"
+PROCEDURES_FILE = "procedures.txt"
 FILES = (OBJECTS_FILE, SAMPLES_NPY, SAMPLES_CSV)
 _SAMPLE_HEADER = ["object", "trial"]
 
@@ -182,6 +188,7 @@ def load_folder(path: str | Path) -> TactileDataset:
             f"sample {i} (line {i + 2} of {SAMPLES_CSV}) contains NaN or infinity",
             row=i,
         )
+    procedures = _read_procedures(root / PROCEDURES_FILE, samples.shape[1:])
     return TactileDataset(
         samples=samples,
         labels=labels,
@@ -191,7 +198,25 @@ def load_folder(path: str | Path) -> TactileDataset:
         class_names=table.names,
         object_ids=table.object_ids or (),
         name="folder",
+        procedures=procedures,
     )
+
+
+def _read_procedures(path: Path, input_shape: tuple[int, ...]) -> tuple[str, ...]:
+    """The names in procedures.txt (none when the file is absent), checked against the
+    samples' shape."""
+    if not path.is_file():
+        return ()
+    try:
+        names = tuple(line.strip() for line in path.read_text("utf-8-sig").splitlines())
+    except UnicodeDecodeError as exc:
+        raise DatasetFileError(path, f"not a readable text file: {exc}") from None
+    names = tuple(n for n in names if n)
+    try:
+        check_procedures(names, input_shape)
+    except ProcedureError as exc:
+        raise DatasetFileError(path, f"{exc} (samples have shape {list(input_shape)})") from None
+    return names
 
 
 def _read_samples(path: Path) -> np.ndarray:
@@ -268,6 +293,10 @@ def write_folder(dataset: TactileDataset, path: str | Path, overwrite: bool = Fa
         ids,
     )
     np.save(root / SAMPLES_NPY, dataset.samples.astype(np.float32), allow_pickle=False)
+    if dataset.procedures:
+        (root / PROCEDURES_FILE).write_text("".join(f"{p}\n" for p in dataset.procedures), "utf-8")
+    else:
+        (root / PROCEDURES_FILE).unlink(missing_ok=True)
     with (root / SAMPLES_CSV).open("w", newline="", encoding="utf-8") as fh:
         out = csv.writer(fh, lineterminator="\n")
         out.writerow(_SAMPLE_HEADER)

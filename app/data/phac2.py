@@ -107,6 +107,7 @@ def load_phac2(path: str | Path, min_objects_per_attribute: int = 3) -> TactileD
         class_names=_unique_names(names, ids),
         object_ids=tuple(ids),
         name="phac2",
+        procedures=tuple(str(p) for p in arrays["phases"].tolist()),
     )
 
 

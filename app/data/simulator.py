@@ -123,6 +123,7 @@ def simulate_dataset(
         attribute_names=names,
         class_names=tuple(f"sim-object-{k:0{width}d}" for k in range(n_objects)),
         name="simulated",
+        procedures=PROCEDURES,
     )
 
 

@@ -493,4 +493,5 @@ def featurize_dataset(
         attribute_names=raw.attribute_names,
         class_names=raw.class_names,
         name=raw.name,
+        procedures=featurizer.phase_names,  # the image's rows come in phase blocks
     )
