@@ -138,6 +138,7 @@ def _contents(model: TactileRecognizer) -> tuple[dict[str, Any], dict[str, np.nd
         "method": model.method,
         "created_at": datetime.now(UTC).isoformat(),
         "input_shape": list(model.input_shape),
+        "procedures": list(model.procedures),
         "attribute_names": list(reg.attribute_names),
         "classes": [{"name": n, "kind": "known"} for n in reg.known_names]
         + [{"name": n, "kind": "novel"} for n in reg.novel_names],
@@ -230,6 +231,7 @@ def from_bytes(data: bytes, part: Callable[[str], np.ndarray] | None = None) -> 
         cls = method_class(manifest["method"])
         model = cls()
         model.input_shape = tuple(int(s) for s in manifest["input_shape"])
+        model.procedures = tuple(str(p) for p in manifest.get("procedures") or ())
         names = manifest["classes"]
         model.registry = ClassRegistry(
             attribute_names=tuple(manifest["attribute_names"]),

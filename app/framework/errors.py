@@ -78,3 +78,8 @@ class ZeroShotUnavailableError(UnsupportedOperationError):
     """A class cannot be enrolled from a description: the model was fitted on objects
     without attributes, so it has no attribute to recognise a class by; enrol it from real
     samples instead."""
+
+
+class MissingProcedureError(InputShapeError):
+    """A sample lacks every procedure, lacks part of one, or lacks one where the model
+    answers only from every procedure (or takes only complete samples, as enrolment does)."""

@@ -38,12 +38,14 @@ import numpy as np
 
 from app.data.biotac import BioTacDataset, RawTrial, RawTrialError, parse_trial
 from app.data.dataset import TactileDataset
+from app.data.procedures import ProcedureError, present
 from app.framework.errors import (
     AttributeVectorError,
     DuplicateClassError,
     FrameworkError,
     InputKindError,
     InputShapeError,
+    MissingProcedureError,
     NonFiniteInputError,
     NotFittedError,
     TrialInputError,
@@ -59,6 +61,9 @@ SAMPLES = "samples"
 RAW_TRIALS = "raw_trials"
 #: how ``recognize_batch`` fuses the samples of a group (see ``fuse_groups``)
 FUSION_RULE = "mean"
+#: the answer's probability at which ``next_procedure`` says stop (None): measured on
+#: PHAC-2's development seeds by ``tactile-zsl evaluate --procedures`` (docs/RESULTS.md)
+TARGET_CONFIDENCE = 0.9
 
 
 class ClassScore(NamedTuple):
@@ -74,6 +79,8 @@ class Recognition(NamedTuple):
     is_novel: bool
     novelty_score: float
     top_k: tuple[ClassScore, ...]
+    procedures_used: tuple[str, ...] = ()
+    next_procedure: str | None = None  # the procedure to do next; None: stop
 
 
 @dataclass(frozen=True)
@@ -92,6 +99,11 @@ class RecognitionBatch:
     top_probability: np.ndarray  # (N, k) float64
     is_novel: np.ndarray  # (N,) bool: novelty score above the threshold
     novelty_score: np.ndarray  # (N,) float64
+    #: the model's procedures, and which each answer used ((N, P) bool) and which it asks
+    #: for next ((N,) index into ``procedures``, -1: none); P = 0 for a model without them
+    procedures: tuple[str, ...] = ()
+    procedures_used: np.ndarray | None = None
+    next_procedure: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.novelty_score)
@@ -104,7 +116,20 @@ class RecognitionBatch:
             self.top_probability[rows],
             self.is_novel[rows],
             self.novelty_score[rows],
+            self.procedures,
+            None if self.procedures_used is None else self.procedures_used[rows],
+            None if self.next_procedure is None else self.next_procedure[rows],
         )
+
+    def procedure_fields(self) -> list[tuple[list[str], str | None]]:
+        """(``procedures_used``, ``next_procedure``) of each answer, by name."""
+        names = self.procedures
+        if self.procedures_used is None or self.next_procedure is None:
+            return [(list(names), None)] * len(self)
+        return [
+            ([names[j] for j in np.flatnonzero(used)], names[nxt] if nxt >= 0 else None)
+            for used, nxt in zip(self.procedures_used, self.next_procedure.tolist(), strict=True)
+        ]
 
     @property
     def class_kinds(self) -> list[str]:
@@ -145,12 +170,15 @@ class RecognitionBatch:
                     for j, q in zip(idx, top_p, strict=True)
                     if j >= 0
                 ],
+                "procedures_used": used,
+                "next_procedure": nxt,
             }
-            for idx, top_p, novel, score in zip(
+            for idx, top_p, novel, score, (used, nxt) in zip(
                 self.top_index.tolist(),
                 self.top_probability.tolist(),
                 self.is_novel.tolist(),
                 self.novelty_score.tolist(),
+                self.procedure_fields(),
                 strict=True,
             )
         ]
@@ -164,12 +192,15 @@ class RecognitionBatch:
                 nov,
                 score,
                 tuple(ClassScore(names[j], q) for j, q in zip(idx, tp, strict=True) if j >= 0),
+                tuple(used),
+                nxt,
             )
-            for idx, tp, nov, score in zip(
+            for idx, tp, nov, score, (used, nxt) in zip(
                 self.top_index.tolist(),
                 self.top_probability.tolist(),
                 self.is_novel.tolist(),
                 self.novelty_score.tolist(),
+                self.procedure_fields(),
                 strict=True,
             )
         ]
@@ -280,6 +311,8 @@ class TactileRecognizer(ABC):
         self.metrics: dict[str, Any] = {}
         # the featurizer fitted on raw training trials; None for a model of fixed-shape samples
         self.featurizer_: Any = None
+        # the exploratory procedures a sample holds (``TactileDataset.procedures``); () none
+        self.procedures: tuple[str, ...] = ()
 
     # --------------------------------------------------------- hyper-parameters
     @classmethod
@@ -371,6 +404,7 @@ class TactileRecognizer(ABC):
         attributes = self._training_attributes(dataset)
         self.input_shape = dataset.input_shape
         self.featurizer_ = featurizer
+        self.procedures = dataset.procedures
         self.registry = ClassRegistry(
             attribute_names=dataset.attribute_names,
             known_names=list(dataset.class_names),
@@ -543,15 +577,24 @@ class TactileRecognizer(ABC):
         return self._novelty_score(x), self._known_proba(x), novel_p
 
     def known_proba(self, samples: np.ndarray) -> np.ndarray:
-        return self._known_proba(self.validate_samples(samples))
+        x, used = self._checked(samples)
+        if used is None:
+            return self._known_proba(x)
+        return self._by_procedures(x, used, lambda x, keep: self._scores_from(x, keep)[1])
 
     def novel_proba(self, samples: np.ndarray) -> np.ndarray:
         if not self.registry.novel_names:
             raise UnknownClassError("the model has no novel classes yet")
-        return self._novel_proba(self.validate_samples(samples))
+        x, used = self._checked(samples)
+        if used is None:
+            return self._novel_proba(x)
+        return self._by_procedures(x, used, lambda x, keep: self._scores_from(x, keep)[2])
 
     def novelty_score(self, samples: np.ndarray) -> np.ndarray:
-        return self._novelty_score(self.validate_samples(samples))
+        x, used = self._checked(samples)
+        if used is None:
+            return self._novelty_score(x)
+        return self._by_procedures(x, used, lambda x, keep: self._scores_from(x, keep)[0])
 
     def is_novel(self, samples: np.ndarray) -> np.ndarray:
         return self.novelty_score(samples) > self.novelty_threshold
@@ -560,7 +603,92 @@ class TactileRecognizer(ABC):
         """(N, M) probability that each attribute describes each sample's object, in the
         registry's attribute order: what a touch feels like, to help describe an object
         nobody registered yet. Only methods that predict attributes from a sample have it."""
-        return self._attribute_proba(self.validate_samples(samples))
+        x, used = self._checked(samples)
+        if used is None:
+            return self._attribute_proba(x)
+        every = len(self.procedures)
+        return self._by_procedures(
+            x,
+            used,
+            lambda x, keep: (
+                self._attribute_proba(x)
+                if len(keep) == every
+                else self._subset_attribute_proba(x, keep)
+            ),
+        )
+
+    # ------------------------------------------------------- missing procedures
+    @property
+    def answers_from_some_procedures(self) -> bool:
+        """True where samples lacking some procedures are answered (from those they hold);
+        elsewhere such a sample is a MissingProcedureError."""
+        return False
+
+    @property
+    def first_procedure(self) -> str | None:
+        """The procedure to do first, before any answer: the one the model recognises its
+        known classes best from alone; None for a model that needs every procedure."""
+        return None
+
+    def _checked(self, samples: Any) -> tuple[np.ndarray, np.ndarray | None]:
+        """The validated samples, and which procedures each holds ((N, P) bool) where some
+        lack one (None when every sample is complete)."""
+        x = self.validate_samples(samples, partial=True)
+        if not self.procedures or not np.isnan(x).any():
+            return x, None
+        return x, present(x, self.procedures)
+
+    def _scores_from(
+        self, x: np.ndarray, keep: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """(novelty scores, known, novel probabilities) from the procedures ``keep``."""
+        if len(keep) == len(self.procedures):
+            return self._all_scores(x)
+        return self._subset_scores(x, keep)
+
+    def _subset_scores(
+        self, x: np.ndarray, keep: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """``_all_scores`` from the procedures ``keep`` (indices) alone; methods with
+        ``answers_from_some_procedures`` override it."""
+        raise UnsupportedOperationError(f"method '{self.method}' answers from every procedure")
+
+    def _subset_attribute_proba(self, x: np.ndarray, keep: np.ndarray) -> np.ndarray:
+        """``_attribute_proba`` from the procedures ``keep`` alone."""
+        raise UnsupportedOperationError(f"method '{self.method}' answers from every procedure")
+
+    def _next_procedures(
+        self, known_p: np.ndarray, used: np.ndarray, ask: np.ndarray
+    ) -> np.ndarray:
+        """(N,) index of the procedure each row of ``ask`` should do next (-1 elsewhere),
+        from its known-class probabilities and the procedures it used ((N, P) bool)."""
+        return np.full(len(known_p), -1, np.int64)
+
+    @staticmethod
+    def _by_procedures(
+        x: np.ndarray, used: np.ndarray, part: Callable[[np.ndarray, np.ndarray], Any]
+    ) -> Any:
+        """``part(rows, keep)`` on each group of rows that hold the same procedures ``keep``
+        (indices), put back in row order. ``part`` returns an array or a tuple of arrays
+        (a None entry stays None)."""
+        patterns, which = np.unique(used, axis=0, return_inverse=True)
+        which = which.ravel()
+        out: list[np.ndarray | None] = []
+        single = False
+        for g, pattern in enumerate(patterns):
+            rows = np.flatnonzero(which == g)
+            got = part(x[rows], np.flatnonzero(pattern))
+            single = not isinstance(got, tuple)
+            parts = (got,) if single else got
+            if not out:
+                out = [
+                    None if a is None else np.empty((len(x), *a.shape[1:]), a.dtype)
+                    for a in parts
+                ]
+            for o, a in zip(out, parts, strict=True):
+                if o is not None:
+                    o[rows] = a
+        return out[0] if single else tuple(out)
 
     def _attribute_proba(self, samples: np.ndarray) -> np.ndarray:
         raise UnsupportedOperationError(
@@ -568,14 +696,22 @@ class TactileRecognizer(ABC):
         )
 
     def recognize(
-        self, samples: np.ndarray, top_k: int = 3, groups: np.ndarray | None = None
+        self,
+        samples: np.ndarray,
+        top_k: int = 3,
+        groups: np.ndarray | None = None,
+        target_confidence: float = TARGET_CONFIDENCE,
     ) -> list[Recognition]:
         """Fig. 1: ND(x) routes each sample (or each group, see ``recognize_batch``) to
         FC_Y or FC_Z."""
-        return self.recognize_batch(samples, top_k, groups).answers()
+        return self.recognize_batch(samples, top_k, groups, target_confidence).answers()
 
     def recognize_batch(
-        self, samples: np.ndarray, top_k: int = 3, groups: np.ndarray | None = None
+        self,
+        samples: np.ndarray,
+        top_k: int = 3,
+        groups: np.ndarray | None = None,
+        target_confidence: float = TARGET_CONFIDENCE,
     ) -> RecognitionBatch:
         """``recognize`` as arrays (the service's hot path): one row per sample.
 
@@ -585,14 +721,42 @@ class TactileRecognizer(ABC):
         novel-class probabilities and novelty score are the means over its samples
         (``fuse_groups``), and the fused score is routed by the same threshold. A group of
         one sample gets exactly that sample's answer.
+
+        A sample may lack procedures (NaN throughout their blocks) where the model
+        ``answers_from_some_procedures``; each answer names the procedures it used and the
+        one to do next: None once its top probability reaches ``target_confidence`` or no
+        procedure is left (``next_procedure``).
         """
-        x = self.validate_samples(samples)
-        scores, known_p, novel_p = self._all_scores(x)
+        x, used = self._checked(samples)
+        if used is None:
+            scores, known_p, novel_p = self._all_scores(x)
+        else:
+            scores, known_p, novel_p = self._by_procedures(x, used, self._scores_from)
         if groups is not None:
-            scores, known_p, novel_p = fuse_groups(
-                check_groups(groups, len(x)), scores, known_p, novel_p
+            g = check_groups(groups, len(x))
+            scores, known_p, novel_p = fuse_groups(g, scores, known_p, novel_p)
+            if used is not None:
+                used = group_mean(used.astype(np.float64), g, int(g.max()) + 1) > 0
+        batch = self._batch(scores, known_p, novel_p, top_k)
+        if not self.procedures:
+            return batch
+        if used is None:
+            every = np.ones((1, len(self.procedures)), bool)
+            batch.__dict__.update(
+                procedures=self.procedures,
+                procedures_used=np.broadcast_to(every, (len(batch), len(self.procedures))),
+                next_procedure=np.full(len(batch), -1, np.int64),
             )
-        return self._batch(scores, known_p, novel_p, top_k)
+            return batch
+        if not 0.0 < float(target_confidence) <= 1.0:
+            raise FrameworkError(f"target_confidence must lie in (0, 1], got {target_confidence}")
+        ask = (batch.top_probability[:, 0] < float(target_confidence)) & ~used.all(axis=1)
+        batch.__dict__.update(
+            procedures=self.procedures,
+            procedures_used=used,
+            next_procedure=self._next_procedures(known_p, used, ask),
+        )
+        return batch
 
     def _batch(
         self,
@@ -890,11 +1054,13 @@ class TactileRecognizer(ABC):
         """Rebuild FC_Z from the registry's novel classes and their real samples."""
 
     # -------------------------------------------------------------- validation
-    def validate_samples(self, samples: np.ndarray) -> np.ndarray:
+    def validate_samples(self, samples: np.ndarray, partial: bool = False) -> np.ndarray:
         """float32 array of shape (N, *input_shape); a single sample gets a batch axis.
 
         Raw trials given as samples, and samples of another shape given to a model fitted
-        on raw trials, raise InputKindError saying which input the model takes."""
+        on raw trials, raise InputKindError saying which input the model takes. With
+        ``partial``, a sample may lack whole procedures (NaN throughout their blocks) where
+        the model ``answers_from_some_procedures``; else MissingProcedureError says so."""
         self._require_fitted()
         # an array is never trials (the isinstance checks against Mapping cost more)
         if not isinstance(samples, np.ndarray) and _looks_like_trials(samples):
@@ -919,9 +1085,32 @@ class TactileRecognizer(ABC):
         if len(x) == 0:
             raise InputShapeError("expected at least one sample, got an empty batch")
         if not np.isfinite(x).all():
-            bad = int((~np.isfinite(x)).reshape(len(x), -1).any(axis=1).argmax())
-            raise NonFiniteInputError(f"sample {bad} contains NaN or infinity")
+            self._check_missing(x, partial)
         return x
+
+    def _check_missing(self, x: np.ndarray, partial: bool) -> None:
+        """The error for samples with NaN or infinity, unless every NaN is a whole missing
+        procedure that ``partial`` allows and the model answers without."""
+        flat = x.reshape(len(x), -1)
+        infinite = np.isinf(flat).any(axis=1)
+        if infinite.any() or not self.procedures:
+            bad = int(infinite.argmax()) if infinite.any() else int(np.isnan(flat).any(1).argmax())
+            raise NonFiniteInputError(
+                f"sample {bad} contains {'infinity' if infinite.any() else 'NaN'}"
+            )
+        try:
+            used = present(x, self.procedures)
+        except ProcedureError as exc:
+            raise MissingProcedureError(str(exc)) from None
+        if not partial or not self.answers_from_some_procedures:
+            i = int((~used.all(axis=1)).argmax())
+            lacking = [p for p, u in zip(self.procedures, used[i], strict=True) if not u]
+            why = (
+                f"method '{self.method}' answers from every procedure"
+                if partial
+                else "samples learnt by the model need every procedure"
+            )
+            raise MissingProcedureError(f"sample {i} lacks {', '.join(lacking)}: {why}")
 
     def validate_attribute_vectors(self, vectors: Any) -> np.ndarray:
         m = len(self.registry.attribute_names)

@@ -61,6 +61,7 @@ from app.methods.attributes import (
     semantic_autoencoder,
     softmax,
 )
+from app.methods.by_procedure import ProcedureModels
 from app.methods.known import CUES, KnownModel, relabelled
 from app.methods.small_batch import SmallBatchScorer
 
@@ -160,6 +161,13 @@ class BestRecognizer(TactileRecognizer):
         the paper's 5 sub-sampling offsets. On validation trials of the BioTac pilot the
         forest carried objects across grip pressures worse the more offsets it was trained
         on (docs/RESULTS.md). Unused when ``fit`` is given fixed-shape samples.
+    by_procedure : bool, default True
+        Where the training samples name two or more exploratory procedures
+        (``TactileDataset.procedures``), also fit one model per procedure on its block of the
+        samples (``app.methods.by_procedure``), so that a sample lacking some procedures is
+        answered from those it holds and every answer says which procedure to do next.
+        It costs about 3.4 times the fit time of the whole model alone (PHAC-2, 50 objects);
+        False answers complete samples only.
     """
 
     method = "best"
@@ -198,6 +206,7 @@ class BestRecognizer(TactileRecognizer):
         ),
         "sae_lambda": number(0, include_low=True, allow_bool=False, finite=True),
         "sae_temperature": number(0, include_low=True, allow_bool=False, finite=True),
+        "by_procedure": one_of((True, False), "be true or false"),
         # featurizer_params: checked by building the featurizer (TactileRecognizer)
     }
 
@@ -223,6 +232,7 @@ class BestRecognizer(TactileRecognizer):
         sae_temperature: float = 10.0,
         n_jobs: int | None = 1,
         featurizer_params: dict[str, Any] | None = None,
+        by_procedure: bool = True,
     ) -> None:
         super().__init__()
         self.seed = seed
@@ -245,6 +255,7 @@ class BestRecognizer(TactileRecognizer):
         self.sae_temperature = sae_temperature
         self.n_jobs = n_jobs
         self.featurizer_params = featurizer_params
+        self.by_procedure = by_procedure
 
     def _cue_weights(self) -> np.ndarray:
         w = np.zeros(len(CUES))
@@ -326,7 +337,14 @@ class BestRecognizer(TactileRecognizer):
         t = time.perf_counter()
         self._fit_attributes(z, y)
         timings["attributes_s"] = time.perf_counter() - t
+        self.procedures_ = None
         self._reset_novel()
+        if self.by_procedure and len(dataset.procedures) >= 2:
+            t = time.perf_counter()
+            self.procedures_ = ProcedureModels.fit(
+                dataset, lambda: type(self)(**{**self.get_params(), "by_procedure": False})
+            )
+            timings["by_procedure_s"] = time.perf_counter() - t
         timings["total_s"] = time.perf_counter() - t0
         self.metrics = {
             "n_train_samples": int(len(dataset)),
@@ -364,6 +382,10 @@ class BestRecognizer(TactileRecognizer):
         self._fit_attributes(
             self.known_.cues_model.scaled(flatten(dataset.samples)), dataset.labels
         )
+        if self.procedures_ is not None:
+            self.procedures_ = self.procedures_.synced(
+                self, lambda m, j: m._refit_attributes(dataset.procedure_view(j))
+            )
         self.metrics = {**self.metrics, "n_attributes": len(self.registry.attribute_names)}
 
     def _grow_known(self, samples: np.ndarray, labels: np.ndarray) -> None:
@@ -387,12 +409,16 @@ class BestRecognizer(TactileRecognizer):
             "n_known_classes": len(self.registry.known_names),
             "n_grown_samples": grown + len(samples),
         }
+        if self.procedures_ is not None:
+            self.procedures_ = self.procedures_.grown(self, samples, labels)
 
     def _reset_novel(self) -> None:
         n_known = len(self.registry.known_names)
         self.shot_prototypes_ = np.zeros((0, n_known), np.float64)
         self.shot_has_ = np.zeros(0, bool)
         self._small_batch = None  # its constants describe the novel part: built again on use
+        if getattr(self, "procedures_", None) is not None:
+            self.procedures_ = self.procedures_.synced(self, lambda m, j: m._reset_novel())
 
     # --------------------------------------------------------------- inference
     def _known_proba(self, samples: np.ndarray) -> np.ndarray:
@@ -464,6 +490,38 @@ class BestRecognizer(TactileRecognizer):
                 has[i] = True
         self.shot_prototypes_, self.shot_has_ = protos, has
         self._small_batch = None
+        if self.procedures_ is not None:
+            self.procedures_ = self.procedures_.synced(self, lambda m, j: m._refit_novel())
+
+    # ------------------------------------------------------- missing procedures
+    @property
+    def answers_from_some_procedures(self) -> bool:
+        return getattr(self, "procedures_", None) is not None
+
+    @property
+    def first_procedure(self) -> str | None:
+        if not self.answers_from_some_procedures:
+            return None
+        return self.procedures[self.procedures_.first]
+
+    def _subset_scores(
+        self, x: np.ndarray, keep: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        if not self.answers_from_some_procedures:
+            return super()._subset_scores(x, keep)
+        return self.procedures_.scores(x, keep, self.novelty_threshold)
+
+    def _subset_attribute_proba(self, x: np.ndarray, keep: np.ndarray) -> np.ndarray:
+        if not self.answers_from_some_procedures:
+            return super()._subset_attribute_proba(x, keep)
+        return self.procedures_.attribute_proba(x, keep)
+
+    def _next_procedures(
+        self, known_p: np.ndarray, used: np.ndarray, ask: np.ndarray
+    ) -> np.ndarray:
+        if not self.answers_from_some_procedures:
+            return super()._next_procedures(known_p, used, ask)
+        return self.procedures_.next_procedures(known_p, used, ask)
 
     # ------------------------------------------------------------ persistence
     def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -479,6 +537,9 @@ class BestRecognizer(TactileRecognizer):
             "n_features": self.known_.cues_model.forest.n_features,
             "n_classes": self.known_.cues_model.forest.n_classes,
         }
+        if self.procedures_ is not None:
+            meta["by_procedure"], parts = self.procedures_.get_state()
+            arrays.update({f"by_procedure/{key}": value for key, value in parts.items()})
         return meta, arrays
 
     def set_state(self, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
@@ -489,6 +550,7 @@ class BestRecognizer(TactileRecognizer):
         self.tuning_objects = 0
         self.attribute_samples = 0
         self.sae_lambda = 0.0  # and those made before the autoencoder have none
+        self.by_procedure = False  # and those made before per-procedure models answer whole samples
         names = self._get_param_names()
         for key, value in meta["params"].items():
             if key not in names:
@@ -526,6 +588,11 @@ class BestRecognizer(TactileRecognizer):
             raise ValueError(
                 "attribute model does not match the inputs or the attribute vocabulary"
             )
+        self.procedures_ = None
         self._reset_novel()
         if self.registry.novel_names:
             self._refit_novel()
+        if "by_procedure" in meta:
+            self.procedures_ = ProcedureModels.from_state(
+                meta["by_procedure"], part("by_procedure/"), self
+            )

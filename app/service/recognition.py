@@ -50,7 +50,7 @@ class RecognitionService:
         """Recognise ``n`` samples with ``model``, the caller's snapshot to the end."""
         rec = model.recognizer
         if n <= self.coalesce:
-            x = rec.validate_samples(samples)
+            x = rec.validate_samples(samples, partial=True)
             results = await self.batcher.recognize(model, x, self.top_k)
         else:
             results = await run_in_threadpool(rec.recognize_batch, samples, self.top_k)
