@@ -25,6 +25,7 @@ import io
 import json
 import time
 import uuid
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +33,7 @@ import httpx
 import numpy as np
 
 from app.framework import bundle
-from app.framework.recognizer import TactileRecognizer
+from app.framework.recognizer import TARGET_CONFIDENCE, TactileRecognizer
 
 UNREACHABLE_STATUS = frozenset({502, 503, 504})
 
@@ -86,25 +87,68 @@ class TactileClient:
         self.close()
 
     # ------------------------------------------------------------ recognition
-    def recognize(self, samples: Any, same_object: bool = False) -> dict[str, Any]:
+    def recognize(
+        self,
+        samples: Any,
+        same_object: bool = False,
+        target_confidence: float | None = None,
+    ) -> dict[str, Any]:
         """Recognise one sample or a batch (N, *input shape); with ``same_object``, the
-        samples are touches of one object and get one answer, their evidence fused."""
+        samples are touches of one object and get one answer, their evidence fused. A
+        procedure not done yet is NaN throughout its block; each result names the
+        procedures it used and ``next_procedure``, null once its probability reaches
+        ``target_confidence`` (None: the model's default)."""
         x = np.asarray(samples, dtype=np.float32)
+        params: dict[str, Any] = {"same_object": same_object}
+        if target_confidence is not None:
+            params["target_confidence"] = target_confidence
         try:
             r = self._send(
                 "POST",
                 "/v1/recognize",
                 content=_npy(x),
-                params={"same_object": same_object},
+                params=params,
                 headers={"Content-Type": "application/x-npy"},
             )
         except ServiceUnreachable as exc:
             model, meta = self._offline_model(exc)
-            x = model.validate_samples(x)
+            x = model.validate_samples(x, partial=True)
             groups = np.zeros(len(x), np.int64) if same_object else None
-            batch = model.recognize_batch(x, top_k=self.offline_top_k, groups=groups)
+            target = TARGET_CONFIDENCE if target_confidence is None else target_confidence
+            batch = model.recognize_batch(x, self.offline_top_k, groups, target)
             return self._offline_answer(batch, meta)
         return {**r.json(), "source": "service"}
+
+    def explore(
+        self, touch: Callable[[str], Any], target_confidence: float | None = None
+    ) -> dict[str, Any]:
+        """Recognise one object with the fewest procedures: do the served model's
+        ``first_procedure``, then each answer's ``next_procedure`` until it is null.
+        ``touch(name)`` has the robot do that procedure and returns its values (the
+        procedure's block of a sample: e.g. 47 numbers of PHAC-2's 188). Returns the last
+        answer with ``procedures_done``, in the order they were done. ServiceError where
+        the served model answers complete samples only."""
+        active = self._send("GET", "/v1/models/active").json()
+        names, name = active.get("procedures") or [], active.get("first_procedure")
+        if not name:
+            raise ServiceError(
+                "the served model answers complete samples only (it names no first procedure)"
+            )
+        sample = np.full(active["input_shape"], np.nan, np.float32)
+        rows = sample.shape[0] // len(names)
+        done: list[str] = []
+        while name:
+            if name in done or name not in names:
+                raise ServiceError(f"the service asked for procedure {name!r} again or unknown")
+            j = names.index(name)
+            values = np.asarray(touch(name), dtype=np.float32)
+            block = sample[j * rows : (j + 1) * rows]
+            block[...] = values.reshape(block.shape)
+            done.append(name)
+            result = self.recognize(sample, target_confidence=target_confidence)
+            answer = result["results"][0]
+            name = answer["next_procedure"]
+        return {**answer, "model_version": result["model_version"], "procedures_done": done}
 
     def recognize_trials(self, trials: Any, same_object: bool = False) -> dict[str, Any]:
         """Recognise raw BioTac trials (``RawTrial``s or their JSON form), one answer per

@@ -230,6 +230,8 @@ class Worker:
             input_shape=list(new.input_shape),
             input_kind=new.input_kind,
             attribute_names=list(new.registry.attribute_names),
+            procedures=list(new.procedures),
+            first_procedure=new.first_procedure,
             metrics=repo.jsonable(new.metrics),
             classes=model_classes(new),
             sample_ids=plan.sample_ids,

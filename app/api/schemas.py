@@ -12,6 +12,9 @@ from app.words.interpret import MAX_TEXT
 
 # One tactile sample: a [C, T] tactile image or a flat [D] feature vector.
 SampleData = list[list[float]] | list[float]
+# A sample to recognise or describe: a row may be null, a procedure not done yet, and the
+# sample may come as one entry per procedure (app/api/sample_input.py).
+ProbeData = list[list[float] | None] | list[float] | list[list[list[float]] | None]
 
 # no control characters: PostgreSQL text cannot hold NUL, and no one names an object with a tab
 ClassName = Annotated[
@@ -348,10 +351,13 @@ class TrialIn(Strict):
 
 
 class RecognizeRequest(Strict):
-    samples: list[SampleData] = Field(
+    samples: list[ProbeData] = Field(
         min_length=1,
         description="1 … batch_limit samples (`TACTILE_BATCH_LIMIT`), each of the "
-        "shape `input_shape` of `GET /v1/models/active` says.",
+        "shape `input_shape` of `GET /v1/models/active` says. Where the model names its "
+        "`procedures`, a sample may lack some: their rows are `null` (or NaN in a .npy "
+        "body), and a sample may come as one entry per procedure, e.g. PHAC-2's "
+        "`[[...47 numbers], null, null, null]` after a squeeze alone.",
     )
 
 
@@ -390,6 +396,15 @@ class RecognitionOut(BaseModel):
     )
     top_k: list[ScoreOut] = Field(
         description="The most probable classes of the group answered from, best first."
+    )
+    procedures_used: list[str] = Field(
+        description="The exploratory procedures the answer came from (those the sample "
+        "holds); empty for a model that does not name its procedures."
+    )
+    next_procedure: str | None = Field(
+        description="The procedure whose expected gain for this answer is largest, to do "
+        "next and send again with the others; null once the answer's probability reaches "
+        "`target_confidence` or every procedure is done."
     )
 
 
@@ -453,6 +468,19 @@ class ModelSummary(BaseModel):
     input_shape: list[int] = Field(
         description="The shape of one sample to send: `POST /v1/recognize` and `POST /v1/describe` "
         "take a batch of samples of this shape (nested lists), `POST /v1/classes/{id}/samples` one."
+    )
+    procedures: list[str] | None = Field(
+        default_factory=list,
+        description="The exploratory procedures a sample holds, in order along its first axis "
+        "(e.g. PHAC-2's squeeze, hold, slide, move down); empty where the model does not name "
+        "them.",
+    )
+    first_procedure: str | None = Field(
+        None,
+        description="The procedure to do first when exploring an object; then send the "
+        "sample with the procedures done so far (the others null) and do each answer's "
+        "`next_procedure` until it is null. Null where the model answers complete samples "
+        "only.",
     )
     metrics: dict[str, Any]
     class_count: int = Field(description="Classes the version recognises, known and novel.")

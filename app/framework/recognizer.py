@@ -682,8 +682,7 @@ class TactileRecognizer(ABC):
             parts = (got,) if single else got
             if not out:
                 out = [
-                    None if a is None else np.empty((len(x), *a.shape[1:]), a.dtype)
-                    for a in parts
+                    None if a is None else np.empty((len(x), *a.shape[1:]), a.dtype) for a in parts
                 ]
             for o, a in zip(out, parts, strict=True):
                 if o is not None:

@@ -142,7 +142,9 @@ class ProcedureModels:
         return int(score.argmax())
 
     # ---------------------------------------------------------------- lifecycle
-    def synced(self, parent: Any, change: Callable[[Any, int], None] | None = None) -> ProcedureModels:
+    def synced(
+        self, parent: Any, change: Callable[[Any, int], None] | None = None
+    ) -> ProcedureModels:
         """These models with ``parent``'s classes (its registry, one-shot samples cut to
         each procedure's block), each then changed by ``change(model, j)``: a copy, the
         original untouched."""
@@ -163,9 +165,7 @@ class ProcedureModels:
         """``synced`` after ``parent`` learnt ``samples`` of known classes ``labels``: each
         model learns its block of them, and the class means take them in."""
         k = len(parent.registry.known_names)
-        counts = np.concatenate(
-            [self.class_counts, np.zeros(k - len(self.class_counts), np.int64)]
-        )
+        counts = np.concatenate([self.class_counts, np.zeros(k - len(self.class_counts), np.int64)])
         means = np.concatenate(
             [self.class_means, np.zeros((k - len(self.class_means), *self.class_means.shape[1:]))]
         ).astype(np.float64)

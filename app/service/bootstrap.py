@@ -174,6 +174,8 @@ def store_base_model(s: Session, model: TactileRecognizer, dataset: Dataset) -> 
         input_shape=list(model.input_shape),
         input_kind=model.input_kind,
         attribute_names=list(model.registry.attribute_names),
+        procedures=list(model.procedures),
+        first_procedure=model.first_procedure,
         metrics=repo.jsonable(model.metrics),
         classes=model_classes(model),
         sample_ids=[],

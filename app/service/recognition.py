@@ -15,7 +15,7 @@ import numpy as np
 import orjson
 from fastapi.concurrency import run_in_threadpool
 
-from app.framework.recognizer import RecognitionBatch
+from app.framework.recognizer import TARGET_CONFIDENCE, RecognitionBatch
 from app.service.batcher import RecognitionBatcher
 from app.service.holder import LoadedModel
 from app.service.metrics import Metrics
@@ -45,10 +45,21 @@ class RecognitionService:
         }
 
     async def recognize(
-        self, model: LoadedModel, samples: np.ndarray | list, n: int
+        self,
+        model: LoadedModel,
+        samples: np.ndarray | list,
+        n: int,
+        target_confidence: float | None = None,
     ) -> RecognitionBatch:
-        """Recognise ``n`` samples with ``model``, the caller's snapshot to the end."""
+        """Recognise ``n`` samples with ``model``, the caller's snapshot to the end; a
+        ``target_confidence`` other than the model's default (None) runs alone."""
         rec = model.recognizer
+        if target_confidence is not None:
+            return self._counted(
+                await run_in_threadpool(
+                    rec.recognize_batch, samples, self.top_k, None, target_confidence
+                )
+            )
         if n <= self.coalesce:
             x = rec.validate_samples(samples, partial=True)
             results = await self.batcher.recognize(model, x, self.top_k)
@@ -57,13 +68,17 @@ class RecognitionService:
         return self._counted(results)
 
     async def recognize_object(
-        self, model: LoadedModel, samples: np.ndarray | list
+        self,
+        model: LoadedModel,
+        samples: np.ndarray | list,
+        target_confidence: float | None = None,
     ) -> RecognitionBatch:
         """One answer for all ``samples``, touches of one object, their evidence fused."""
         groups = np.zeros(len(samples), np.int64)
         rec = model.recognizer
+        target = TARGET_CONFIDENCE if target_confidence is None else target_confidence
         return self._counted(
-            await run_in_threadpool(rec.recognize_batch, samples, self.top_k, groups)
+            await run_in_threadpool(rec.recognize_batch, samples, self.top_k, groups, target)
         )
 
     async def recognize_trials(

@@ -164,6 +164,10 @@ class ModelVersion(Base):
     metrics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     # the attribute vocabulary the version was trained with, in its vectors' order
     attribute_names: Mapped[list[str] | None] = mapped_column(JSON)
+    # the exploratory procedures a sample holds, and the one to do first (None: the model
+    # answers complete samples only); null for versions stored before they were kept
+    procedures: Mapped[list[str] | None] = mapped_column(JSON)
+    first_procedure: Mapped[str | None] = mapped_column(String(200))
     classes: Mapped[list[dict[str, Any]]] = mapped_column(JSON)  # [{"name", "kind"}]
     sample_ids: Mapped[list[int]] = mapped_column(JSON, default=list)  # enrolled samples inside
     active: Mapped[bool] = mapped_column(Boolean, default=False)

@@ -40,7 +40,7 @@ async def describe(
     docs/RESULTS.md measures them."""
     model, service = recognizing
     rec = model.recognizer
-    body = await read_body(request, rec.input_shape, service.batch_limit)
+    body = await read_body(request, rec.input_shape, service.batch_limit, rec.procedures)
     takes_kind(rec, body)
     if not rec.has_attributes:
         raise Problem(

@@ -13,9 +13,10 @@ from pydantic import TypeAdapter, ValidationError
 from app.api import problems, trials
 from app.api.deps import JSON, NPY, api_key_header, get_recognizing, media_type
 from app.api.problems import Problem, blame
+from app.api.sample_input import sample_array
 from app.api.schemas import RecognizeRequest, RecognizeResponse
 from app.data.biotac import RawTrial
-from app.framework.recognizer import RAW_TRIALS, TactileRecognizer
+from app.framework.recognizer import RAW_TRIALS, TARGET_CONFIDENCE, TactileRecognizer
 
 router = APIRouter(prefix="/v1", tags=["recognize"], responses=problems.responses(401, 403, 429))
 
@@ -75,10 +76,26 @@ RECOGNIZE_EXTRA = {
             "required": False,
             "schema": {"type": "boolean", "default": False},
             "description": SAME_OBJECT,
-        }
+        },
+        {
+            "name": "target_confidence",
+            "in": "query",
+            "required": False,
+            "schema": {
+                "type": "number",
+                "exclusiveMinimum": 0,
+                "maximum": 1,
+                "default": TARGET_CONFIDENCE,
+            },
+            "description": "An answer whose probability reaches this needs no further "
+            "procedure (`next_procedure` null); below it, `next_procedure` names the one to "
+            "do next. The default was chosen on PHAC-2's development splits "
+            "(docs/RESULTS.md).",
+        },
     ],
 }
 _BOOL = TypeAdapter(bool)
+_CONFIDENCE = TypeAdapter(float)
 
 
 class Body(NamedTuple):
@@ -116,17 +133,19 @@ async def answer(request: Request) -> bytes:
     # request on the route robots call most (RECOGNIZE_EXTRA documents the key it checks)
     model, service = await get_recognizing(request)
     same_object = _same_object(request)
-    body = await read_body(request, model.recognizer.input_shape, service.batch_limit)
-    takes_kind(model.recognizer, body)
+    target = _target_confidence(request)
+    rec = model.recognizer
+    body = await read_body(request, rec.input_shape, service.batch_limit, rec.procedures)
+    takes_kind(rec, body)
     if body.trials is not None:
         with blame("trials"):
             results = await service.recognize_trials(model, body.trials, same_object)
     else:
         with blame("samples"):
             if same_object:
-                results = await service.recognize_object(model, body.samples)
+                results = await service.recognize_object(model, body.samples, target)
             else:
-                results = await service.recognize(model, body.samples, body.n)
+                results = await service.recognize(model, body.samples, body.n, target)
     return service.to_json(model, results)
 
 
@@ -138,6 +157,24 @@ def _same_object(request: Request) -> bool:
         return _BOOL.validate_python(raw)
     except ValidationError:
         raise Problem(422, f"same_object: not true or false (got {raw!r})", "same_object") from None
+
+
+def _target_confidence(request: Request) -> float | None:
+    """The request's ``target_confidence``, None when it gives none (the model's default)."""
+    raw = request.query_params.get("target_confidence") if request.scope["query_string"] else None
+    if raw is None:
+        return None
+    try:
+        value = _CONFIDENCE.validate_python(raw)
+    except ValidationError:
+        value = float("nan")
+    if not 0.0 < value <= 1.0:
+        raise Problem(
+            422,
+            f"target_confidence: a probability in (0, 1] is needed (got {raw!r})",
+            "target_confidence",
+        )
+    return value
 
 
 def takes_kind(rec: TactileRecognizer, body: Body) -> None:
@@ -153,9 +190,15 @@ def takes_kind(rec: TactileRecognizer, body: Body) -> None:
         )
 
 
-async def read_body(request: Request, input_shape: tuple[int, ...], batch_limit: int) -> Body:
+async def read_body(
+    request: Request,
+    input_shape: tuple[int, ...],
+    batch_limit: int,
+    procedures: tuple[str, ...] = (),
+) -> Body:
     """The body's samples (JSON or .npy) or raw trials (JSON or HDF5), by its Content-Type,
-    at most ``batch_limit``; the model validates samples, the trials are validated here."""
+    at most ``batch_limit``; the model validates samples, the trials are validated here.
+    Samples may lack procedures (``app.api.sample_input``)."""
     content_type = media_type(request, (JSON, NPY, trials.HDF5))
     body = await request.body()
     if content_type == trials.HDF5:
@@ -166,9 +209,9 @@ async def read_body(request: Request, input_shape: tuple[int, ...], batch_limit:
         n = 1 if samples.ndim <= len(input_shape) else len(samples)  # one bare sample
     else:
         parsed = (
-            await run_in_threadpool(_from_json, body, input_shape, batch_limit)
+            await run_in_threadpool(_from_json, body, input_shape, batch_limit, procedures)
             if len(body) > PARSE_INLINE_BYTES
-            else _from_json(body, input_shape, batch_limit)
+            else _from_json(body, input_shape, batch_limit, procedures)
         )
         if parsed.trials is not None:
             return parsed
@@ -178,7 +221,12 @@ async def read_body(request: Request, input_shape: tuple[int, ...], batch_limit:
     return Body(samples, None, n)
 
 
-def _from_json(body: bytes, input_shape: tuple[int, ...], batch_limit: int) -> Body:
+def _from_json(
+    body: bytes,
+    input_shape: tuple[int, ...],
+    batch_limit: int,
+    procedures: tuple[str, ...] = (),
+) -> Body:
     """The samples of a JSON body: an array when well-formed, else pydantic's errors or a
     422 naming the first sample not of ``input_shape``; or its validated ``trials``.
 
@@ -195,7 +243,7 @@ def _from_json(body: bytes, input_shape: tuple[int, ...], batch_limit: int) -> B
         samples = data["samples"] if isinstance(data, dict) and len(data) == 1 else None
         if isinstance(samples, list) and samples:
             x = np.asarray(samples)
-            if x.dtype.kind in "fiu" and x.ndim in (2, 3):
+            if x.dtype.kind in "fiu" and x.ndim in (2, 3) and x.shape[1:] == input_shape:
                 with np.errstate(over="ignore"):  # beyond float32 is inf: rejected by name below
                     x = x.astype(np.float32, copy=False)
                     return Body(x, None, len(x))
@@ -214,28 +262,13 @@ def _from_json(body: bytes, input_shape: tuple[int, ...], batch_limit: int) -> B
         raise RequestValidationError(
             [{**e, "loc": ("body", *e["loc"])} for e in exc.errors(include_url=False)]
         ) from None
-    samples = np.stack([_one(s, i, input_shape) for i, s in enumerate(request.samples)])
+    samples = np.stack(
+        [
+            sample_array(s, input_shape, f"samples[{i}]", procedures, partial=True)
+            for i, s in enumerate(request.samples)
+        ]
+    )
     return Body(samples, None, len(samples))
-
-
-def _one(sample: list, i: int, input_shape: tuple[int, ...]) -> np.ndarray:
-    try:
-        with np.errstate(over="ignore"):  # beyond float32 is inf: rejected by name later
-            x = np.asarray(sample, dtype=np.float32)
-    except ValueError:  # ragged nesting
-        raise Problem(
-            422,
-            f"samples[{i}]: its rows have different lengths; one sample has shape "
-            f"{list(input_shape)}",
-            f"samples[{i}]",
-        ) from None
-    if x.shape != input_shape:
-        raise Problem(
-            422,
-            f"samples[{i}]: shape {list(x.shape)}, where one sample has shape {list(input_shape)}",
-            f"samples[{i}]",
-        )
-    return x
 
 
 def _from_npy(body: bytes) -> np.ndarray:

@@ -19,6 +19,7 @@ from app.api.deps import (
     SessionDep,
 )
 from app.api.problems import Problem, blame, not_found
+from app.api.sample_input import sample_array
 from app.api.schemas import (
     JobOut,
     SampleCreate,
@@ -160,16 +161,9 @@ def add_sample(
 
 
 def one_sample(data: list, input_shape: tuple[int, ...], field: str = "sample") -> np.ndarray:
-    """``data`` as one sample of ``input_shape``, or a 422 at ``field`` that names the shape
-    expected."""
-    expected = f"expected one sample of shape {list(input_shape)}"
-    try:
-        x = np.asarray(data, dtype=np.float32)
-    except ValueError:  # ragged nesting
-        raise Problem(422, f"{expected}; its rows have different lengths", field) from None
-    if x.shape != input_shape:
-        raise Problem(422, f"{expected}, got one of shape {list(x.shape)}", field)
-    return x[None]
+    """``data`` as one complete sample of ``input_shape`` (a batch of one), or a 422 at
+    ``field`` that names the shape expected."""
+    return sample_array(data, input_shape, field)[None]
 
 
 @router.delete(
