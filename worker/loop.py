@@ -183,7 +183,7 @@ class Worker:
                     grow_fraction=self.settings.grow_fraction,
                 )
             refit = plan.rebuild in (Rebuild.FULL, Rebuild.ATTRIBUTES)
-            known = known_dataset(s, plan) if refit else None
+            known = known_dataset(s, plan, model.procedures if model else ()) if refit else None
         # the session is closed: no transaction stays open while training runs
         if plan.changes_model:
             log.info(

@@ -365,8 +365,11 @@ def _grown(plan: Plan, model: TactileRecognizer) -> TactileRecognizer:
     )
 
 
-def known_dataset(s: Session, plan: Plan) -> TactileDataset | BioTacDataset:
-    """Every known class (promoted ones included) with its stored samples, for a full retrain."""
+def known_dataset(
+    s: Session, plan: Plan, procedures: tuple[str, ...] = ()
+) -> TactileDataset | BioTacDataset:
+    """Every known class (promoted ones included) with its stored samples, for a full retrain;
+    the samples hold ``procedures`` (the served model's), which the new model keeps."""
     promoted, demoted = {c.id for c in plan.promote}, {c.id for c in plan.demote}
     live = set(plan.sample_ids)
     known = [
@@ -404,6 +407,7 @@ def known_dataset(s: Session, plan: Plan) -> TactileDataset | BioTacDataset:
         class_names=names,
         object_ids=[c.id for c in known],
         name="store",
+        procedures=procedures,
     )
 
 

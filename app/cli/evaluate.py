@@ -41,6 +41,21 @@ def _touch_counts(value: str) -> list[int]:
     return [_positive(v.strip()) for v in value.split(",") if v.strip()]
 
 
+def _durations(value: str) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for item in value.split(","):
+        name, sep, seconds = item.partition("=")
+        try:
+            out[name.strip()] = float(seconds)
+        except ValueError:
+            sep = ""
+        if not sep or not name.strip() or not out[name.strip()] > 0:
+            raise argparse.ArgumentTypeError(
+                f"expected NAME=SECONDS with SECONDS > 0, got {item!r}"
+            )
+    return out
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     from app.framework.registry import DEFAULT_METHOD, METHODS
 
@@ -199,6 +214,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--test-trials, which then holds out that many trials of every known object",
     )
     p.add_argument(
+        "--procedures",
+        action="store_true",
+        help="also the figures against the exploratory procedures used: every subset of the "
+        "dataset's procedures (each fixed order is a sequence of them), and the adaptive rule "
+        "(first_procedure, then each answer's next_procedure) at several target confidences, "
+        "with the share of robot time it used (app/evaluation/procedures.py)",
+    )
+    p.add_argument(
+        "--durations",
+        type=_durations,
+        default={},
+        metavar="NAME=SECONDS,...",
+        help="seconds of robot time of procedures, for --procedures (defaults: "
+        "app.evaluation.procedures.DURATIONS, whose sources docs/RESULTS.md gives)",
+    )
+    p.add_argument(
         "--no-progress",
         action="store_true",
         help="hide the progress bar and the line printed on stderr per finished split",
@@ -239,10 +270,10 @@ def run(args: argparse.Namespace) -> int:
     params = method_params(args.param, methods)
     dataset = open_dataset(args.dataset, seed=args.data_seed)
     if isinstance(dataset, BioTacDataset):
-        if args.ceilings or args.touches or args.rerun_splits:
+        if args.ceilings or args.touches or args.rerun_splits or args.procedures:
             raise ValueError(
-                "--ceilings, --touches and --rerun-splits apply to known/novel splits, not to "
-                "raw BioTac trials"
+                "--ceilings, --touches, --rerun-splits and --procedures apply to known/novel "
+                "splits, not to raw BioTac trials"
             )
         results = evaluate_raw(
             dataset,
@@ -272,6 +303,8 @@ def run(args: argparse.Namespace) -> int:
             ceilings=args.ceilings,
             touches=args.touches,
             rerun_splits=args.rerun_splits,
+            procedures=args.procedures,
+            durations=args.durations,
         )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=1))

@@ -62,7 +62,7 @@ import multiprocessing
 import platform
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
@@ -71,6 +71,8 @@ from tqdm.auto import tqdm
 
 from app.data.dataset import TactileDataset
 from app.evaluation import metrics
+from app.evaluation.procedures import TARGETS, check_durations, procedure_figures
+from app.evaluation.procedures import measure as measure_procedures
 from app.evaluation.splits import ZslSplit, make_zsl_splits
 from app.evaluation.touches import check_touches, touch_figures
 from app.evaluation.touches import measure as measure_touches
@@ -127,10 +129,16 @@ _CURVE_POINTS = 200
 
 
 def method_figures(
-    method: str, ceilings: bool = False, touches: Sequence[int] = ()
+    method: str, ceilings: bool = False, touches: Sequence[int] = (), n_procedures: int = 0
 ) -> tuple[str, ...]:
     extra = CEILING_FIGURES if ceilings else ()
-    return FIGURES + tuple(ZSL_VARIANTS.get(method, {})) + extra + touch_figures(touches)
+    return (
+        FIGURES
+        + tuple(ZSL_VARIANTS.get(method, {}))
+        + extra
+        + touch_figures(touches)
+        + procedure_figures(n_procedures)
+    )
 
 
 def make_recognizer(method: str, params: dict[str, Any] | None, seed: int) -> TactileRecognizer:
@@ -155,11 +163,13 @@ def evaluate_split(
     seed: int = 0,
     ceilings: bool = False,
     touches: Sequence[int] = (),
+    durations: np.ndarray | None = None,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """(figures, details) of one method on one split; details hold matrices, curve, timings.
     ``ceilings``: also the measured limits of ``CEILING_FIGURES``; ``touches``: also the
     figures after that many touches of each test object, and after one enrolled touch
-    (``app.evaluation.touches``)."""
+    (``app.evaluation.touches``); ``durations`` (seconds per procedure): also the figures
+    against the procedures used (``app.evaluation.procedures``)."""
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     train = split.train_dataset(dataset)
@@ -261,6 +271,15 @@ def evaluate_split(
         )
         timings["touches_s"] = time.perf_counter() - t
 
+    if durations is not None:
+        t = time.perf_counter()
+        figures.update(
+            measure_procedures(
+                zsl_model, (xk, yk), (xn, yn), known_names, names, np.asarray(durations)
+            )
+        )
+        timings["procedures_s"] = time.perf_counter() - t
+
     timings["total_s"] = time.perf_counter() - t0
     details["timings"] = timings
     details["model_metrics"] = jsonable(getattr(model, "metrics", {}) or {})
@@ -297,6 +316,8 @@ def evaluate(
     ceilings: bool = False,
     touches: Sequence[int] = (),
     rerun_splits: int | None = None,
+    procedures: bool = False,
+    durations: Mapping[str, float] | None = None,
 ) -> dict[str, Any]:
     """Every method on the same ``n_splits`` splits; a JSON-ready results dict.
 
@@ -315,9 +336,19 @@ def evaluate(
     also the figures of ``CEILING_FIGURES``.
     ``touches``: touch counts (at most ``test_trials``) for ``app.evaluation.touches``'s
     figures; ValueError naming the problem otherwise. ``rerun_splits``: the size of the
-    re-run that ``rerun95`` predicts (default ``n_splits``).
+    re-run that ``rerun95`` predicts (default ``n_splits``). ``procedures``: also the
+    figures against the procedures used (``app.evaluation.procedures``), with each
+    procedure's seconds from ``durations`` (else ``procedures.DURATIONS``).
     """
     touches = check_touches(touches, test_trials)
+    seconds = None
+    if procedures:
+        if len(dataset.procedures) < 2:
+            raise ValueError(
+                f"dataset '{dataset.name}' names {len(dataset.procedures)} procedures; the "
+                "figures against the procedures used need at least 2"
+            )
+        seconds = check_durations(dataset.procedures, durations or {})
     if rerun_splits is not None and (
         not isinstance(rerun_splits, int | np.integer) or rerun_splits < 1
     ):
@@ -361,6 +392,11 @@ def evaluate(
     results["jobs"] = jobs
     results["ceilings"] = bool(ceilings)
     results["touches"] = touches
+    results["procedures_measured"] = seconds is not None
+    results["procedures"] = list(dataset.procedures)
+    if seconds is not None:
+        results["durations"] = seconds.tolist()
+        results["procedure_targets"] = list(TARGETS)
     results["intervals"] = INTERVALS
     results["rerun_splits"] = int(rerun_splits or n_splits)
     started = time.perf_counter()
@@ -389,7 +425,14 @@ def evaluate(
                     bar.set_postfix_str(f"split {split.index + 1}/{len(splits)} {m}")
                     outcome.append(
                         _run_method(
-                            dataset, split, m, method_params.get(m), seed, ceilings, touches
+                            dataset,
+                            split,
+                            m,
+                            method_params.get(m),
+                            seed,
+                            ceilings,
+                            touches,
+                            seconds,
                         )
                     )
                     bar.update(1)
@@ -406,7 +449,14 @@ def evaluate(
                 bar.set_postfix_str(f"{jobs} processes")
                 futures = {
                     pool.submit(
-                        _split_task, split, methods, method_params, seed, ceilings, touches
+                        _split_task,
+                        split,
+                        methods,
+                        method_params,
+                        seed,
+                        ceilings,
+                        touches,
+                        seconds,
                     ): split
                     for split in splits
                 }
@@ -427,8 +477,11 @@ def evaluate(
             entry["splits"].append(figures)
             entry["details"].append(details)
     for m in methods:
+        n_procedures = len(dataset.procedures) if seconds is not None else 0
         summarize_entry(
-            results["methods"][m], method_figures(m, ceilings, touches), results["rerun_splits"]
+            results["methods"][m],
+            method_figures(m, ceilings, touches, n_procedures),
+            results["rerun_splits"],
         )
     if len(methods) > 1:
         results["paired"] = paired_summary(results["methods"], methods[0])
@@ -444,10 +497,13 @@ def _run_method(
     seed: int,
     ceilings: bool,
     touches: Sequence[int] = (),
+    durations: np.ndarray | None = None,
 ) -> tuple[dict[str, Any], dict[str, Any], float]:
     t = time.perf_counter()
     own_seed = split_method_seed(seed, split.index)
-    figures, details = evaluate_split(dataset, split, method, params, own_seed, ceilings, touches)
+    figures, details = evaluate_split(
+        dataset, split, method, params, own_seed, ceilings, touches, durations
+    )
     details["method_seed"] = own_seed
     return figures, details, time.perf_counter() - t
 
@@ -482,11 +538,14 @@ def _split_task(
     seed: int,
     ceilings: bool,
     touches: Sequence[int] = (),
+    durations: np.ndarray | None = None,
 ) -> list[tuple[dict[str, Any], dict[str, Any], float]]:
     """Every method on one split, in order (a worker process's task)."""
     assert _WORKER_DATASET is not None, "worker not initialised"
     return [
-        _run_method(_WORKER_DATASET, split, m, method_params.get(m), seed, ceilings, touches)
+        _run_method(
+            _WORKER_DATASET, split, m, method_params.get(m), seed, ceilings, touches, durations
+        )
         for m in methods
     ]
 

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from app.evaluation.metrics import jaccard_similarity, row_normalize
+from app.evaluation.procedures import procedure_markdown
 from app.evaluation.touches import touch_markdown
 
 # Paper averages (fractions). 6 novel objects: Tables II, III, V, VI, VIII;
@@ -154,6 +155,7 @@ def markdown(results: dict[str, Any], images: dict[str, list[str]] | None = None
     ]
     lines += _interval_sections(results, figures)
     lines += touch_markdown(results)
+    lines += procedure_markdown(results)
     lines += [
         "",
         "## Wall time",
@@ -487,6 +489,17 @@ def write_report(
             f"{results['splits']} splits, {results['novel']} novel objects",
         )
         images["Touches and one enrolled touch"] = [path.name]
+        written.append(path)
+    if results.get("procedures_measured"):
+        from app.evaluation.procedures import plot_procedures
+
+        path = out / "procedures.png"
+        plot_procedures(
+            results,
+            path,
+            f"Known accuracy and gzsl_h against robot time, {results['novel']} novel objects",
+        )
+        images["Figures against the procedures used"] = [path.name]
         written.append(path)
     md = out / "report.md"
     md.write_text(markdown(results, images))

@@ -383,9 +383,7 @@ class BestRecognizer(TactileRecognizer):
             self.known_.cues_model.scaled(flatten(dataset.samples)), dataset.labels
         )
         if self.procedures_ is not None:
-            self.procedures_ = self.procedures_.synced(
-                self, lambda m, j: m._refit_attributes(dataset.procedure_view(j))
-            )
+            self.procedures_ = self.procedures_.refit_attributes(self, dataset)
         self.metrics = {**self.metrics, "n_attributes": len(self.registry.attribute_names)}
 
     def _grow_known(self, samples: np.ndarray, labels: np.ndarray) -> None:

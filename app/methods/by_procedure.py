@@ -182,6 +182,25 @@ class ProcedureModels:
         out.class_means, out.class_counts = means.astype(np.float32), counts
         return out
 
+    def refit_attributes(self, parent: Any, dataset: TactileDataset) -> ProcedureModels:
+        """``synced`` after ``parent`` refitted its attribute parts on ``dataset`` (its
+        training samples, which may not name their procedures): each model refits on its
+        block of them."""
+
+        def refit(model: Any, j: int) -> None:
+            model._refit_attributes(
+                TactileDataset(
+                    samples=dataset.samples[:, self._block(j)],
+                    labels=dataset.labels,
+                    trials=dataset.trials,
+                    class_attributes=dataset.attribute_values,
+                    attribute_names=dataset.attribute_names,
+                    class_names=dataset.class_names,
+                )
+            )
+
+        return self.synced(parent, refit)
+
     # -------------------------------------------------------------- persistence
     def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         arrays = {"class_means": self.class_means, "class_counts": self.class_counts}

@@ -77,7 +77,7 @@ def test_methods_without_attribute_classifiers_say_so(client, sample):
 
 def test_bad_touches_are_named(best_service):
     client, _, _ = best_service
-    problem(client.post("/v1/describe", json={"samples": [[0.0]]}), 422, "samples")
+    problem(client.post("/v1/describe", json={"samples": [[0.0]]}), 422, "samples[0]")
     problem(client.post("/v1/describe", json={"samples": []}), 422)
     problem(
         client.post(

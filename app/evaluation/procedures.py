@@ -1,0 +1,298 @@
+"""Figures against the exploratory procedures used, on the splits of ``protocol.evaluate``.
+
+A robot that answers after fewer procedures saves their time. For every non-empty subset
+S of the dataset's procedures (``TactileDataset.procedures``), the test samples with only
+S kept (the others missing, ``app.data.procedures.keep_only``) give the split's figures
+under ``procs{bits}_``, bits in procedure order (``procs1000_known_acc``: the first
+procedure alone): ``known_acc``, ``nd_known_kept``, ``nd_novel_detected``, ``zsl`` and the
+mixed known + novel ``gzsl_seen`` / ``_unseen`` / ``_h``, from the model with the split's
+novel objects enrolled by attributes. A fixed order of procedures is the sequence of its
+prefixes, so every order's curve is read from these.
+
+**The adaptive rule**, for each target confidence t: every test sample (known and novel
+mixed) starts with the model's ``first_procedure``; while its answer's probability is
+below t and a procedure is left, it adds the answer's ``next_procedure``. Its figures
+(``adaptive{t}_``, t in percent) are those of each sample's last answer, and
+``adaptive{t}_time`` is the mean share of the whole exploration's robot time it used
+(``_time_known`` / ``_time_novel`` for the known / novel samples), with each procedure's
+duration from ``durations``.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from app.data.procedures import keep_only
+from app.evaluation import metrics
+from app.framework.recognizer import TactileRecognizer
+
+PER_SUBSET: tuple[str, ...] = (
+    "known_acc",
+    "nd_known_kept",
+    "nd_novel_detected",
+    "zsl",
+    "gzsl_seen",
+    "gzsl_unseen",
+    "gzsl_h",
+)
+PER_ADAPTIVE: tuple[str, ...] = (
+    *PER_SUBSET,
+    "time",
+    "time_known",
+    "time_novel",
+    "procedures",
+)
+#: target confidences of the adaptive rule that ``evaluate --procedures`` measures
+TARGETS: tuple[float, ...] = (0.5, 0.7, 0.8, 0.9, 0.95, 0.99)
+
+#: Seconds of robot time per procedure, by the names the datasets give them. PHAC-2's
+#: robot controller (IanTheEngineer/Penn-haptics-bolt, gripper_controller.cpp) holds for
+#: 10 s, slides 5 cm in 5 s (SLIDE_5CM) and 5 cm in 2 s (MOVE_DOWN_5CM); its squeeze runs
+#: until a set pressure, with no fixed time: 4.2 s is the median squeeze contact of the
+#: BioTac pilot's 74 trials, recorded by the same controller. The simulator's four take
+#: PHAC-2's times.
+DURATIONS: dict[str, float] = {
+    "SQUEEZE_SET_PRESSURE_SLOW": 4.2,
+    "HOLD_FOR_10_SECONDS": 10.0,
+    "SLIDE_5CM": 5.0,
+    "MOVE_DOWN_5CM": 2.0,
+    "squeeze": 4.2,
+    "hold": 10.0,
+    "slide": 5.0,
+    "move_down": 2.0,
+}
+
+
+def subsets(n: int) -> list[tuple[int, ...]]:
+    """Every non-empty subset of ``n`` procedures, as sorted index tuples, smallest first."""
+    return [c for r in range(1, n + 1) for c in itertools.combinations(range(n), r)]
+
+
+def bits(subset: Sequence[int], n: int) -> str:
+    return "".join("1" if j in subset else "0" for j in range(n))
+
+
+def target_key(t: float) -> str:
+    return f"adaptive{round(t * 100):d}"
+
+
+def procedure_figures(n_procedures: int, targets: Sequence[float] = TARGETS) -> tuple[str, ...]:
+    """The figures ``measure`` adds for ``n_procedures`` procedures (none for fewer than 2)."""
+    if n_procedures < 2:
+        return ()
+    out = [f"procs{bits(s, n_procedures)}_{f}" for s in subsets(n_procedures) for f in PER_SUBSET]
+    out += [f"{target_key(t)}_{f}" for t in targets for f in PER_ADAPTIVE]
+    return tuple(out)
+
+
+def check_durations(procedures: Sequence[str], durations: Mapping[str, float]) -> np.ndarray:
+    """(P,) seconds of each procedure; ValueError naming one without a positive duration."""
+    out = []
+    for name in procedures:
+        value = durations.get(name, DURATIONS.get(name))
+        if value is None or not np.isfinite(value) or value <= 0:
+            raise ValueError(
+                f"procedure {name!r} has no positive duration; give one with "
+                f"--durations {name}=SECONDS"
+            )
+        out.append(float(value))
+    return np.array(out)
+
+
+def measure(
+    model: TactileRecognizer,
+    known: tuple[np.ndarray, np.ndarray],
+    novel: tuple[np.ndarray, np.ndarray],
+    known_names: Sequence[str],
+    novel_names: Sequence[str],
+    durations: np.ndarray,
+    targets: Sequence[float] = TARGETS,
+) -> dict[str, float]:
+    """The figures of ``procedure_figures`` for one split. ``model`` has the split's novel
+    objects enrolled; ``known`` / ``novel``: (samples, class index) of the test samples."""
+    (xk, yk), (xn, yn) = known, novel
+    names = model.procedures
+    n = len(names)
+    x = np.concatenate([xk, xn])
+    is_known = np.r_[np.ones(len(xk), bool), np.zeros(len(xn), bool)]
+    out: dict[str, float] = {}
+    for subset in subsets(n):
+        used = np.zeros((len(x), n), bool)
+        used[:, list(subset)] = True
+        prefix = f"procs{bits(subset, n)}_"
+        out.update(_figures(model, x, used, is_known, yk, yn, known_names, novel_names, prefix))
+    for t in targets:
+        used = explore(model, x, t)
+        prefix = f"{target_key(t)}_"
+        out.update(_figures(model, x, used, is_known, yk, yn, known_names, novel_names, prefix))
+        share = used @ durations / durations.sum()
+        out[prefix + "time"] = float(share.mean())
+        out[prefix + "time_known"] = float(share[is_known].mean())
+        out[prefix + "time_novel"] = float(share[~is_known].mean())
+        out[prefix + "procedures"] = float(used.sum(axis=1).mean())
+    return out
+
+
+def explore(model: TactileRecognizer, x: np.ndarray, target: float) -> np.ndarray:
+    """(N, P) bool: the procedures the adaptive rule uses on each complete sample of ``x``:
+    the model's first procedure, then each answer's next one until there is none."""
+    names = model.procedures
+    used = np.zeros((len(x), len(names)), bool)
+    used[:, names.index(model.first_procedure)] = True
+    active = np.arange(len(x))
+    while len(active):
+        partial = _masked(x[active], used[active])
+        nxt = model.recognize_batch(partial, top_k=1, target_confidence=target).next_procedure
+        go = nxt >= 0
+        used[active[go], nxt[go]] = True
+        active = active[go]
+    return used
+
+
+def _masked(x: np.ndarray, used: np.ndarray) -> np.ndarray:
+    out = np.array(x, np.float32, copy=True)
+    for pattern in np.unique(used, axis=0):
+        rows = (used == pattern).all(axis=1)
+        out[rows] = keep_only(x[rows], range(len(pattern)), np.flatnonzero(pattern).tolist())
+    return out
+
+
+def _figures(model, x, used, is_known, yk, yn, known_names, novel_names, prefix):
+    xm = _masked(x, used)
+    xk, xn = xm[is_known], xm[~is_known]
+    threshold = model.novelty_threshold
+    out = {
+        "known_acc": metrics.argmax_accuracy(model.known_proba(xk), yk),
+        "nd_known_kept": float(np.mean(model.novelty_score(xk) <= threshold)),
+        "nd_novel_detected": metrics.detection_rate(model.novelty_score(xn), threshold),
+        "zsl": metrics.argmax_accuracy(model.novel_proba(xn), yn),
+    }
+    answers = model.recognize_batch(xm, top_k=1)
+    predicted = [answers.class_names[i] for i in answers.top_index[:, 0]]
+    true = [known_names[j] for j in yk] + [novel_names[j] for j in yn]
+    out.update(metrics.gzsl_figures(true, predicted, is_known))
+    return {prefix + k: v for k, v in out.items()}
+
+
+# ------------------------------------------------------------------------- report
+SHOWN = ("known_acc", "nd_known_kept", "nd_novel_detected", "zsl", "gzsl_h")
+
+
+def procedure_markdown(results: dict[str, Any]) -> list[str]:
+    """Markdown per method: each subset's figures, the best order's curve, and the
+    adaptive rule at each target against all procedures (paired over splits)."""
+    names = list(results.get("procedures") or [])
+    if not results.get("procedures_measured") or len(names) < 2:
+        return []
+    n = len(names)
+    durations = np.array(results["durations"], float)
+    everything = bits(range(n), n)
+
+    def cell(values: list[float], signed: bool = False) -> str:
+        fmt = "{:+.3f}" if signed else "{:.3f}"
+        lo, hi = metrics.mean_interval(values, bounds=(-1.0, 1.0) if signed else (0.0, 1.0))
+        return f"{fmt.format(float(np.nanmean(values)))} [{fmt.format(lo)}, {fmt.format(hi)}]"
+
+    lines = ["", "## Figures against the procedures used", ""]
+    for m, entry in results["methods"].items():
+        splits = entry["splits"]
+        if not all(f"procs{everything}_known_acc" in s for s in splits):
+            continue
+        lines += [
+            f"`{m}`, mean [95 % interval] over {len(splits)} splits. Procedures: "
+            + ", ".join(
+                f"{j + 1} {p} ({d:g} s)"
+                for j, (p, d) in enumerate(zip(names, durations, strict=True))
+            )
+            + ".",
+            "",
+            "| procedures | robot time | " + " | ".join(f"`{f}`" for f in SHOWN) + " |",
+            "| --- | --- | " + " | ".join("---" for _ in SHOWN) + " |",
+        ]
+        for subset in subsets(n):
+            key = bits(subset, n)
+            share = durations[list(subset)].sum() / durations.sum()
+            label = " + ".join(str(j + 1) for j in subset)
+            cells = [cell([s[f"procs{key}_{f}"] for s in splits]) for f in SHOWN]
+            lines.append(f"| {label} | {share:.2f} | " + " | ".join(cells) + " |")
+        lines += [
+            "",
+            "Adaptive rule at each target confidence; the differences from all procedures "
+            "are paired on the same splits.",
+            "",
+            "| target | robot time (known / novel) | procedures | `known_acc` | − all | "
+            "`gzsl_h` | − all |",
+            "| --- | --- | --- | --- | --- | --- | --- |",
+        ]
+        for t in results["procedure_targets"]:
+            p = target_key(t) + "_"
+            diff = {
+                f: [s[p + f] - s[f"procs{everything}_{f}"] for s in splits]
+                for f in ("known_acc", "gzsl_h")
+            }
+            time = np.mean([s[p + "time"] for s in splits])
+            tk = np.mean([s[p + "time_known"] for s in splits])
+            tn = np.mean([s[p + "time_novel"] for s in splits])
+            procs = np.mean([s[p + "procedures"] for s in splits])
+            lines.append(
+                f"| {t:g} | {time:.2f} ({tk:.2f} / {tn:.2f}) | {procs:.2f} | "
+                f"{cell([s[p + 'known_acc'] for s in splits])} | {cell(diff['known_acc'], True)} | "
+                f"{cell([s[p + 'gzsl_h'] for s in splits])} | {cell(diff['gzsl_h'], True)} |"
+            )
+        lines.append("")
+    return lines
+
+
+def plot_procedures(results: dict[str, Any], path: Path, title: str) -> None:
+    """known_acc and gzsl_h against robot time: every fixed order's prefixes (grey), the
+    adaptive rule at each target (black), all procedures (star)."""
+    from app.evaluation.report import _plt
+
+    plt = _plt()
+    names = list(results["procedures"])
+    n = len(names)
+    durations = np.array(results["durations"], float)
+    m = next(iter(results["methods"]))
+    mean = results["methods"][m]["mean"]
+    fig, axes = plt.subplots(1, 2, figsize=(10.5, 4.2))
+    for ax, figure in zip(axes, ("known_acc", "gzsl_h"), strict=True):
+        for order in itertools.permutations(range(n)):
+            xs, ys = [0.0], [np.nan]
+            for k in range(1, n + 1):
+                prefix = sorted(order[:k])
+                xs.append(durations[prefix].sum() / durations.sum())
+                ys.append(mean[f"procs{bits(prefix, n)}_{figure}"])
+            ax.plot(xs[1:], ys[1:], color="0.75", lw=0.8, marker=".", ms=3)
+        for j in range(n):
+            ax.annotate(
+                names[j][:12],
+                (durations[j] / durations.sum(), mean[f"procs{bits([j], n)}_{figure}"]),
+                fontsize=6,
+                color="0.4",
+            )
+        ts = results["procedure_targets"]
+        ax.plot(
+            [mean[f"{target_key(t)}_time"] for t in ts],
+            [mean[f"{target_key(t)}_{figure}"] for t in ts],
+            color="black",
+            marker="o",
+            ms=4,
+            label="adaptive rule (targets " + ", ".join(f"{t:g}" for t in ts) + ")",
+        )
+        ax.plot([1.0], [mean[f"procs{bits(range(n), n)}_{figure}"]], "k*", ms=11, label="all")
+        ax.set(xlabel="share of the whole exploration's robot time", ylabel=figure, xlim=(0, 1.05))
+        ax.grid(alpha=0.3)
+    axes[0].plot([], [], color="0.75", label="fixed orders, procedure by procedure")
+    axes[0].legend(fontsize=7, loc="lower right")
+    fig.suptitle(
+        f"{title} ({m}, mean over {len(results['methods'][m]['splits'])} splits)", fontsize=10
+    )
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

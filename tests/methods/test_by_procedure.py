@@ -1,0 +1,143 @@
+"""``best`` answers samples that lack procedures, from the ones they hold, and says which
+procedure to do next; complete samples are answered exactly as before."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.data.procedures import keep_only
+from app.data.simulator import simulate_dataset
+from app.framework import bundle
+from app.framework.errors import MissingProcedureError, NonFiniteInputError
+from app.methods.best import BestRecognizer
+
+PARAMS = {"seed": 0, "n_estimators": 30, "tuning_rounds": 1, "distance_components": 8}
+
+
+@pytest.fixture(scope="module")
+def data():
+    full = simulate_dataset(n_objects=14, trials_per_object=6, seed=3)
+    train = full.subset(full.trials % 6 != 0)
+    test = full.subset(full.trials % 6 == 0)
+    known = np.arange(12)
+    return (
+        train.subset(np.isin(train.labels, known)).select_classes(known),
+        test.subset(np.isin(test.labels, known)).select_classes(known),
+        full,
+    )
+
+
+@pytest.fixture(scope="module")
+def model(data):
+    return BestRecognizer(**PARAMS).fit(data[0])
+
+
+def test_complete_samples_are_answered_as_by_the_whole_model_alone(data, model):
+    train, test, _ = data
+    alone = BestRecognizer(**PARAMS, by_procedure=False).fit(train)
+    assert model.answers_from_some_procedures and not alone.answers_from_some_procedures
+    np.testing.assert_array_equal(model.known_proba(test.samples), alone.known_proba(test.samples))
+    np.testing.assert_array_equal(
+        model.novelty_score(test.samples), alone.novelty_score(test.samples)
+    )
+    batch = model.recognize_batch(test.samples)
+    assert batch.procedures == test.procedures
+    assert batch.procedures_used.all() and (batch.next_procedure == -1).all()
+
+
+def test_every_subset_of_procedures_is_answered_from_its_procedures(data, model):
+    _, test, _ = data
+    chance = 1 / test.n_classes
+    for keep in ([0], [1], [2], [3], [0, 3], [1, 2, 3]):
+        x = keep_only(test.samples, test.procedures, keep)
+        p = model.known_proba(x)
+        np.testing.assert_allclose(p.sum(axis=1), 1.0, rtol=1e-6)
+        assert (p.argmax(axis=1) == test.labels).mean() > 3 * chance, keep
+        answers = model.recognize(x, top_k=2)
+        assert all(a.procedures_used == tuple(test.procedures[j] for j in keep) for a in answers)
+        assert np.isfinite(model.novelty_score(x)).all()
+        assert model.attribute_proba(x).shape == (len(x), model.registry.attribute_names.__len__())
+
+
+def test_a_batch_may_mix_samples_of_different_procedures(data, model):
+    _, test, _ = data
+    x = test.samples[:3].copy()
+    x[0] = keep_only(x[:1], test.procedures, [0])[0]
+    x[2] = keep_only(x[2:3], test.procedures, [1, 2])[0]
+    mixed = model.known_proba(x)
+    for i in range(3):
+        np.testing.assert_allclose(mixed[i], model.known_proba(x[i : i + 1])[0])
+    used = model.recognize_batch(x).procedures_used
+    assert used.tolist() == [
+        [True, False, False, False],
+        [True, True, True, True],
+        [False, True, True, False],
+    ]
+
+
+def test_next_procedure_is_one_not_done_until_the_answer_is_confident(data, model):
+    _, test, _ = data
+    x = keep_only(test.samples, test.procedures, [0])
+    unsure = model.recognize_batch(x, target_confidence=1.0)
+    assert (unsure.next_procedure >= 1).all()  # never the one already done
+    sure = model.recognize_batch(x, target_confidence=1e-9)
+    assert (sure.next_procedure == -1).all()
+    assert model.first_procedure in test.procedures
+
+
+def test_a_sample_missing_part_of_a_procedure_or_all_of_them_is_refused(data, model):
+    _, test, _ = data
+    x = test.samples[:1].copy()
+    x[0, 0, :5] = np.nan  # five values of the first procedure's first row
+    with pytest.raises(MissingProcedureError, match="procedure 'squeeze' is partly missing"):
+        model.recognize(x)
+    with pytest.raises(MissingProcedureError, match="every procedure is missing"):
+        model.recognize(np.full_like(x, np.nan))
+    y = test.samples[:1].copy()
+    y[0, 9, 3] = np.inf
+    with pytest.raises(NonFiniteInputError, match="infinity"):
+        model.recognize(y)
+
+
+def test_models_without_per_procedure_parts_say_they_need_every_procedure(data):
+    alone = BestRecognizer(**PARAMS, by_procedure=False).fit(data[0])
+    x = keep_only(data[1].samples[:1], data[1].procedures, [0])
+    with pytest.raises(MissingProcedureError, match="answers from every procedure"):
+        alone.recognize(x)
+    assert alone.first_procedure is None
+
+
+def test_enrolment_keeps_the_per_procedure_models_in_step(data, model):
+    train, test, full = data
+    novel = full.subset(full.labels >= 12)
+    names = [full.class_names[12], full.class_names[13]]
+    zsl = model.add_novel_classes(names, full.class_attributes[12:14], allow_known_vectors=True)
+    x = keep_only(novel.samples, novel.procedures, [0, 2])
+    assert zsl.novel_proba(x).shape == (len(x), 2)
+    shot = zsl.add_one_shot(names[0], novel.samples[novel.labels == 12][:1])
+    for j, sub in enumerate(shot.procedures_.models):
+        assert sub.shot_has_.tolist() == [True, False]  # each learnt the sample's block
+        assert sub.registry.novel_samples[names[0]].shape == (1, 8, 30), j
+    assert not zsl.procedures_.models[0].shot_has_.any()  # the original is untouched
+    with pytest.raises(MissingProcedureError, match="need every procedure"):
+        zsl.add_one_shot(names[0], x[:1])
+    grown = shot.with_known_samples({names[1]: novel.samples[novel.labels == 13][:3]})
+    assert grown.known_proba(x).shape == (len(x), 13)
+    assert grown.procedures_.class_means.shape[0] == 13
+    dropped = shot.without_novel_classes()
+    assert dropped.procedures_.models[0].registry.novel_names == []
+
+
+def test_a_bundle_keeps_the_per_procedure_models(data, model):
+    _, test, full = data
+    m = model.add_novel_classes([full.class_names[12]], full.class_attributes[12:13])
+    m = m.add_one_shot(full.class_names[12], full.samples[full.labels == 12][:1])
+    back = bundle.from_bytes(bundle.to_bytes(m))
+    x = keep_only(test.samples, test.procedures, [1, 3])
+    assert back.procedures == m.procedures and back.first_procedure == m.first_procedure
+    np.testing.assert_array_equal(back.known_proba(x), m.known_proba(x))
+    np.testing.assert_array_equal(back.novel_proba(x), m.novel_proba(x))
+    np.testing.assert_array_equal(
+        back.recognize_batch(x).next_procedure, m.recognize_batch(x).next_procedure
+    )
