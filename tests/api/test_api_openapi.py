@@ -167,7 +167,7 @@ def test_a_generated_client_omits_nothing_and_does_a_robots_first_calls(
 
     bad = recognize.sync_detailed(client=gen, body=models.RecognizeRequest(samples=[sample[:3]]))
     assert bad.status_code == 422 and isinstance(bad.parsed, models.ValidationProblem)
-    assert bad.parsed.errors[0].field == "samples"
+    assert bad.parsed.errors[0].field == "samples[0]"
     assert ", ".join(map(str, dataset.input_shape)) in bad.parsed.detail  # the shape to send
 
 
