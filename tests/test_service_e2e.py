@@ -272,3 +272,45 @@ def test_a_lab_starts_empty_and_grows_its_own_vocabulary(tmp_path):
             assert client.get("/v1/models/active").json()["attribute_names"] == ["soft"]
     finally:
         service.stop()
+
+
+def test_a_robot_touches_procedure_by_procedure_as_the_service_asks(tmp_path):
+    """A real ``serve`` of ``best`` on the simulator: the robot starts with the model's
+    first procedure and sends the sample again, procedure by procedure, as each answer's
+    next_procedure asks, until it is null."""
+    from tests.service_fixtures import BEST_PARAMS
+
+    dataset = quick_dataset()
+    rng = np.random.default_rng(2)
+    # a touch unlike the training ones: the forest is not sure of it after one procedure
+    touch = dataset.samples[3] + rng.normal(0, dataset.samples.std(), dataset.input_shape)
+    rows = touch.shape[0] // len(dataset.procedures)
+    service = Service(tmp_path / "data", free_port())
+    service.env.update(TACTILE_METHOD="best", TACTILE_METHOD_PARAMS=json.dumps(BEST_PARAMS))
+    service.start()
+    try:
+        with httpx.Client(base_url=f"http://127.0.0.1:{service.port}", timeout=30) as client:
+            service.wait_ready(client)
+            active = client.get("/v1/models/active").json()
+            assert active["procedures"] == list(dataset.procedures)
+            for target, most in ((1.0, 4), (1e-6, 1)):
+                sample: list = [None] * touch.shape[0]
+                name, done = active["first_procedure"], []
+                while name is not None:
+                    j = dataset.procedures.index(name)
+                    sample[j * rows : (j + 1) * rows] = touch[j * rows : (j + 1) * rows].tolist()
+                    done.append(name)
+                    r = client.post(
+                        "/v1/recognize",
+                        params={"target_confidence": target},
+                        json={"samples": [sample]},
+                    )
+                    assert r.status_code == 200, r.text
+                    (answer,) = r.json()["results"]
+                    assert answer["procedures_used"] == [p for p in dataset.procedures if p in done]
+                    name = answer["next_procedure"]
+                    assert name not in done
+                assert len(done) == most  # never sure: all four; sure at once: the first
+            assert answer["class_name"] in dataset.class_names
+    finally:
+        service.stop()
