@@ -80,6 +80,8 @@ class ZeroShotUnavailableError(UnsupportedOperationError):
     samples instead."""
 
 
-class MissingProcedureError(InputShapeError):
+class MissingProcedureError(InputShapeError, NonFiniteInputError):
     """A sample lacks every procedure, lacks part of one, or lacks one where the model
-    answers only from every procedure (or takes only complete samples, as enrolment does)."""
+    answers only from every procedure (or takes only complete samples, as enrolment does).
+    A missing value is NaN, so this is also a ``NonFiniteInputError``: code that refuses
+    NaN samples catches it unchanged."""
