@@ -402,9 +402,10 @@ class RecognitionOut(BaseModel):
         "holds); empty for a model that does not name its procedures."
     )
     next_procedure: str | None = Field(
-        description="The procedure whose expected gain for this answer is largest, to do "
-        "next and send again with the others; null once the answer's probability reaches "
-        "`target_confidence` or every procedure is done."
+        description="The procedure whose expected gain per second of robot time is largest "
+        "for this answer, to do next and send again with the others; null once two "
+        "procedures are done and the answer's probability reaches `target_confidence`, or "
+        "every procedure is done."
     )
 
 

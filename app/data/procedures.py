@@ -14,6 +14,31 @@ from collections.abc import Sequence
 
 import numpy as np
 
+#: Seconds of robot time per procedure, by the names the datasets give them. PHAC-2's
+#: robot controller (IanTheEngineer/Penn-haptics-bolt, gripper_controller.cpp) holds for
+#: 10 s, slides 5 cm in 5 s (SLIDE_5CM) and 5 cm in 2 s (MOVE_DOWN_5CM); its squeeze runs
+#: until a set pressure, with no fixed time: 4.2 s is the median squeeze contact of the
+#: BioTac pilot's 74 trials, recorded by the same controller. The simulator's four take
+#: PHAC-2's times.
+SECONDS: dict[str, float] = {
+    "SQUEEZE_SET_PRESSURE_SLOW": 4.2,
+    "HOLD_FOR_10_SECONDS": 10.0,
+    "SLIDE_5CM": 5.0,
+    "MOVE_DOWN_5CM": 2.0,
+    "squeeze": 4.2,
+    "hold": 10.0,
+    "slide": 5.0,
+    "move_down": 2.0,
+}
+
+
+def seconds_of(procedures: Sequence[str]) -> np.ndarray:
+    """(P,) robot seconds of each procedure from ``SECONDS``; a name it lacks costs the
+    mean of those it has (1 s each when it has none), so unknown procedures weigh alike."""
+    known = [SECONDS[p] for p in procedures if p in SECONDS]
+    fill = float(np.mean(known)) if known else 1.0
+    return np.array([SECONDS.get(p, fill) for p in procedures], np.float64)
+
 
 class ProcedureError(ValueError):
     """Procedure names that do not fit the samples, or a sample whose procedures are

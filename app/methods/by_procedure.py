@@ -18,7 +18,12 @@ procedures S and c one of the ``candidates`` most probable known classes (weight
 ``p`` renormalised over them), the model of j is asked what it would answer for a typical
 touch of c (the mean of c's training samples on j's block, ``q_c``); fused with ``p``
 (the mean rule, weight |S| : 1) that gives the probability left on c. The gain of j is the
-expected rise of the probability on the true class, ``sum_c w_c (fused_c[c] - p[c])``.
+expected rise of the probability on the true class, ``sum_c w_c (fused_c[c] - p[c])``,
+and the procedure chosen has the largest gain per second of robot time
+(``app.data.procedures.seconds_of``). On PHAC-2's development splits (seeds 1-2, 10
+splits, target 0.5, two procedures at least; ``bench/research/explore_stopping.py``) the
+gain alone used 0.66 of the robot time, the gain per second 0.54, with known-object
+accuracy alike (-0.001 and -0.003 from all procedures) and ``gzsl_h`` -0.026 and +0.005.
 Class means are kept per known class (K x D, one pass over the training samples); novel
 classes have no training samples and are not candidates, so for a sample routed as novel
 the procedures are chosen by what tells its nearest known classes apart.
@@ -36,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from app.data.dataset import TactileDataset
-from app.data.procedures import block
+from app.data.procedures import block, seconds_of
 
 #: known classes weighed by the next-procedure rule (the answer's most probable ones)
 CANDIDATES = 5
@@ -108,7 +113,8 @@ class ProcedureModels:
         return [self.models[j] for j in keep]
 
     def next_procedures(self, known_p: np.ndarray, used: np.ndarray, ask: np.ndarray) -> np.ndarray:
-        """(N,) index of the procedure to do next for the rows of ``ask`` (-1 elsewhere)."""
+        """(N,) index of the procedure to do next for the rows of ``ask`` (-1 elsewhere):
+        the largest expected gain per second of robot time (``seconds_of``)."""
         out = np.full(len(known_p), -1, np.int64)
         rows = np.flatnonzero(ask)
         if not len(rows):
@@ -128,7 +134,7 @@ class ProcedureModels:
             q_true = q[np.arange(len(flat)), flat].reshape(-1, m)  # what j gives class c
             after = (n_used[todo] * p_c[todo] + q_true) / (n_used[todo] + 1.0)
             gain[todo, j] = (w[todo] * (after - p_c[todo])).sum(axis=1)
-        out[rows] = gain.argmax(axis=1)
+        out[rows] = (gain / seconds_of(self.procedures)[None, :]).argmax(axis=1)
         return out
 
     def _first_procedure(self) -> int:

@@ -7,6 +7,7 @@ import numpy as np
 
 from app.client import TactileClient
 from app.data.procedures import keep_only
+from app.framework.recognizer import MIN_PROCEDURES
 from tests.service_fixtures import npy, problem
 
 PROCEDURES = ["squeeze", "hold", "slide", "move_down"]
@@ -60,8 +61,14 @@ def test_next_procedure_follows_the_target_confidence(best_service, best_base):
     body = {"samples": [_squeezed(x)]}
     unsure = client.post("/v1/recognize?target_confidence=1", json=body).json()["results"][0]
     assert unsure["next_procedure"] in PROCEDURES[1:]
-    sure = client.post("/v1/recognize?target_confidence=0.0001", json=body).json()["results"][0]
-    assert sure["next_procedure"] is None
+    # sure, but after one procedure: a second one first
+    one = client.post("/v1/recognize?target_confidence=0.0001", json=body).json()["results"][0]
+    assert one["next_procedure"] in PROCEDURES[1:]
+    two = x.tolist()[:8] + [None] * 16 + x.tolist()[24:]  # squeeze and move down
+    body_two = {"samples": [two]}
+    sure = client.post("/v1/recognize?target_confidence=0.0001", json=body_two).json()
+    assert sure["results"][0]["next_procedure"] is None
+    assert sure["results"][0]["procedures_used"] == ["squeeze", "move_down"]
     problem(client.post("/v1/recognize?target_confidence=2", json=body), 422, "target_confidence")
     problem(client.post("/v1/recognize?target_confidence=x", json=body), 422, "target_confidence")
 
@@ -117,4 +124,4 @@ def test_the_client_explores_procedure_by_procedure(best_service, best_base):
     assert asked[0] == client.get("/v1/models/active").json()["first_procedure"]
     assert answer["next_procedure"] is None and answer["procedures_used"] == PROCEDURES
     quick = tactile.explore(touch, target_confidence=1e-6)
-    assert len(quick["procedures_done"]) == 1
+    assert len(quick["procedures_done"]) == MIN_PROCEDURES  # sure at once

@@ -18,6 +18,7 @@ from app.evaluation.procedures import (
 )
 from app.evaluation.protocol import evaluate
 from app.evaluation.report import write_report
+from app.framework.recognizer import MIN_PROCEDURES
 from app.framework.registry import make_method
 
 FAST = {"n_estimators": 20, "tuning_rounds": 1, "distance_components": 8}
@@ -66,9 +67,9 @@ def test_the_adaptive_rule_uses_more_time_for_a_higher_target(results):
 def test_explore_starts_with_the_first_procedure_and_stops_when_sure(dataset):
     model = make_method("best", **FAST).fit(dataset)
     x = dataset.samples[:10]
-    sure = explore(model, x, 1e-9)
+    sure = explore(model, x, 1e-9)  # sure at once: stops after MIN_PROCEDURES
     first = dataset.procedures.index(model.first_procedure)
-    assert sure.sum(axis=1).tolist() == [1] * 10 and sure[:, first].all()
+    assert sure.sum(axis=1).tolist() == [MIN_PROCEDURES] * 10 and sure[:, first].all()
     never = explore(model, x + np.float32(3.0), 1.0)  # unlike any training sample
     assert never.all()
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from app.data import procedures
 from app.data.procedures import keep_only
 from app.data.simulator import simulate_dataset
 from app.framework import bundle
@@ -76,14 +77,37 @@ def test_a_batch_may_mix_samples_of_different_procedures(data, model):
     ]
 
 
-def test_next_procedure_is_one_not_done_until_the_answer_is_confident(data, model):
+def test_next_procedure_is_one_not_done_until_two_are_done_and_the_answer_confident(data, model):
     _, test, _ = data
     x = keep_only(test.samples, test.procedures, [0])
     unsure = model.recognize_batch(x, target_confidence=1.0)
     assert (unsure.next_procedure >= 1).all()  # never the one already done
-    sure = model.recognize_batch(x, target_confidence=1e-9)
-    assert (sure.next_procedure == -1).all()
+    # one procedure alone is never enough, however sure its answer (MIN_PROCEDURES)
+    one = model.recognize_batch(x, target_confidence=1e-9)
+    assert (one.next_procedure >= 1).all()
+    two = keep_only(test.samples, test.procedures, [0, 3])
+    assert (model.recognize_batch(two, target_confidence=1e-9).next_procedure == -1).all()
+    still = model.recognize_batch(two, target_confidence=1.0).next_procedure
+    assert np.isin(still, [1, 2]).all()
     assert model.first_procedure in test.procedures
+
+
+def test_the_next_procedure_has_the_largest_expected_gain_per_second(data, model, monkeypatch):
+    """A procedure that costs far less robot time wins where gains are alike; made
+    ten times dearer, the same procedure is chosen less often."""
+    _, test, _ = data
+    x = keep_only(test.samples, test.procedures, [0])
+    known_p = model.known_proba(x)
+    used = np.zeros((len(x), 4), bool)
+    used[:, 0] = True
+    ask = np.ones(len(x), bool)
+    parts = model.procedures_
+    chosen = parts.next_procedures(known_p, used, ask)
+    cheap = min(test.procedures[1:], key=procedures.SECONDS.__getitem__)
+    share = (chosen == test.procedures.index(cheap)).mean()
+    monkeypatch.setitem(procedures.SECONDS, cheap, procedures.SECONDS[cheap] * 10)
+    dearer = parts.next_procedures(known_p, used, ask)
+    assert share > 0 and (dearer == test.procedures.index(cheap)).mean() < share
 
 
 def test_a_sample_missing_part_of_a_procedure_or_all_of_them_is_refused(data, model):

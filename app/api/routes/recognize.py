@@ -87,10 +87,10 @@ RECOGNIZE_EXTRA = {
                 "maximum": 1,
                 "default": TARGET_CONFIDENCE,
             },
-            "description": "An answer whose probability reaches this needs no further "
-            "procedure (`next_procedure` null); below it, `next_procedure` names the one to "
-            "do next. The default was chosen on PHAC-2's development splits "
-            "(docs/RESULTS.md).",
+            "description": "An answer whose probability reaches this, after two procedures "
+            "at least, needs no further procedure (`next_procedure` null); otherwise "
+            "`next_procedure` names the one to do next. The default was chosen on PHAC-2's "
+            "development splits (docs/RESULTS.md).",
         },
     ],
 }

@@ -1,0 +1,136 @@
+"""Exploration bench: when should a robot stop exploring? Development seeds only.
+
+``best`` answers from some procedures and names the next one (``next_procedure``). The
+service's rule stops once the answer's top probability reaches a target confidence. On
+PHAC-2 that rule stops after squeeze alone for most objects, and squeeze alone makes
+confident mistakes. This script compares stopping rules on the same fitted models, each
+at several targets, all choosing the next procedure by the model's expected gain:
+
+- ``top``: stop when the top probability reaches the target (the service's rule);
+- ``two``: the same, but never before two procedures;
+- ``agree``: stop when the top probability reaches the target and the last procedure
+  alone names the same class as all procedures so far (two procedures at least).
+
+Prints, per rule and target, the mean over development splits of known_acc, gzsl_h and the
+share of robot time (``app.evaluation.procedures.DURATIONS``), beside all procedures'.
+
+    .venv/bin/python bench/research/explore_stopping.py --seeds 1,2 --novel 6
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import numpy as np
+from dev_splits import add_split_arguments, splits, tiny
+
+from app.data.phac2 import load_phac2
+from app.data.procedures import keep_only
+from app.evaluation import metrics
+from app.evaluation.procedures import DURATIONS, check_durations
+from app.evaluation.protocol import make_recognizer
+
+RULES = ("top", "two", "agree", "top_per_second", "two_per_second")
+
+
+def masked(x: np.ndarray, used: np.ndarray, n: int) -> np.ndarray:
+    out = np.array(x, np.float32, copy=True)
+    for pattern in np.unique(used, axis=0):
+        rows = (used == pattern).all(axis=1)
+        out[rows] = keep_only(x[rows], range(n), np.flatnonzero(pattern).tolist())
+    return out
+
+
+def explore(model, x: np.ndarray, rule: str, target: float, costs: np.ndarray) -> np.ndarray:
+    """(N, P) procedures used under ``rule`` at ``target``."""
+    n = len(model.procedures)
+    used = np.zeros((len(x), n), bool)
+    used[:, model.procedures.index(model.first_procedure)] = True
+    last = np.full(len(x), model.procedures.index(model.first_procedure))
+    active = np.arange(len(x))
+    while len(active):
+        batch = model.recognize_batch(masked(x[active], used[active], n), 1, None, 1.0)
+        sure = batch.top_probability[:, 0] >= target
+        count = used[active].sum(axis=1)
+        if rule in ("two", "two_per_second"):
+            sure &= count >= 2
+        elif rule == "agree":
+            alone = np.zeros_like(used[active])
+            alone[np.arange(len(active)), last[active]] = True
+            single = model.recognize_batch(masked(x[active], alone, n), 1, None, 1.0)
+            same = single.top_index[:, 0] == batch.top_index[:, 0]
+            sure &= (count >= 2) & same
+        nxt = batch.next_procedure
+        if rule.endswith("_per_second"):
+            partial = masked(x[active], used[active], n)
+            known_p = model.known_proba(partial)
+            ask = np.ones(len(active), bool) & ~used[active].all(axis=1)
+            nxt = model.procedures_.next_procedures(known_p, used[active], ask, costs)
+        go = ~sure & (nxt >= 0)
+        used[active[go], nxt[go]] = True
+        last[active[go]] = nxt[go]
+        active = active[go]
+    return used
+
+
+def figures(model, x, used, is_known, yk, true) -> tuple[float, float]:
+    xm = masked(x, used, len(model.procedures))
+    known_acc = metrics.argmax_accuracy(model.known_proba(xm[is_known]), yk)
+    answers = model.recognize_batch(xm, top_k=1)
+    predicted = [answers.class_names[i] for i in answers.top_index[:, 0]]
+    return known_acc, metrics.gzsl_figures(true, predicted, is_known)["gzsl_h"]
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    add_split_arguments(p)
+    p.add_argument("--targets", default="0.5,0.7,0.9")
+    p.add_argument("--rules", default=",".join(RULES), help=f"some of {', '.join(RULES)}")
+    args = tiny(p.parse_args())
+    targets = [float(t) for t in args.targets.split(",")]
+    data = load_phac2(args.data)
+    durations = check_durations(data.procedures, DURATIONS)
+    rows: dict[str, list[tuple[float, float, float]]] = {}
+    for seed, split in splits(data, args, development_only=True):
+        train = split.train_dataset(data)
+        model = (
+            make_recognizer("best", None, 0)
+            .fit(train)
+            .add_novel_classes(
+                list(split.novel_names), split.novel_attributes(data), allow_known_vectors=True
+            )
+        )
+        xk, xn = data.samples[split.known_test_idx], data.samples[split.novel_test_idx]
+        yk = split.known_labels(data, split.known_test_idx)
+        yn = split.novel_labels(data, split.novel_test_idx)
+        true = [train.class_names[j] for j in yk] + [split.novel_names[j] for j in yn]
+        x = np.concatenate([xk, xn])
+        is_known = np.r_[np.ones(len(xk), bool), np.zeros(len(xn), bool)]
+        every = np.ones((len(x), len(data.procedures)), bool)
+        rows.setdefault("all", []).append((*figures(model, x, every, is_known, yk, true), 1.0))
+        for rule in args.rules.split(","):
+            for t in targets:
+                used = explore(model, x, rule, t, durations)
+                share = float((used @ durations / durations.sum()).mean())
+                got = (*figures(model, x, used, is_known, yk, true), share)
+                rows.setdefault(f"{rule}@{t}", []).append(got)
+        print(json.dumps({"seed": seed, "split": split.index + 1}), file=sys.stderr, flush=True)
+    all_k, all_h, _ = np.mean(rows["all"], axis=0)
+    out = {}
+    for key, values in rows.items():
+        k, h, time = np.mean(values, axis=0)
+        out[key] = {
+            "known_acc": round(float(k), 3),
+            "known_vs_all": round(float(k - all_k), 3),
+            "gzsl_h": round(float(h), 3),
+            "gzsl_h_vs_all": round(float(h - all_h), 3),
+            "time": round(float(time), 3),
+        }
+    print(json.dumps({"splits_run": len(rows["all"]), "rules": out}, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
