@@ -341,8 +341,10 @@ class BestRecognizer(TactileRecognizer):
         self._reset_novel()
         if self.by_procedure and len(dataset.procedures) >= 2:
             t = time.perf_counter()
+            # plain best parts, whatever subclass this is: a part sees one procedure's
+            # block of the (featurized) samples, not what a subclass's fit expects
             self.procedures_ = ProcedureModels.fit(
-                dataset, lambda: type(self)(**{**self.get_params(), "by_procedure": False})
+                dataset, lambda: BestRecognizer(**{**self.get_params(), "by_procedure": False})
             )
             timings["by_procedure_s"] = time.perf_counter() - t
         timings["total_s"] = time.perf_counter() - t0

@@ -69,7 +69,7 @@ def test_one_bare_sample_and_json_from_a_file_or_stdin(saved, tmp_path, capsys, 
             lambda d, x: _save(
                 d / "x.npy", np.where(np.arange(x.size).reshape(x.shape) == 7, np.nan, x)
             ),
-            "contains NaN or infinity",
+            "is partly missing; send all of its values, or none",
         ),
     ],
 )
