@@ -554,15 +554,17 @@ def summarize_entry(
     entry: dict[str, Any], figures: Sequence[str], rerun_splits: int | None = None
 ) -> None:
     """A method's ``mean``, ``std`` (ddof 0), ``ci95`` ([low, high], Student's t over
-    splits, clipped to [0, 1]) and ``rerun95`` (where the mean of a re-run over
+    splits, clipped to [0, 1] but for counts of procedures) and ``rerun95`` (where the mean of a re-run over
     ``rerun_splits`` splits, default as many, lands: ``metrics.rerun_interval``) of every
     figure, from its ``splits``."""
     entry["mean"], entry["std"], entry["ci95"], entry["rerun95"] = {}, {}, {}, {}
     for f in figures:
         values = [s.get(f, math.nan) for s in entry["splits"]]
+        # every figure is a share in [0, 1] but the adaptive rule's count of procedures
+        bounds = None if f.endswith("_procedures") else (0.0, 1.0)
         entry["mean"][f], entry["std"][f] = metrics.summarize(values)
-        entry["ci95"][f] = list(metrics.mean_interval(values, bounds=(0.0, 1.0)))
-        entry["rerun95"][f] = list(metrics.rerun_interval(values, rerun_splits, bounds=(0.0, 1.0)))
+        entry["ci95"][f] = list(metrics.mean_interval(values, bounds=bounds))
+        entry["rerun95"][f] = list(metrics.rerun_interval(values, rerun_splits, bounds=bounds))
 
 
 def paired_summary(entries: dict[str, dict[str, Any]], reference: str) -> dict[str, Any]:
