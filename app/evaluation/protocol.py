@@ -554,9 +554,9 @@ def summarize_entry(
     entry: dict[str, Any], figures: Sequence[str], rerun_splits: int | None = None
 ) -> None:
     """A method's ``mean``, ``std`` (ddof 0), ``ci95`` ([low, high], Student's t over
-    splits, clipped to [0, 1] but for counts of procedures) and ``rerun95`` (where the mean of a re-run over
-    ``rerun_splits`` splits, default as many, lands: ``metrics.rerun_interval``) of every
-    figure, from its ``splits``."""
+    splits, clipped to [0, 1] but for counts of procedures) and ``rerun95`` (where the mean
+    of a re-run over ``rerun_splits`` splits, default as many, lands:
+    ``metrics.rerun_interval``) of every figure, from its ``splits``."""
     entry["mean"], entry["std"], entry["ci95"], entry["rerun95"] = {}, {}, {}, {}
     for f in figures:
         values = [s.get(f, math.nan) for s in entry["splits"]]

@@ -735,6 +735,8 @@ class TactileRecognizer(ABC):
         procedure is left (``next_procedure``), and never before ``MIN_PROCEDURES`` were done
         where the model has that many.
         """
+        if not 0.0 < float(target_confidence) <= 1.0:
+            raise FrameworkError(f"target_confidence must lie in (0, 1], got {target_confidence}")
         x, used = self._checked(samples)
         if used is None:
             scores, known_p, novel_p = self._all_scores(x)
@@ -746,18 +748,8 @@ class TactileRecognizer(ABC):
             if used is not None:
                 used = group_mean(used.astype(np.float64), g, int(g.max()) + 1) > 0
         batch = self._batch(scores, known_p, novel_p, top_k)
-        if not self.procedures:
-            return batch
         if used is None:
-            every = np.ones((1, len(self.procedures)), bool)
-            batch.__dict__.update(
-                procedures=self.procedures,
-                procedures_used=np.broadcast_to(every, (len(batch), len(self.procedures))),
-                next_procedure=np.full(len(batch), -1, np.int64),
-            )
-            return batch
-        if not 0.0 < float(target_confidence) <= 1.0:
-            raise FrameworkError(f"target_confidence must lie in (0, 1], got {target_confidence}")
+            return self._complete(batch)
         unsure = batch.top_probability[:, 0] < float(target_confidence)
         ask = (unsure | (used.sum(axis=1) < MIN_PROCEDURES)) & ~used.all(axis=1)
         batch.__dict__.update(
@@ -765,6 +757,18 @@ class TactileRecognizer(ABC):
             procedures_used=used,
             next_procedure=self._next_procedures(known_p, used, ask),
         )
+        return batch
+
+    def _complete(self, batch: RecognitionBatch) -> RecognitionBatch:
+        """``batch``, answers from complete samples: every procedure used, none next (a
+        model that names no procedures leaves the fields empty)."""
+        if self.procedures:
+            every = np.ones((1, len(self.procedures)), bool)
+            batch.__dict__.update(
+                procedures=self.procedures,
+                procedures_used=np.broadcast_to(every, (len(batch), len(self.procedures))),
+                next_procedure=np.full(len(batch), -1, np.int64),
+            )
         return batch
 
     def _batch(
@@ -815,6 +819,9 @@ class TactileRecognizer(ABC):
             top_probability=value[None],
             is_novel=novel,
             novelty_score=scores.astype(np.float64),
+            procedures=(),
+            procedures_used=None,
+            next_procedure=None,
         )
         return batch
 

@@ -112,9 +112,16 @@ class ProcedureModels:
     def _at(self, keep: np.ndarray) -> list[Any]:
         return [self.models[j] for j in keep]
 
-    def next_procedures(self, known_p: np.ndarray, used: np.ndarray, ask: np.ndarray) -> np.ndarray:
+    def next_procedures(
+        self,
+        known_p: np.ndarray,
+        used: np.ndarray,
+        ask: np.ndarray,
+        seconds: np.ndarray | None = None,
+    ) -> np.ndarray:
         """(N,) index of the procedure to do next for the rows of ``ask`` (-1 elsewhere):
-        the largest expected gain per second of robot time (``seconds_of``)."""
+        the largest expected gain per second of robot time, each procedure taking
+        ``seconds`` ((P,); default ``seconds_of`` its name)."""
         out = np.full(len(known_p), -1, np.int64)
         rows = np.flatnonzero(ask)
         if not len(rows):
@@ -134,7 +141,9 @@ class ProcedureModels:
             q_true = q[np.arange(len(flat)), flat].reshape(-1, m)  # what j gives class c
             after = (n_used[todo] * p_c[todo] + q_true) / (n_used[todo] + 1.0)
             gain[todo, j] = (w[todo] * (after - p_c[todo])).sum(axis=1)
-        out[rows] = (gain / seconds_of(self.procedures)[None, :]).argmax(axis=1)
+        if seconds is None:
+            seconds = seconds_of(self.procedures)
+        out[rows] = (gain / np.asarray(seconds, np.float64)[None, :]).argmax(axis=1)
         return out
 
     def _first_procedure(self) -> int:

@@ -1,15 +1,20 @@
 """Exploration bench: when should a robot stop exploring? Development seeds only.
 
-``best`` answers from some procedures and names the next one (``next_procedure``). The
-service's rule stops once the answer's top probability reaches a target confidence. On
-PHAC-2 that rule stops after squeeze alone for most objects, and squeeze alone makes
-confident mistakes. This script compares stopping rules on the same fitted models, each
-at several targets, all choosing the next procedure by the model's expected gain:
+``best`` answers from some procedures and names the next one (``next_procedure``). Until
+2026-11-26 the service stopped once the answer's top probability reached a target
+confidence; on PHAC-2 that stops after squeeze alone for most objects, and squeeze alone
+makes confident mistakes. This script compares stopping rules on the same fitted models, each
+at several targets, the next procedure chosen by the model's expected gain
+(``ProcedureModels.next_procedures``):
 
-- ``top``: stop when the top probability reaches the target (the service's rule);
+- ``top``: stop when the top probability reaches the target;
 - ``two``: the same, but never before two procedures;
 - ``agree``: stop when the top probability reaches the target and the last procedure
-  alone names the same class as all procedures so far (two procedures at least).
+  alone names the same class as all procedures so far (two procedures at least);
+- ``top_per_second`` and ``two_per_second``: ``top`` and ``two`` with the next procedure
+  chosen by expected gain per second of robot time. ``two_per_second`` is the service's
+  rule since 2026-11-26 (``MIN_PROCEDURES``, ``TARGET_CONFIDENCE`` in
+  ``app/framework/recognizer.py``).
 
 Prints, per rule and target, the mean over development splits of known_acc, gzsl_h and the
 share of robot time (``app.evaluation.procedures.DURATIONS``), beside all procedures'.
@@ -43,15 +48,18 @@ def masked(x: np.ndarray, used: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
-def explore(model, x: np.ndarray, rule: str, target: float, costs: np.ndarray) -> np.ndarray:
+def explore(model, x: np.ndarray, rule: str, target: float, seconds: np.ndarray) -> np.ndarray:
     """(N, P) procedures used under ``rule`` at ``target``."""
     n = len(model.procedures)
+    per_second = rule.endswith("_per_second")
+    cost = seconds if per_second else np.ones(n)
     used = np.zeros((len(x), n), bool)
     used[:, model.procedures.index(model.first_procedure)] = True
     last = np.full(len(x), model.procedures.index(model.first_procedure))
     active = np.arange(len(x))
     while len(active):
-        batch = model.recognize_batch(masked(x[active], used[active], n), 1, None, 1.0)
+        partial = masked(x[active], used[active], n)
+        batch = model.recognize_batch(partial, 1, None, 1.0)
         sure = batch.top_probability[:, 0] >= target
         count = used[active].sum(axis=1)
         if rule in ("two", "two_per_second"):
@@ -62,13 +70,9 @@ def explore(model, x: np.ndarray, rule: str, target: float, costs: np.ndarray) -
             single = model.recognize_batch(masked(x[active], alone, n), 1, None, 1.0)
             same = single.top_index[:, 0] == batch.top_index[:, 0]
             sure &= (count >= 2) & same
-        nxt = batch.next_procedure
-        if rule.endswith("_per_second"):
-            partial = masked(x[active], used[active], n)
-            known_p = model.known_proba(partial)
-            ask = np.ones(len(active), bool) & ~used[active].all(axis=1)
-            nxt = model.procedures_.next_procedures(known_p, used[active], ask, costs)
-        go = ~sure & (nxt >= 0)
+        ask = ~sure & ~used[active].all(axis=1)
+        nxt = model.procedures_.next_procedures(model.known_proba(partial), used[active], ask, cost)
+        go = nxt >= 0
         used[active[go], nxt[go]] = True
         last[active[go]] = nxt[go]
         active = active[go]

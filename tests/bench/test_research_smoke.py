@@ -73,6 +73,18 @@ def explore_routing(phac2: Path, tmp: Path) -> None:
         assert all(share(v) for v in figures.values()), figures
 
 
+def explore_stopping(phac2: Path, tmp: Path) -> None:
+    report = json.loads(run("explore_stopping.py", phac2, "--targets", "0.5").stdout)
+    assert report["splits_run"] == 1
+    assert set(report["rules"]) == {"all"} | {
+        f"{r}@0.5" for r in ("top", "two", "agree", "top_per_second", "two_per_second")
+    }
+    for figures in report["rules"].values():
+        assert share(figures["known_acc"]) and share(figures["gzsl_h"]), figures
+        assert 0 < figures["time"] <= 1, figures
+    assert report["rules"]["all"]["time"] == 1.0
+
+
 def explore_best(phac2: Path, tmp: Path) -> None:
     variants = ["best", "best:n_estimators=10"]
     out = tmp / "runs.json"
@@ -197,6 +209,7 @@ SCRIPTS: dict[str, Callable[[Path, Path], None]] = {
     for check in (
         novelty_bound,
         explore_routing,
+        explore_stopping,
         explore_best,
         explore_zsl,
         explore_fingers,

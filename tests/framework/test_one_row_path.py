@@ -207,17 +207,17 @@ def check_model(model, x: np.ndarray) -> None:
         scores, known_p, novel_p = model._all_scores(model.validate_samples(one))
         routed[bool(scores[0] > model.novelty_threshold)] += 1
         for top_k in TOP_KS:
-            ref = TactileRecognizer._rows(model, scores, known_p, novel_p, top_k)
+            ref = model._complete(TactileRecognizer._rows(model, scores, known_p, novel_p, top_k))
             assert_same(model.recognize_batch(one, top_k), ref)
             assert_same(model.recognize_batch(one[0], top_k), ref)  # no batch axis
-        ref = TactileRecognizer._rows(model, scores, known_p, novel_p, 3)  # the default top_k
+        ref = model._complete(TactileRecognizer._rows(model, scores, known_p, novel_p, 3))
         assert repr(model.recognize(one)) == repr(ref.answers())
         # two samples fused as one group: one row too
         pair = x[[i, (i + 1) % len(x)]]
         fused = fuse_groups(np.zeros(2, np.int64), *model._all_scores(model.validate_samples(pair)))
         assert_same(
             model.recognize_batch(pair, 3, groups=[0, 0]),
-            TactileRecognizer._rows(model, *fused, 3),
+            model._complete(TactileRecognizer._rows(model, *fused, 3)),
         )
     assert routed[False] and routed[True], routed  # both classifiers answered some sample
 
@@ -234,8 +234,8 @@ def general_path(model, one: np.ndarray, top_k: int) -> RecognitionBatch:
     (``small_batch_max = 0``), then the general ranking (``_rows``)."""
     general = copy.copy(model)
     general.small_batch_max = 0
-    return TactileRecognizer._rows(
-        general, *general._all_scores(general.validate_samples(one)), top_k
+    return general._complete(
+        TactileRecognizer._rows(general, *general._all_scores(general.validate_samples(one)), top_k)
     )
 
 

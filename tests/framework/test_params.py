@@ -120,11 +120,13 @@ def test_bundles_carry_the_parameter_names_they_always_had():
         "novelty_holdout_trials",
         "tuning_rounds", "tuning_objects", "distance_components", "forest_codes",
         "approximate_above", "sae_lambda", "sae_temperature", "n_jobs", "featurizer_params",
+        "by_procedure",
     ]  # fmt: skip
     # tuning_objects, forest_codes, approximate_above and attribute_samples came with the
     # forest grown on class codes; a bundle without them loads as what it was made with (0:
     # every tuning round, a classifier's forest, exact distances, every sample;
-    # tests/methods/test_scale_parts.py)
+    # tests/methods/test_scale_parts.py); by_procedure came with answers from some
+    # procedures, and a bundle without it loads as one whole model (False)
 
 
 def test_a_constructor_with_kwargs_is_refused():
