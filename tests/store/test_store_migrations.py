@@ -15,7 +15,7 @@ from app.store import migrate
 from app.store.db import make_engine
 from tests.service_fixtures import fresh_postgres_database, postgres_url, require_postgres
 
-HEAD = "0008"
+HEAD = "0009"
 PG_URL = postgres_url()
 
 TABLES = {
@@ -311,6 +311,43 @@ def test_0007_rewrites_keys_lists_each_versions_vocabulary_and_refuses_to_lose_v
         migrate.downgrade(engine, "0006")
         with engine.connect() as conn:
             assert conn.execute(text("SELECT attribute_key FROM classes")).scalar() == "101"
+        migrate.upgrade(engine)
+        assert migrate.current_revision(engine) == HEAD
+        engine.dispose()
+
+
+@pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
+def test_0009_adds_procedures_to_model_versions_and_keeps_every_row(backend, tmp_path):
+    with _database(backend, tmp_path) as url:
+        engine = make_engine(url)
+        migrate.upgrade(engine, "0008")
+        with engine.begin() as conn:
+            conn.execute(
+                text(
+                    "INSERT INTO bundles (sha256, size, data, created_at) "
+                    "VALUES ('ab', 1, :d, '2026-11-24')"
+                ),
+                {"d": b"x"},
+            )
+            conn.execute(
+                text(
+                    "INSERT INTO model_versions (version, created_at, method, reason, "
+                    "bundle_sha256, input_shape, metrics, classes, sample_ids, active, "
+                    "attribute_names) VALUES (1, '2026-11-24', 'best', 'bootstrap', 'ab', "
+                    "'[2]', '{}', '[]', '[]', false, '[]')"
+                )
+            )
+        migrate.upgrade(engine)
+        assert {"procedures", "first_procedure"} <= set(_columns(engine, "model_versions"))
+        with engine.connect() as conn:
+            row = conn.execute(
+                text("SELECT version, procedures, first_procedure FROM model_versions")
+            )
+            assert tuple(row.one()) == (1, None, None)  # stored before: no procedures named
+        migrate.downgrade(engine, "0008")
+        assert not {"procedures", "first_procedure"} & set(_columns(engine, "model_versions"))
+        with engine.connect() as conn:
+            assert conn.execute(text("SELECT count(*) FROM model_versions")).scalar() == 1
         migrate.upgrade(engine)
         assert migrate.current_revision(engine) == HEAD
         engine.dispose()
