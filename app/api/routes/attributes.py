@@ -15,7 +15,6 @@ from app.api.deps import (
     ReadAccess,
     SessionDep,
 )
-from app.api.descriptions import read_text, readings_out, stored_readings
 from app.api.problems import Problem
 from app.api.schemas import (
     AttributeChanged,
@@ -23,14 +22,17 @@ from app.api.schemas import (
     AttributeList,
     AttributeOut,
     JobOut,
+    ReadingOut,
     TextIn,
     TextRead,
 )
+from app.service.enrolment import read_text, stored_readings
 from app.service.keys import Principal
 from app.store import repo
 from app.store.enums import ClassKind, JobKind, Origin
 from app.store.models import Attribute
 from app.store.vocabulary import MAX_ATTRIBUTES, Vocabulary, describes
+from app.words.interpret import Reading
 
 router = APIRouter(
     prefix="/v1/attributes",
@@ -93,8 +95,7 @@ def add_attribute(
     their meaning), with its value for the classes it is known for; a class described in
     words and given no value here gets the value read from its text, if it speaks of it. It is in
     `GET /v1/attributes` and accepted by registration and `PATCH` at once; the served model
-    learns it when the job succeeds (`best` refits only its attribute classifiers, the
-    paper's pipeline is fitted again with G's wider input). Classes given no value are
+    learns it when the job succeeds. Classes given no value are
     not known for it: left out of its training, never counted as 0. With an
     `Idempotency-Key`, a retry gets the first answer."""
     idempotency.replay(session)
@@ -226,3 +227,10 @@ def _check_distinct(
                 field,
             )
         seen[description] = cls.name
+
+
+def readings_out(readings: dict[str, Reading]) -> list[ReadingOut]:
+    return [
+        ReadingOut(attribute=r.attribute, value=r.value, words=r.words, source=r.source)
+        for r in readings.values()
+    ]

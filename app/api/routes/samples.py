@@ -29,11 +29,12 @@ from app.api.schemas import (
     SampleOut,
     Withdrawal,
 )
-from app.api.withdrawals import queue_withdrawal
+from app.api.withdrawals import withdrawal
 from app.data.biotac import RawTrial
 from app.framework.recognizer import RAW_TRIALS
+from app.service import enrolment
 from app.store import repo
-from app.store.enums import ClassKind, JobKind, Origin
+from app.store.enums import ClassKind, JobKind
 
 router = APIRouter(
     prefix="/v1/classes", tags=["samples"], responses=problems.responses(401, 403, 422, 429)
@@ -183,21 +184,16 @@ def withdraw_sample(
     principal: Enroller,
 ) -> Withdrawal:
     """Withdraw a wrongly enrolled sample (say, one taken of the wrong object). It leaves
-    the store's live data at once and the served model when the job succeeds (the novel
-    classes rebuilt, or a full retrain where it was in the known part). Samples of the
-    training dataset cannot be withdrawn."""
+    the store's live data at once and the served model when the job succeeds. Samples of
+    the training dataset cannot be withdrawn."""
     idempotency.replay(session)
-    if repo.get_class(session, class_id) is None:
-        raise not_found("class", "class_id", class_id)
-    row = repo.get_sample(session, class_id, sample_id)
-    if row is None:
-        raise not_found("sample", "sample_id", sample_id)
-    if row.origin != Origin.ENROLLED:
-        raise Problem(
-            409,
-            f"sample {sample_id} comes from the training dataset; only enrolled samples "
-            "can be withdrawn",
-            "sample_id",
-        )
-    repo.withdraw_sample(session, row)
-    return queue_withdrawal(session, idempotency, metrics, response, principal, class_id, sample_id)
+    out = enrolment.withdraw_sample(
+        session,
+        class_id,
+        sample_id,
+        requested_by=principal.id,
+        writing=idempotency.writing,
+        finish=lambda _, job: withdrawal(session, idempotency, response, class_id, sample_id, job),
+    )
+    metrics.withdrawals.labels("sample").inc()
+    return out
