@@ -1,8 +1,8 @@
 """Enrolment: the rules for registering, describing and withdrawing classes and samples,
 and the jobs that bring each change into the served model.
 
-Routes (``app/api/routes/classes.py``, ``samples.py``), commands and tests call these
-functions with what a request asked for, already parsed. Each rule broken raises an
+Routes (``app/api/routes/classes.py``, ``samples.py``) and tests call these functions
+with what a request asked for, already parsed. Each rule broken raises an
 ``EnrolmentError`` naming the field at fault; ``app.api.problems`` answers each kind with
 its status (``NotFound`` 404, ``Conflict`` 409, ``InvalidDescription`` 422,
 ``ReaderUnavailable`` 503).
@@ -29,8 +29,8 @@ from sqlalchemy.orm import Session
 
 from app.framework.recognizer import suggest_attribute
 from app.store import repo
-from app.store.enums import JobKind, Origin
-from app.store.models import Job, ObjectClass
+from app.store.enums import ClassKind, JobKind, Origin
+from app.store.models import Job, ObjectClass, Sample
 from app.store.vocabulary import Vocabulary, describes
 from app.words.embedding import EmbeddingModelError
 from app.words.interpret import NothingRecognised, Reading, TextError, TextInterpreter
@@ -64,6 +64,10 @@ class NameTaken(Conflict):
 
 class SameDescription(Conflict):
     """A live class has the same attribute vector: no model could tell them apart."""
+
+
+class KnownClass(Conflict):
+    """Samples sent for a known class, which is learnt from its training samples."""
 
 
 class DatasetClass(Conflict):
@@ -356,6 +360,40 @@ def redescribe_class(
             repo.set_description(session, cls, described.description, stored_readings(read))
         job = repo.add_job(session, JobKind.UPDATE_CLASS, cls.id, requested_by=requested_by)
         return (finish or _committing(session))(cls, job)
+
+
+def novel_class(session: Session, class_id: int) -> ObjectClass:
+    """The live class ``class_id``, one samples can be added to: a novel class (a known
+    class is learnt from its training samples; ``KnownClass``)."""
+    cls = repo.get_class(session, class_id)
+    if cls is None:
+        raise NotFound("class", "class_id", class_id)
+    if cls.kind != ClassKind.NOVEL:
+        raise KnownClass(
+            f"class '{cls.name}' is a known class; samples can be added to novel classes only",
+            "class_id",
+        )
+    return cls
+
+
+def add_sample(
+    session: Session,
+    cls: ObjectClass,
+    sample: Any,
+    *,
+    requested_by: str | None,
+    writing: Writing = guarded,
+    finish: Callable[[Sample, Job], T] | None = None,
+) -> T | tuple[Sample, Job]:
+    """Store ``sample`` (an array, or a raw trial kept as sent) for the novel class ``cls``
+    (``novel_class``) and queue the ``add_sample`` job that brings it into the model."""
+    with writing(session, None):  # a concurrent retry with this key may win
+        row = repo.add_sample(session, cls.id, sample)
+        job = repo.add_job(session, JobKind.ADD_SAMPLE, cls.id, row.id, requested_by=requested_by)
+        if finish is None:
+            session.commit()
+            return row, job
+        return finish(row, job)
 
 
 def withdraw_class(

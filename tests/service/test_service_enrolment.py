@@ -279,3 +279,18 @@ def test_a_concurrent_registration_of_the_name_is_named_as_the_conflict(
     with pytest.raises(enrolment.NameTaken) as e:
         register(sessions, "cup", attributes[0], interpreter, writing=racing)
     assert isinstance(e.value.__context__, IntegrityError)
+
+
+def test_samples_are_added_to_novel_classes_only(sessions, dataset, attributes, interpreter):
+    with sessions() as s, pytest.raises(enrolment.KnownClass, match="is a known class") as e:
+        enrolment.novel_class(s, repo.class_by_name(s, dataset.class_names[0]).id)
+    assert e.value.field == "class_id"
+    with sessions() as s, pytest.raises(enrolment.NotFound, match="class_id 9999"):
+        enrolment.novel_class(s, 9999)
+    cup = register(sessions, "cup", attributes[0], interpreter).cls.id
+    x = dataset.samples[1]
+    with sessions() as s:
+        row, job = enrolment.add_sample(s, enrolment.novel_class(s, cup), x, requested_by=ENROLLER)
+    assert (job.kind, job.sample_id, job.requested_by) == (JobKind.ADD_SAMPLE, row.id, ENROLLER)
+    with sessions() as s:
+        assert np.array_equal(repo.decode(repo.sample_record(s, cup, row.id)), x)
