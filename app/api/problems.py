@@ -36,7 +36,7 @@ from app.framework.errors import (
 from app.service.enrolment import (
     Conflict,
     EnrolmentError,
-    InvalidDescription,
+    Invalid,
     NotFound,
     ReaderUnavailable,
 )
@@ -63,7 +63,7 @@ FRAMEWORK_STATUS: dict[type[FrameworkError], tuple[int, str]] = {
 ENROLMENT_STATUS: dict[type[EnrolmentError], int] = {
     NotFound: 404,
     Conflict: 409,
-    InvalidDescription: 422,
+    Invalid: 422,
     ReaderUnavailable: 503,
 }
 

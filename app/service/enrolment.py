@@ -1,11 +1,12 @@
 """Enrolment: the rules for registering, describing and withdrawing classes and samples,
-and the jobs that bring each change into the served model.
+and for growing and retiring the attribute vocabulary, and the jobs that bring each change
+into the served model.
 
-Routes (``app/api/routes/classes.py``, ``samples.py``) and tests call these functions
-with what a request asked for, already parsed. Each rule broken raises an
+Routes (``app/api/routes/classes.py``, ``samples.py``, ``attributes.py``) and tests call
+these functions with what a request asked for, already parsed. Each rule broken raises an
 ``EnrolmentError`` naming the field at fault; ``app.api.problems`` answers each kind with
-its status (``NotFound`` 404, ``Conflict`` 409, ``InvalidDescription`` 422,
-``ReaderUnavailable`` 503).
+its status (``NotFound`` 404, ``Conflict`` 409, ``Invalid`` 422, ``ReaderUnavailable``
+503).
 
 Every write runs inside ``writing(session, recheck)`` and ends with ``finish(...)``, which
 commits. A route passes its ``Idempotency``'s ``writing`` (a concurrent retry with the same
@@ -20,7 +21,7 @@ model has learnt it.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import AbstractContextManager, contextmanager
 from typing import Any, NamedTuple, Protocol, TypeVar
 
@@ -30,8 +31,8 @@ from sqlalchemy.orm import Session
 from app.framework.recognizer import suggest_attribute
 from app.store import repo
 from app.store.enums import ClassKind, JobKind, Origin
-from app.store.models import Job, ObjectClass, Sample
-from app.store.vocabulary import Vocabulary, describes
+from app.store.models import Attribute, Job, ObjectClass, Sample
+from app.store.vocabulary import MAX_ATTRIBUTES, Vocabulary, describes
 from app.words.embedding import EmbeddingModelError
 from app.words.interpret import NothingRecognised, Reading, TextError, TextInterpreter
 
@@ -78,11 +79,35 @@ class CannotLearn(Conflict):
     """The method cannot learn a class from what the registration gives it."""
 
 
+class AttributeTaken(Conflict):
+    """An attribute of the name exists, or existed: names are never reused."""
+
+
+class VocabularyFull(Conflict):
+    """The vocabulary holds its most attributes."""
+
+
+class RetiredAttribute(Conflict):
+    """The attribute is retired already."""
+
+
+class DescribedByNothing(Conflict):
+    """A change that would leave a class nothing to be recognised by."""
+
+
 class EmptyVocabulary(Conflict):
     """A class described by attributes while the vocabulary holds none."""
 
 
-class InvalidDescription(EnrolmentError):
+class Invalid(EnrolmentError):
+    """Well-formed content the store's state makes meaningless."""
+
+
+class UnknownClassName(Invalid):
+    """A name no live class has."""
+
+
+class InvalidDescription(Invalid):
     """A description that names unknown attributes, has the wrong length, contradicts the
     text beside it, gives no value above 0, or whose text names nothing known."""
 
@@ -105,10 +130,10 @@ Writing = Callable[[Session, Callable[[], None] | None], AbstractContextManager[
 
 
 class Enrolled(NamedTuple):
-    """What the default ``finish`` gives back: the class (None for an attribute's change)
-    and the job that brings the change into the model."""
+    """What the default ``finish`` gives back: the class (or the attribute) changed, and the
+    job that brings the change into the model."""
 
-    cls: ObjectClass | None
+    cls: ObjectClass | Attribute
     job: Job
 
 
@@ -125,8 +150,8 @@ def guarded(session: Session, recheck: Callable[[], None] | None = None) -> Iter
         raise
 
 
-def _committing(session: Session) -> Callable[[ObjectClass | None, Job], Enrolled]:
-    def finish(cls: ObjectClass | None, job: Job) -> Enrolled:
+def _committing(session: Session) -> Callable[[ObjectClass | Attribute, Job], Enrolled]:
+    def finish(cls: ObjectClass | Attribute, job: Job) -> Enrolled:
         session.commit()
         return Enrolled(cls, job)
 
@@ -452,6 +477,138 @@ def withdraw_sample(
             session, JobKind.WITHDRAW_SAMPLE, class_id, sample_id, requested_by=requested_by
         )
         return (finish or _committing(session))(cls, job)
+
+
+# ------------------------------------------------------------------------ vocabulary
+def add_attribute(
+    session: Session,
+    name: str,
+    values: Mapping[str, float | None],
+    interpreter: TextInterpreter,
+    *,
+    requested_by: str | None,
+    writing: Writing = guarded,
+    finish: Callable[[Attribute, Job], T] | None = None,
+) -> T | Enrolled:
+    """Add the attribute ``name`` after the existing ones (existing keys keep their
+    meaning), with its ``values`` for the live classes they name, and queue the
+    ``add_attribute`` job. A class described in words and given no value gets the value read
+    from its text, if it speaks of it; other classes are not known for it. Refused for a
+    name used before (``AttributeTaken``), a full vocabulary (``VocabularyFull``), a name
+    no live class has (``UnknownClassName``), or values that would leave two enrolled
+    classes with the same description (``SameDescription``)."""
+    _check_new(session, name)
+    vocab = repo.vocabulary(session)
+    if len(vocab.names) >= MAX_ATTRIBUTES:
+        raise VocabularyFull(f"the vocabulary holds its most attributes ({MAX_ATTRIBUTES})", "name")
+    classes = {c.name: c for c in repo.list_classes(session)}
+    unknown = [n for n in values if n not in classes]
+    if unknown:
+        raise UnknownClassName(
+            f"no live class named {', '.join(map(repr, unknown[:5]))}", f"values.{unknown[0]}"
+        )
+    grown = Vocabulary(vocab.names + (name,), vocab.retired, vocab.fixed)
+    keys = {
+        classes[n].id: grown.key({name: v}, base=classes[n].attribute_key)
+        for n, v in values.items()
+    }
+    worded = {}  # class id -> (class, its reading of the new word)
+    for cls in classes.values():
+        if cls.description and cls.name not in values:
+            reading = interpreter.value_of(cls.description, name)
+            if reading is not None:
+                worded[cls.id] = (cls, reading)
+                keys[cls.id] = grown.key({name: reading.value}, base=cls.attribute_key)
+    _check_distinct(session, grown, keys, f"values.{name}")
+    with writing(session, lambda: _check_new(session, name)):
+        attribute = repo.add_attribute(session, name)
+        repo.describe(session, keys)
+        for cls, r in worded.values():
+            readings = [*(cls.description_readings or []), *stored_readings({r.attribute: r})]
+            repo.set_description(session, cls, cls.description, readings)
+        job = _attribute_job(session, JobKind.ADD_ATTRIBUTE, attribute, requested_by)
+        return (finish or _committing(session))(attribute, job)
+
+
+def retire_attribute(
+    session: Session,
+    name: str,
+    *,
+    requested_by: str | None,
+    writing: Writing = guarded,
+    finish: Callable[[Attribute, Job], T] | None = None,
+) -> T | Enrolled:
+    """Retire the attribute ``name``: every class's value for it is dropped, and the
+    ``retire_attribute`` job takes it out of later models. Refused for an attribute retired
+    already (``RetiredAttribute``), and while it would leave a novel class without samples
+    described by nothing (``DescribedByNothing``) or two enrolled classes with the same
+    description (``SameDescription``)."""
+    attribute = repo.attribute_by_name(session, name)
+    if attribute is None:
+        raise NotFound("attribute", "name", repr(name))
+    if attribute.retired_at is not None:
+        raise RetiredAttribute(f"attribute '{name}' is already retired", "name")
+    vocab = repo.vocabulary(session)
+    after = Vocabulary(vocab.names, vocab.retired | {name}, vocab.fixed)
+    counts = repo.sample_counts(session)
+    for cls in repo.list_classes(session):
+        if (
+            cls.kind == ClassKind.NOVEL
+            and not counts.get(cls.id)
+            and describes(vocab, cls.attribute_key)
+            and not describes(after, cls.attribute_key)
+        ):
+            raise DescribedByNothing(
+                f"retiring '{name}' would leave class '{cls.name}' described by nothing (and it "
+                "has no samples to be recognised by)",
+                "name",
+            )
+    _check_distinct(session, after, {}, "name", because=f"retiring '{name}'")
+    with writing(session, None):
+        repo.retire_attribute(session, attribute, vocab)
+        job = _attribute_job(session, JobKind.RETIRE_ATTRIBUTE, attribute, requested_by)
+        return (finish or _committing(session))(attribute, job)
+
+
+def _attribute_job(
+    session: Session, kind: JobKind, attribute: Attribute, requested_by: str | None
+) -> Job:
+    return repo.add_job(session, kind, None, requested_by=requested_by, attribute_id=attribute.id)
+
+
+def _check_new(session: Session, name: str) -> None:
+    existing = repo.attribute_by_name(session, name)
+    if existing is not None:
+        state = " (retired: names are never reused)" if existing.retired_at else ""
+        raise AttributeTaken(f"an attribute named '{name}' exists{state}", "name")
+
+
+def _check_distinct(
+    session: Session,
+    vocab: Vocabulary,
+    keys: Mapping[int, str],
+    field: str,
+    because: str = "these values",
+) -> None:
+    """``SameDescription`` when, with ``keys`` (class id -> new key) and ``vocab``, two live
+    enrolled classes would have the same description: a model could never tell them
+    apart."""
+    seen: dict[tuple, str] = {}
+    for cls in repo.list_classes(session):
+        if cls.origin != Origin.ENROLLED:
+            continue
+        key = keys.get(cls.id, cls.attribute_key)
+        values = vocab.values(key)
+        if not describes(vocab, key):
+            continue
+        description = tuple(sorted(values.items()))
+        if description in seen:
+            raise SameDescription(
+                f"{because} would give classes '{seen[description]}' and '{cls.name}' the same "
+                "description; the model could never tell them apart",
+                field,
+            )
+        seen[description] = cls.name
 
 
 # ----------------------------------------------------------------------------- rules

@@ -294,3 +294,40 @@ def test_samples_are_added_to_novel_classes_only(sessions, dataset, attributes, 
     assert (job.kind, job.sample_id, job.requested_by) == (JobKind.ADD_SAMPLE, row.id, ENROLLER)
     with sessions() as s:
         assert np.array_equal(repo.decode(repo.sample_record(s, cup, row.id)), x)
+
+
+def test_an_attribute_is_added_with_values_and_readings_of_class_texts(sessions, interpreter):
+    with sessions() as s:
+        worded = enrolment.register_class(
+            s, "sponge", described(description="soft and squishy"), interpreter, requested_by=None
+        ).cls.id
+    with sessions() as s, pytest.raises(enrolment.UnknownClassName) as e:
+        enrolment.add_attribute(s, "wet", {"nothing": 1}, interpreter, requested_by=ENROLLER)
+    assert e.value.field == "values.nothing"
+    with sessions() as s:
+        done = enrolment.add_attribute(s, "sticky", {}, interpreter, requested_by=ENROLLER)
+    assert done.job.kind == JobKind.ADD_ATTRIBUTE and done.job.attribute_id == done.cls.id
+    with sessions() as s:
+        assert "sticky" in repo.vocabulary(s).active
+        cls = repo.get_class(s, worded)
+        assert "sticky" not in repo.vocabulary(s).values(cls.attribute_key)  # its text is silent
+    with sessions() as s, pytest.raises(enrolment.AttributeTaken, match="exists"):
+        enrolment.add_attribute(s, "sticky", {}, interpreter, requested_by=ENROLLER)
+
+
+def test_retiring_an_attribute_keeps_classes_apart_and_described(
+    sessions, dataset, attributes, interpreter
+):
+    a, b = attributes[0]  # two attributes: "cup" has both, "mug" only the first
+    register(sessions, "cup", [a, b], interpreter)
+    register(sessions, "mug", [a], interpreter)
+    with sessions() as s, pytest.raises(enrolment.SameDescription, match=f"retiring '{b}'"):
+        enrolment.retire_attribute(s, b, requested_by=ENROLLER)
+    with sessions() as s, pytest.raises(enrolment.NotFound, match="no attribute with name"):
+        enrolment.retire_attribute(s, "no-such-word", requested_by=ENROLLER)
+    with sessions() as s:
+        free = next(n for n in dataset.attribute_names if n not in (a, b))
+        done = enrolment.retire_attribute(s, free, requested_by=ENROLLER)
+    assert done.job.kind == JobKind.RETIRE_ATTRIBUTE
+    with sessions() as s, pytest.raises(enrolment.RetiredAttribute):
+        enrolment.retire_attribute(s, free, requested_by=ENROLLER)
