@@ -33,6 +33,13 @@ from app.framework.errors import (
     UnknownClassError,
     UnsupportedOperationError,
 )
+from app.service.enrolment import (
+    Conflict,
+    EnrolmentError,
+    Invalid,
+    NotFound,
+    ReaderUnavailable,
+)
 
 log = logging.getLogger(__name__)
 
@@ -50,6 +57,14 @@ FRAMEWORK_STATUS: dict[type[FrameworkError], tuple[int, str]] = {
     BundleError: (409, "version"),
     NotFittedError: (503, "model"),
     UnsupportedOperationError: (409, "model"),  # the served method cannot do it
+}
+
+# enrolment rule broken (app.service.enrolment) -> status
+ENROLMENT_STATUS: dict[type[EnrolmentError], int] = {
+    NotFound: 404,
+    Conflict: 409,
+    Invalid: 422,
+    ReaderUnavailable: 503,
 }
 
 
@@ -265,6 +280,13 @@ async def framework_exception_handler(request: Request, exc: FrameworkError) -> 
     )
 
 
+async def enrolment_exception_handler(request: Request, exc: EnrolmentError) -> ProblemResponse:
+    """A broken enrolment rule, answered as a ``Problem`` raised in its place would be."""
+    status = next((v for cls, v in ENROLMENT_STATUS.items() if isinstance(exc, cls)), 422)
+    errors = [{"field": exc.field, "reason": str(exc)}] if exc.field else []
+    return problem_response(request, status, str(exc), errors)
+
+
 async def store_unavailable_handler(request: Request, exc: OperationalError) -> ProblemResponse:
     """A timed-out statement or an unreachable database: retryable, and no SQL leaves. A
     full disk (SQLite's "database or disk is full", PostgreSQL's "No space left on
@@ -297,6 +319,7 @@ def install(app: FastAPI) -> None:
     app.add_exception_handler(StarletteHTTPException, http_exception_handler)
     app.add_exception_handler(RequestValidationError, validation_exception_handler)
     app.add_exception_handler(FrameworkError, framework_exception_handler)
+    app.add_exception_handler(EnrolmentError, enrolment_exception_handler)
     app.add_exception_handler(OperationalError, store_unavailable_handler)
     app.add_exception_handler(Exception, unhandled_exception_handler)
 

@@ -1,6 +1,8 @@
 """The attribute vocabulary: listed, grown (``POST``) and retired (``DELETE``) on a running
 service; every class description is a key over it (``app.store.vocabulary``)."""
 
+from collections.abc import Callable
+
 from fastapi import APIRouter, Response
 from sqlalchemy.orm import Session
 
@@ -8,6 +10,7 @@ from app.api import problems
 from app.api.deps import (
     AdminAccess,
     Enroller,
+    Idempotency,
     IdempotencyDep,
     InterpreterDep,
     JsonBody,
@@ -15,22 +18,20 @@ from app.api.deps import (
     ReadAccess,
     SessionDep,
 )
-from app.api.descriptions import read_text, readings_out, stored_readings
-from app.api.problems import Problem
 from app.api.schemas import (
     AttributeChanged,
     AttributeCreate,
     AttributeList,
     AttributeOut,
     JobOut,
+    ReadingOut,
     TextIn,
     TextRead,
 )
-from app.service.keys import Principal
+from app.service import enrolment
 from app.store import repo
-from app.store.enums import ClassKind, JobKind, Origin
-from app.store.models import Attribute
-from app.store.vocabulary import MAX_ATTRIBUTES, Vocabulary, describes
+from app.store.models import Attribute, Job
+from app.words.interpret import Reading
 
 router = APIRouter(
     prefix="/v1/attributes",
@@ -65,7 +66,7 @@ def interpret_text(body: TextIn, session: SessionDep, interpreter: InterpreterDe
     text names none; the first text a process reads loads the sentence-embedding model
     (about 4 s)."""
     vocab = repo.vocabulary(session)
-    read = read_text(body.text, vocab, interpreter, "text")
+    read = enrolment.read_text(body.text, vocab, interpreter, "text")
     return TextRead(
         values={a: r.value for a, r in read.items()},
         readings=readings_out(read),
@@ -91,44 +92,21 @@ def add_attribute(
 ) -> AttributeChanged:
     """Add an attribute to the vocabulary, after the existing ones (existing vectors keep
     their meaning), with its value for the classes it is known for; a class described in
-    words and given no value here gets the value read from its text, if it speaks of it. It is in
-    `GET /v1/attributes` and accepted by registration and `PATCH` at once; the served model
-    learns it when the job succeeds (`best` refits only its attribute classifiers, the
-    paper's pipeline is fitted again with G's wider input). Classes given no value are
-    not known for it: left out of its training, never counted as 0. With an
-    `Idempotency-Key`, a retry gets the first answer."""
+    words and given no value here gets the value read from its text, if it speaks of it.
+    It is in `GET /v1/attributes` and accepted by registration and `PATCH` at once; the
+    served model learns it when the job succeeds. Classes given no value are not known for
+    it: left out of its training, never counted as 0. With an `Idempotency-Key`, a retry
+    gets the first answer."""
     idempotency.replay(session)
-    _check_new(session, body.name)
-    vocab = repo.vocabulary(session)
-    if len(vocab.names) >= MAX_ATTRIBUTES:
-        raise Problem(409, f"the vocabulary holds its most attributes ({MAX_ATTRIBUTES})", "name")
-    classes = {c.name: c for c in repo.list_classes(session)}
-    unknown = [n for n in body.values if n not in classes]
-    if unknown:
-        raise Problem(
-            422, f"no live class named {', '.join(map(repr, unknown[:5]))}", f"values.{unknown[0]}"
-        )
-    grown = Vocabulary(vocab.names + (body.name,), vocab.retired, vocab.fixed)
-    keys = {
-        classes[n].id: grown.key({body.name: v}, base=classes[n].attribute_key)
-        for n, v in body.values.items()
-    }
-    worded = {}  # class id -> (class, its reading of the new word)
-    for cls in classes.values():
-        if cls.description and cls.name not in body.values:
-            reading = interpreter.value_of(cls.description, body.name)
-            if reading is not None:
-                worded[cls.id] = (cls, reading)
-                keys[cls.id] = grown.key({body.name: reading.value}, base=cls.attribute_key)
-    _check_distinct(session, grown, keys, f"values.{body.name}")
-    with idempotency.writing(session, recheck=lambda: _check_new(session, body.name)):
-        attribute = repo.add_attribute(session, body.name)
-        repo.describe(session, keys)
-        for cls, r in worded.values():
-            readings = [*(cls.description_readings or []), *stored_readings({r.attribute: r})]
-            repo.set_description(session, cls, cls.description, readings)
-        out = _queue(session, JobKind.ADD_ATTRIBUTE, attribute, principal)
-        idempotency.accept(session, out, out.job.id, response)
+    out = enrolment.add_attribute(
+        session,
+        body.name,
+        body.values,
+        interpreter,
+        requested_by=principal.id,
+        writing=idempotency.writing,
+        finish=_accepted(session, idempotency, response),
+    )
     metrics.enrollments.labels("attribute").inc()
     return out
 
@@ -153,76 +131,35 @@ def retire_attribute(
     two live classes would be left with the same description, or a novel class without
     samples with none. The name is never used again."""
     idempotency.replay(session)
-    attribute = repo.attribute_by_name(session, name)
-    if attribute is None:
-        raise problems.not_found("attribute", "name", repr(name))
-    if attribute.retired_at is not None:
-        raise Problem(409, f"attribute '{name}' is already retired", "name")
-    vocab = repo.vocabulary(session)
-    after = Vocabulary(vocab.names, vocab.retired | {name}, vocab.fixed)
-    counts = repo.sample_counts(session)
-    for cls in repo.list_classes(session):
-        if (
-            cls.kind == ClassKind.NOVEL
-            and not counts.get(cls.id)
-            and describes(vocab, cls.attribute_key)
-            and not describes(after, cls.attribute_key)
-        ):
-            raise Problem(
-                409,
-                f"retiring '{name}' would leave class '{cls.name}' described by nothing (and it "
-                "has no samples to be recognised by)",
-                "name",
-            )
-    _check_distinct(session, after, {}, "name", because=f"retiring '{name}'")
-    with idempotency.writing(session):
-        repo.retire_attribute(session, attribute, vocab)
-        out = _queue(session, JobKind.RETIRE_ATTRIBUTE, attribute, principal)
-        idempotency.accept(session, out, out.job.id, response)
+    out = enrolment.retire_attribute(
+        session,
+        name,
+        requested_by=principal.id,
+        writing=idempotency.writing,
+        finish=_accepted(session, idempotency, response),
+    )
     metrics.enrollments.labels("attribute").inc()
     return out
 
 
-def _queue(
-    session: Session, kind: JobKind, attribute: Attribute, principal: Principal
-) -> AttributeChanged:
-    """The job that brings the vocabulary's change into the model, and the 202's body."""
-    job = repo.add_job(session, kind, None, requested_by=principal.id, attribute_id=attribute.id)
-    return AttributeChanged(
-        attribute=AttributeOut.model_validate(attribute), job=JobOut.model_validate(job)
-    )
+def _accepted(
+    session: Session, idempotency: Idempotency, response: Response
+) -> Callable[[Attribute, Job], AttributeChanged]:
+    """The 202's body for an attribute and its job, committed with them (kept for
+    retries)."""
+
+    def finish(attribute: Attribute, job: Job) -> AttributeChanged:
+        out = AttributeChanged(
+            attribute=AttributeOut.model_validate(attribute), job=JobOut.model_validate(job)
+        )
+        idempotency.accept(session, out, job.id, response)
+        return out
+
+    return finish
 
 
-def _check_new(session: Session, name: str) -> None:
-    existing = repo.attribute_by_name(session, name)
-    if existing is not None:
-        state = " (retired: names are never reused)" if existing.retired_at else ""
-        raise Problem(409, f"an attribute named '{name}' exists{state}", "name")
-
-
-def _check_distinct(
-    session: Session,
-    vocab: Vocabulary,
-    keys: dict[int, str],
-    field: str,
-    because: str = "these values",
-) -> None:
-    """409 when, with ``keys`` (class id -> new key) and ``vocab``, two live enrolled classes
-    would have the same description: a model could never tell them apart."""
-    seen: dict[tuple, str] = {}
-    for cls in repo.list_classes(session):
-        if cls.origin != Origin.ENROLLED:
-            continue
-        key = keys.get(cls.id, cls.attribute_key)
-        values = vocab.values(key)
-        if not describes(vocab, key):
-            continue
-        description = tuple(sorted(values.items()))
-        if description in seen:
-            raise Problem(
-                409,
-                f"{because} would give classes '{seen[description]}' and '{cls.name}' the same "
-                "description; the model could never tell them apart",
-                field,
-            )
-        seen[description] = cls.name
+def readings_out(readings: dict[str, Reading]) -> list[ReadingOut]:
+    return [
+        ReadingOut(attribute=r.attribute, value=r.value, words=r.words, source=r.source)
+        for r in readings.values()
+    ]

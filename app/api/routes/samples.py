@@ -1,5 +1,5 @@
 import io
-from typing import Annotated
+from typing import Annotated, Any
 
 import numpy as np
 from fastapi import APIRouter, Header, Response
@@ -29,11 +29,13 @@ from app.api.schemas import (
     SampleOut,
     Withdrawal,
 )
-from app.api.withdrawals import queue_withdrawal
+from app.api.withdrawals import withdrawal
 from app.data.biotac import RawTrial
 from app.framework.recognizer import RAW_TRIALS
+from app.service import enrolment
+from app.service.holder import LoadedModel
 from app.store import repo
-from app.store.enums import ClassKind, JobKind, Origin
+from app.store.models import Job, Sample
 
 router = APIRouter(
     prefix="/v1/classes", tags=["samples"], responses=problems.responses(401, 403, 422, 429)
@@ -117,15 +119,29 @@ def add_sample(
     the served model made of the sample before learning from it (`recognized_as`). With an
     ``Idempotency-Key``, a retry gets the first answer and adds nothing."""
     idempotency.replay(session)
-    cls = repo.get_class(session, class_id)
-    if cls is None:
-        raise not_found("class", "class_id", class_id)
-    if cls.kind != ClassKind.NOVEL:
-        raise Problem(
-            409,
-            f"class '{cls.name}' is a known class; samples can be added to novel classes only",
-            "class_id",
+    cls = enrolment.novel_class(session, class_id)
+    kept, recognized_as = _read_and_recognize(body, model)
+
+    def accepted(row: Sample, job: Job) -> SampleCreated:
+        out = SampleCreated(
+            sample_id=row.id,
+            job=JobOut.model_validate(job),
+            recognized_as=recognized_as,
+            model_version=model.version,
         )
+        idempotency.accept(session, out, job.id, response)
+        return out
+
+    out = enrolment.add_sample(
+        session, cls, kept, requested_by=principal.id, writing=idempotency.writing, finish=accepted
+    )
+    metrics.enrollments.labels("sample").inc()
+    return out
+
+
+def _read_and_recognize(body: SampleCreate, model: LoadedModel) -> tuple[Any, dict]:
+    """The body's sample or raw trial as the store keeps it, and what ``model`` makes of it
+    before learning from it (one answer for all of it: both fingers of a trial)."""
     rec = model.recognizer
     if body.trial is not None:
         kept = trials.one(body.trial.model_dump(exclude_none=True))
@@ -143,21 +159,8 @@ def add_sample(
         with blame("sample"):
             x = rec.validate_samples(x)  # NaN and infinity become a named 422
         kept = x[0]
-    # one answer for all of it (both fingers of a trial)
     answer = rec.recognize_batch(x, groups=np.zeros(len(x), np.int64))
-    recognized_as = answer.records(model.class_ids)[0]
-    with idempotency.writing(session):  # a concurrent retry with this key may win
-        row = repo.add_sample(session, class_id, kept)
-        job = repo.add_job(session, JobKind.ADD_SAMPLE, class_id, row.id, requested_by=principal.id)
-        out = SampleCreated(
-            sample_id=row.id,
-            job=JobOut.model_validate(job),
-            recognized_as=recognized_as,
-            model_version=model.version,
-        )
-        idempotency.accept(session, out, job.id, response)
-    metrics.enrollments.labels("sample").inc()
-    return out
+    return kept, answer.records(model.class_ids)[0]
 
 
 def one_sample(data: list, input_shape: tuple[int, ...], field: str = "sample") -> np.ndarray:
@@ -183,21 +186,16 @@ def withdraw_sample(
     principal: Enroller,
 ) -> Withdrawal:
     """Withdraw a wrongly enrolled sample (say, one taken of the wrong object). It leaves
-    the store's live data at once and the served model when the job succeeds (the novel
-    classes rebuilt, or a full retrain where it was in the known part). Samples of the
-    training dataset cannot be withdrawn."""
+    the store's live data at once and the served model when the job succeeds. Samples of
+    the training dataset cannot be withdrawn."""
     idempotency.replay(session)
-    if repo.get_class(session, class_id) is None:
-        raise not_found("class", "class_id", class_id)
-    row = repo.get_sample(session, class_id, sample_id)
-    if row is None:
-        raise not_found("sample", "sample_id", sample_id)
-    if row.origin != Origin.ENROLLED:
-        raise Problem(
-            409,
-            f"sample {sample_id} comes from the training dataset; only enrolled samples "
-            "can be withdrawn",
-            "sample_id",
-        )
-    repo.withdraw_sample(session, row)
-    return queue_withdrawal(session, idempotency, metrics, response, principal, class_id, sample_id)
+    out = enrolment.withdraw_sample(
+        session,
+        class_id,
+        sample_id,
+        requested_by=principal.id,
+        writing=idempotency.writing,
+        finish=lambda _, job: withdrawal(session, idempotency, response, class_id, sample_id, job),
+    )
+    metrics.withdrawals.labels("sample").inc()
+    return out
