@@ -16,8 +16,8 @@ import time
 
 import uvloop
 
+from app.testing.harness import free_port
 from bench.load import Connection, hammer
-from tests.reliability.harness import free_port
 
 
 def serve(port: int) -> None:

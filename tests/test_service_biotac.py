@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from app.data.biotac import read_biotac_h5, write_biotac_h5
-from tests.reliability.harness import STARTUP_TIMEOUT, free_port, tactile_zsl
+from app.testing.harness import STARTUP_TIMEOUT, free_port, tactile_zsl
 from tests.test_service_processes import wait_for
 
 pytestmark = pytest.mark.slow

@@ -20,8 +20,8 @@ import httpx
 import pytest
 
 from app.config import MAX_DEFAULT_PROCESSES, Settings
-from tests.reliability.harness import STARTUP_TIMEOUT, free_port, tactile_zsl
-from tests.service_fixtures import (
+from app.testing.harness import STARTUP_TIMEOUT, free_port, tactile_zsl
+from app.testing.service import (
     QUICK_DATASET,
     QUICK_METHOD,
     QUICK_PARAMS,

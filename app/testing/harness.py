@@ -16,7 +16,7 @@ from pathlib import Path
 
 import httpx
 
-from tests.service_fixtures import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS
+from app.testing.service import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS
 
 STARTUP_TIMEOUT = 420  # the first start trains the (small) base model
 
