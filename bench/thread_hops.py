@@ -24,7 +24,7 @@ def serve(port: int) -> None:
     import uvicorn
     from fastapi import Depends, FastAPI
 
-    from app.api.http_protocol import CoalescingHttpToolsProtocol
+    from app.server.http_protocol import CoalescingHttpToolsProtocol
 
     app = FastAPI()
 

@@ -15,9 +15,8 @@ from pathlib import Path
 import httpx
 import pytest
 
-from app.testing.harness import STARTUP_TIMEOUT, free_port, tactile_zsl
+from app.testing.harness import STARTUP_TIMEOUT, free_port, tactile_zsl, wait_for
 from app.testing.service import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS
-from tests.test_service_processes import wait_for
 
 pytestmark = pytest.mark.slow
 

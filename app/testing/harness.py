@@ -35,6 +35,20 @@ def tactile_zsl() -> list[str]:
     return [str(script)] if script.exists() else [sys.executable, "-m", "app.cli"]
 
 
+def wait_for(condition, timeout: float, what: str):
+    """Poll ``condition()`` until it returns something true (returned), a refused
+    connection counting as not yet; AssertionError after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            if value := condition():
+                return value
+        except httpx.TransportError:
+            pass
+        time.sleep(0.2)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
 @dataclass
 class Proc:
     name: str  # api-0, worker-1, ...
