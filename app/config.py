@@ -10,7 +10,7 @@ from typing import Annotated, Any
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
-from app.framework.registry import DEFAULT_METHOD
+from app.framework.defaults import DEFAULT_METHOD
 
 # each API process holds its own interpreter, torch and model (~0.5 GB resident)
 MAX_DEFAULT_PROCESSES = 4

@@ -490,7 +490,7 @@ def main() -> int:
     from fastapi.testclient import TestClient
 
     from app.api.main import create_app
-    from tests.service_fixtures import fresh_postgres_database, quick_settings, trained_base
+    from app.testing.service import fresh_postgres_database, quick_settings, trained_base
 
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--examples", type=int, default=200, help="generated cases per operation")

@@ -23,9 +23,9 @@ from pathlib import Path
 
 import httpx
 
+from app.testing.harness import Cluster
+from app.testing.service import fresh_postgres_database, quick_dataset, unused_vectors
 from bench.load import process_cpu_s
-from tests.reliability.harness import Cluster
-from tests.service_fixtures import fresh_postgres_database, quick_dataset, unused_vectors
 
 
 async def robot(

@@ -45,8 +45,8 @@ import uvloop
 from app.config import Settings
 from app.data.sources import load_dataset
 from app.framework.registry import DEFAULT_METHOD
-from tests.reliability.harness import Cluster
-from tests.service_fixtures import fresh_postgres_database, unused_vectors
+from app.testing.harness import Cluster
+from app.testing.service import fresh_postgres_database, unused_vectors
 
 
 def cpu_jiffies() -> list[int] | None:

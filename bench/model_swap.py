@@ -34,7 +34,7 @@ from app.service.bootstrap import model_classes
 from app.store import bundles, repo, retention
 from app.store.db import make_engine, make_sessionmaker
 from app.store.models import Base
-from tests.service_fixtures import unused_vectors
+from app.testing.service import unused_vectors
 
 
 def cpu_ms(fn, repeats: int) -> float:

@@ -33,9 +33,9 @@ from app.api.main import create_app
 from app.config import Settings
 from app.framework import bundle
 from app.framework.registry import DEFAULT_METHOD
+from app.testing.harness import tactile_zsl
 from bench.bench_framework import timed
 from bench.withdrawal import cpu_model, timed_round, unused_attributes
-from tests.reliability.harness import tactile_zsl
 from worker import Worker
 
 

@@ -8,7 +8,7 @@
 
 --postgres takes a server URL (e.g. postgresql://postgres@127.0.0.1:5432/test); the run
 gets a fresh database on it, dropped afterwards. pg-outage starts a PostgreSQL server of
-its own instead (tests/reliability/pgserver.py), since it stops and crashes it; the
+its own instead (app/testing/pgserver.py), since it stops and crashes it; the
 service runs ``best`` there, so that POST /v1/describe answers too. Prints one JSON report.
 """
 
@@ -21,9 +21,9 @@ import sys
 import tempfile
 from pathlib import Path
 
-from tests.reliability import scenarios
-from tests.reliability.harness import Cluster
-from tests.service_fixtures import fresh_postgres_database
+from app.testing import scenarios
+from app.testing.harness import Cluster
+from app.testing.service import fresh_postgres_database
 
 
 def main() -> int:
@@ -74,8 +74,8 @@ def main() -> int:
 
 
 def pg_outage(args: argparse.Namespace) -> int:
-    from tests.reliability.pgserver import PostgresServer, missing_reason
-    from tests.service_fixtures import BEST_PARAMS
+    from app.testing.pgserver import PostgresServer, missing_reason
+    from app.testing.service import BEST_PARAMS
 
     if reason := missing_reason():
         print(f"cannot run pg-outage: {reason}", file=sys.stderr)

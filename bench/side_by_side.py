@@ -149,7 +149,7 @@ def app_server(kind: str, workers: int, log_dir: Path):
     processes on its port); yields (url, pid). Stopped on exit, whatever happened."""
     import httpx
 
-    from tests.reliability.harness import free_port
+    from app.testing.harness import free_port
 
     port = free_port()
     log = open(log_dir / f"{kind}-{workers}.log", "wb")  # noqa: SIM115
@@ -208,7 +208,7 @@ def service(data_dir: Path, processes: int, database_url: str = "", method: str 
     put back to the service's defaults (the harness shortens them)."""
     from app.config import Settings
     from app.framework.registry import DEFAULT_METHOD
-    from tests.reliability.harness import Cluster
+    from app.testing.harness import Cluster
 
     fields = Settings.model_fields
     defaults = {

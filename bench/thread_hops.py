@@ -16,15 +16,15 @@ import time
 
 import uvloop
 
+from app.testing.harness import free_port
 from bench.load import Connection, hammer
-from tests.reliability.harness import free_port
 
 
 def serve(port: int) -> None:
     import uvicorn
     from fastapi import Depends, FastAPI
 
-    from app.api.http_protocol import CoalescingHttpToolsProtocol
+    from app.server.http_protocol import CoalescingHttpToolsProtocol
 
     app = FastAPI()
 

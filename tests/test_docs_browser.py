@@ -15,9 +15,8 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.reliability.harness import STARTUP_TIMEOUT, free_port, tactile_zsl
-from tests.service_fixtures import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS
-from tests.test_service_processes import wait_for
+from app.testing.harness import STARTUP_TIMEOUT, free_port, tactile_zsl, wait_for
+from app.testing.service import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS
 
 pytestmark = pytest.mark.slow
 

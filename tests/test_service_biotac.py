@@ -14,8 +14,7 @@ import numpy as np
 import pytest
 
 from app.data.biotac import read_biotac_h5, write_biotac_h5
-from tests.reliability.harness import STARTUP_TIMEOUT, free_port, tactile_zsl
-from tests.test_service_processes import wait_for
+from app.testing.harness import STARTUP_TIMEOUT, free_port, tactile_zsl, wait_for
 
 pytestmark = pytest.mark.slow
 

@@ -15,14 +15,8 @@ import httpx
 import numpy as np
 import pytest
 
-from tests.reliability.harness import STARTUP_TIMEOUT, free_port, tactile_zsl
-from tests.service_fixtures import (
-    QUICK_DATASET,
-    QUICK_METHOD,
-    QUICK_PARAMS,
-    list_all,
-    quick_dataset,
-)
+from app.testing.harness import STARTUP_TIMEOUT, free_port, tactile_zsl
+from app.testing.service import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS, list_all, quick_dataset
 
 pytestmark = pytest.mark.slow
 
@@ -279,7 +273,7 @@ def test_a_robot_touches_procedure_by_procedure_as_the_service_asks(tmp_path):
     first procedure and sends the sample again, procedure by procedure, as each answer's
     next_procedure asks, until it is null."""
     from app.framework.recognizer import MIN_PROCEDURES
-    from tests.service_fixtures import BEST_PARAMS
+    from app.testing.service import BEST_PARAMS
 
     dataset = quick_dataset()
     rng = np.random.default_rng(2)

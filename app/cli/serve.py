@@ -44,10 +44,10 @@ def run(args: argparse.Namespace) -> int:
 
     import uvicorn
 
-    from app.api import processes
-    from app.api.http_protocol import CoalescingHttpToolsProtocol
     from app.api.main import create_app
     from app.config import Settings
+    from app.server import processes
+    from app.server.http_protocol import CoalescingHttpToolsProtocol
     from app.service.bootstrap import ensure_ready
     from app.store.db import make_engine, make_sessionmaker
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import importlib
 
+# re-exported: DEFAULT_METHOD lives where app.config can read it without the methods
+from app.framework.defaults import DEFAULT_METHOD as DEFAULT_METHOD
 from app.framework.recognizer import TactileRecognizer
 
 # name -> "module:Class"; imported lazily so that listing methods stays cheap.
@@ -18,10 +20,6 @@ METHODS: dict[str, str] = {
     # the method that measured best on PHAC-2 (docs/RESULTS.md; storable in bundles)
     "best": "app.methods.best:BestRecognizer",
 }
-
-# the service uses the method that measured better on the mixed known/novel
-# figure (gzsl_h, docs/RESULTS.md); the paper pipeline stays selectable as "paper".
-DEFAULT_METHOD = "best"
 
 
 class UnknownMethodError(ValueError):

@@ -9,7 +9,8 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.data.simulator import simulate_dataset
-from tests.service_fixtures import BEST_PARAMS, problem
+from app.testing.service import BEST_PARAMS
+from tests.service_fixtures import problem
 
 
 @pytest.fixture

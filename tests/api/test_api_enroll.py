@@ -9,7 +9,8 @@ import pytest
 from sqlalchemy import select
 
 from app.store.models import Job, ObjectClass, Sample
-from tests.service_fixtures import names_of, problem, unused_vectors
+from app.testing.service import names_of, unused_vectors
+from tests.service_fixtures import problem
 
 
 @pytest.fixture

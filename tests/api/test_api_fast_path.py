@@ -155,7 +155,7 @@ def test_an_unexpected_error_is_a_500_problem_without_internals(app, sample, mon
 
 def test_bodies_over_the_cap_are_413_declared_or_chunked(tmp_path, base_model):
     from app.api.main import create_app
-    from tests.service_fixtures import quick_settings
+    from app.testing.service import quick_settings
 
     app = create_app(
         quick_settings(tmp_path / "d", max_body_bytes=1024), trainer=lambda: base_model

@@ -10,7 +10,7 @@ from sqlalchemy import func, select
 
 from app.store import repo
 from app.store.models import IdempotencyRecord, Job, ObjectClass, Sample
-from tests.service_fixtures import unused_vectors
+from app.testing.service import unused_vectors
 
 PROBLEM = "application/problem+json"
 

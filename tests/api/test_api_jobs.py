@@ -5,7 +5,7 @@ from __future__ import annotations
 import threading
 import time
 
-from tests.service_fixtures import unused_vectors
+from app.testing.service import unused_vectors
 
 PROBLEM = "application/problem+json"
 

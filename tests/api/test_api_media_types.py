@@ -8,7 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from tests.service_fixtures import names_of, npy, problem, register, unused_vectors
+from app.testing.service import names_of, unused_vectors
+from tests.service_fixtures import npy, problem, register
 
 
 def _json_body(dataset) -> dict[str, str]:

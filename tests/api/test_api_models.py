@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from tests.service_fixtures import problem, unused_vectors
+from app.testing.service import unused_vectors
+from tests.service_fixtures import problem
 
 PROBLEM = "application/problem+json"
 

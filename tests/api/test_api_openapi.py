@@ -177,7 +177,7 @@ def test_a_generated_authenticated_client_sends_the_api_key(generated, tmp_path)
     from fastapi.testclient import TestClient
 
     from app.api.main import create_app
-    from tests.service_fixtures import quick_settings, trained_base
+    from app.testing.service import quick_settings, trained_base
 
     pkg, _ = generated
     models = importlib.import_module(f"{PACKAGE}.models")

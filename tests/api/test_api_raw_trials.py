@@ -14,7 +14,8 @@ from fastapi.testclient import TestClient
 
 from app.data.biotac import RawTrial, write_biotac_h5
 from app.framework.registry import make_method
-from tests.service_fixtures import problem, quick_settings
+from app.testing.service import quick_settings
+from tests.service_fixtures import problem
 
 PILOT = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "biotac_pilot"
 HDF5 = {"Content-Type": "application/x-hdf5"}
@@ -262,7 +263,7 @@ def test_a_robot_recognises_trials_online_and_from_its_model_file(raw_service, p
     """TactileClient sends trials; offline, the downloaded model's own featurizer makes the
     images, so the answers are the service's."""
     from app.client import TactileClient
-    from tests.reliability.harness import free_port
+    from app.testing.harness import free_port
 
     client, _ = raw_service
     trials = list(pilot[2].trials[:4])

@@ -9,7 +9,7 @@ import numpy as np
 from sqlalchemy import func, select
 
 from app.store.models import Bundle
-from tests.service_fixtures import unused_vectors
+from app.testing.service import unused_vectors
 
 PROBLEM = "application/problem+json"
 

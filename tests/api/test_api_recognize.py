@@ -129,7 +129,7 @@ def test_body_over_the_size_cap_is_413(tmp_path, base_model):
     from fastapi.testclient import TestClient
 
     from app.api.main import create_app
-    from tests.service_fixtures import quick_settings
+    from app.testing.service import quick_settings
 
     settings = quick_settings(tmp_path / "d", max_body_bytes=1024)
     with TestClient(create_app(settings, trainer=lambda: base_model)) as c:

@@ -6,7 +6,8 @@ from __future__ import annotations
 from sqlalchemy import select
 
 from app.store.models import Job, ObjectClass
-from tests.service_fixtures import add_sample, names_of, problem, register, unused_vectors
+from app.testing.service import names_of, unused_vectors
+from tests.service_fixtures import add_sample, problem, register
 
 
 def test_new_attributes_are_committed_before_the_202_and_the_samples_stay(client, app, dataset):

@@ -14,7 +14,8 @@ from app.cli import main as cli
 from app.service.keys import RateLimiter
 from app.store import repo
 from app.store.models import ApiKey
-from tests.service_fixtures import PROBLEM, problem, unused_vectors
+from app.testing.service import unused_vectors
+from tests.service_fixtures import PROBLEM, problem
 
 
 def make_key(app, scope: str, name: str | None = None) -> str:

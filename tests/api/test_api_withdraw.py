@@ -6,7 +6,8 @@ from __future__ import annotations
 from sqlalchemy import select
 
 from app.store.models import Job, ObjectClass, Sample
-from tests.service_fixtures import add_sample, names_of, problem, register, unused_vectors
+from app.testing.service import names_of, unused_vectors
+from tests.service_fixtures import add_sample, problem, register
 
 
 def enrol(client, dataset, name: str = "mug", i: int = 0) -> tuple[int, int]:

@@ -11,7 +11,7 @@ import pytest
 
 from app.cli import main
 from app.framework import bundle
-from tests.service_fixtures import trained_base
+from app.testing.service import trained_base
 
 
 @pytest.fixture(scope="module")
@@ -143,7 +143,7 @@ def test_lines_are_answered_one_by_one_and_a_new_model_file_is_picked_up(saved, 
 def test_a_lines_process_answers_each_line_as_it_comes(saved):
     import subprocess
 
-    from tests.reliability.harness import tactile_zsl
+    from app.testing.harness import tactile_zsl
 
     path, model, x = saved
     proc = subprocess.Popen(

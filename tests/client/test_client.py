@@ -11,8 +11,8 @@ import pytest
 
 from app.client import ServiceError, ServiceUnreachable, TactileClient
 from app.framework import bundle
-from tests.reliability.harness import free_port
-from tests.service_fixtures import list_all, unused_vectors
+from app.testing.harness import free_port
+from app.testing.service import list_all, unused_vectors
 
 
 @pytest.fixture

@@ -116,7 +116,7 @@ def test_an_index_learns_the_promoted_samples():
 
 def test_methods_that_cannot_grow_say_so():
     from app.framework.registry import make_method
-    from tests.service_fixtures import QUICK_PARAMS, quick_dataset
+    from app.testing.service import QUICK_PARAMS, quick_dataset
 
     ds = quick_dataset()
     paper = make_method("paper", **QUICK_PARAMS).fit(ds)

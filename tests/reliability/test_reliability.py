@@ -8,9 +8,10 @@ import json
 
 import pytest
 
-from tests.reliability import scenarios
-from tests.reliability.harness import KEEP_VERSIONS, Cluster
-from tests.service_fixtures import BEST_PARAMS, fresh_postgres_database, postgres_url
+from app.testing import scenarios
+from app.testing.harness import KEEP_VERSIONS, Cluster
+from app.testing.service import BEST_PARAMS, fresh_postgres_database
+from tests.service_fixtures import postgres_url
 
 pytestmark = pytest.mark.slow
 
@@ -116,7 +117,7 @@ def test_postgres_outage(tmp_path):
     the loaded model (with an API key read before the outage), writes get a quick 503
     problem with Retry-After, /readyz says not ready until the server is back, nothing is
     restarted, and every 202'd enrolment reaches the served model."""
-    from tests.reliability.pgserver import PostgresServer, missing_reason
+    from app.testing.pgserver import PostgresServer, missing_reason
 
     reason = missing_reason()
     if reason:

@@ -1,22 +1,13 @@
 """Shared service fixtures live in tests/service_fixtures.py."""
 
-import sys
-from pathlib import Path
+import numpy as np
+import pytest
 
-# The project root must be on sys.path: otherwise the folder tests/worker, as a
-# namespace package, would shadow the real top-level ``worker`` package.
-_ROOT = str(Path(__file__).resolve().parents[2])
-if _ROOT not in sys.path:
-    sys.path.insert(0, _ROOT)
-
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
-
-from app.framework import bundle  # noqa: E402
-from app.service.bootstrap import model_classes  # noqa: E402
-from app.store import bundles, repo  # noqa: E402
-from tests.service_fixtures import *  # noqa: E402, F403
-from tests.service_fixtures import unused_vectors  # noqa: E402
+from app.framework import bundle
+from app.service.bootstrap import model_classes
+from app.store import bundles, repo
+from app.testing.service import unused_vectors
+from tests.service_fixtures import *  # noqa: F403
 
 SMALL_PARTS = 64  # bytes: each version's novel-class arrays become parts of their own
 

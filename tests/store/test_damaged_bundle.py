@@ -17,7 +17,8 @@ from app.framework.errors import BundleError
 from app.service import holder as holder_module
 from app.store import repo
 from app.store.models import Bundle
-from tests.service_fixtures import register, store_check
+from app.testing.service import store_check
+from tests.service_fixtures import register
 
 
 def flip_byte(sessions, sha: str) -> bytes:

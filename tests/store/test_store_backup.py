@@ -19,7 +19,7 @@ from app.store.backup import StoreBackupError, backup, restore
 from app.store.in_use import StoreInUseError, closed_to_service, lock_path, opened_by_service
 from app.store.integrity import check_store
 from app.store.models import Bundle
-from tests.service_fixtures import list_all, quick_settings, unused_vectors
+from app.testing.service import list_all, quick_settings, unused_vectors
 
 sqlite_only = pytest.mark.parametrize("settings", ["sqlite"], indirect=True)
 

@@ -79,7 +79,7 @@ def test_two_processes_starting_at_once_bootstrap_once(settings, base_model):
 
 
 def test_a_dataset_of_graded_and_unknown_values_is_stored_as_given(tmp_path, best_base):
-    from tests.service_fixtures import BEST_PARAMS, quick_settings
+    from app.testing.service import BEST_PARAMS, quick_settings
 
     model, dataset = best_base
     values = dataset.attribute_values.copy()

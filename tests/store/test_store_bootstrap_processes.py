@@ -23,7 +23,7 @@ from app.config import Settings
 from app.framework import bundle
 from app.service.bootstrap import ensure_ready
 from app.store.db import make_engine, make_sessionmaker
-from tests.service_fixtures import quick_dataset
+from app.testing.service import quick_dataset
 
 settings = Settings(**json.loads(sys.argv[1]))
 marks = sys.argv[3]

@@ -11,7 +11,7 @@ from app.framework import bundle
 from app.framework.errors import BundleError
 from app.store import bundles, repo
 from app.store.models import Bundle
-from tests.service_fixtures import unused_vectors
+from app.testing.service import unused_vectors
 
 
 @pytest.fixture

@@ -13,7 +13,8 @@ from sqlalchemy import inspect, text
 
 from app.store import migrate
 from app.store.db import make_engine
-from tests.service_fixtures import fresh_postgres_database, postgres_url, require_postgres
+from app.testing.service import fresh_postgres_database
+from tests.service_fixtures import postgres_url, require_postgres
 
 HEAD = "0009"
 PG_URL = postgres_url()

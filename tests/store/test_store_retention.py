@@ -12,7 +12,7 @@ from app.framework.errors import BundleError
 from app.service.bootstrap import model_classes
 from app.store import bundles, repo, retention
 from app.store.models import Bundle, ModelVersion
-from tests.service_fixtures import unused_vectors
+from app.testing.service import unused_vectors
 from tests.store.conftest import SMALL_PARTS
 
 

@@ -9,7 +9,8 @@ from sqlalchemy import text
 from sqlalchemy.exc import OperationalError
 
 from app.store.db import make_engine
-from tests.service_fixtures import postgres_url, unused_vectors
+from app.testing.service import unused_vectors
+from tests.service_fixtures import postgres_url
 
 PG_URL = postgres_url()
 

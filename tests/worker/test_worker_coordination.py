@@ -13,7 +13,7 @@ from sqlalchemy import func, select, update
 from app.store import leases, repo
 from app.store.db import make_engine, make_sessionmaker
 from app.store.models import Bundle, Job, Lease, ModelVersion, utcnow
-from tests.service_fixtures import names_of, unused_vectors
+from app.testing.service import names_of, unused_vectors
 from worker import Worker, loop
 
 

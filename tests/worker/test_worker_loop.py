@@ -250,7 +250,8 @@ def test_embedded_worker_thread_processes_jobs(tmp_path, base_model):
     from fastapi.testclient import TestClient
 
     from app.api.main import create_app
-    from tests.service_fixtures import quick_settings, wait_for_job
+    from app.testing.service import quick_settings
+    from tests.service_fixtures import wait_for_job
 
     settings = quick_settings(tmp_path / "e", embedded_worker=True)
     with TestClient(create_app(settings, trainer=lambda: base_model)) as c:

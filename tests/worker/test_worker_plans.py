@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 from app.store.enums import VersionReason
-from tests.service_fixtures import add_sample, register, unused_vectors
+from app.testing.service import unused_vectors
+from tests.service_fixtures import add_sample, register
 from worker import loop
 from worker.retrain import Rebuild
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from app.framework.recognizer import TactileRecognizer
-from tests.service_fixtures import add_sample, job, register, unused_vectors
+from app.testing.service import unused_vectors
+from tests.service_fixtures import add_sample, job, register
 from worker import retrain
 
 

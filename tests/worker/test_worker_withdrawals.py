@@ -7,12 +7,8 @@ import pytest
 
 from app.framework.errors import UnsupportedOperationError
 from app.store import repo
-from tests.service_fixtures import (
-    add_sample,
-    job,
-    register,
-    unused_vectors,
-)
+from app.testing.service import unused_vectors
+from tests.service_fixtures import add_sample, job, register
 from worker import retrain
 
 

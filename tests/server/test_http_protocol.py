@@ -12,7 +12,11 @@ import uvicorn
 from fastapi import FastAPI
 from fastapi.responses import PlainTextResponse
 
-from app.api.http_protocol import COALESCE_BYTES, CoalescingHttpToolsProtocol, CoalescingTransport
+from app.server.http_protocol import (
+    COALESCE_BYTES,
+    CoalescingHttpToolsProtocol,
+    CoalescingTransport,
+)
 
 
 class RecordingTransport(asyncio.Transport):

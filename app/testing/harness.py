@@ -16,7 +16,7 @@ from pathlib import Path
 
 import httpx
 
-from tests.service_fixtures import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS
+from app.testing.service import QUICK_DATASET, QUICK_METHOD, QUICK_PARAMS
 
 STARTUP_TIMEOUT = 420  # the first start trains the (small) base model
 
@@ -33,6 +33,20 @@ def free_port() -> int:
 def tactile_zsl() -> list[str]:
     script = Path(sys.executable).with_name("tactile-zsl")
     return [str(script)] if script.exists() else [sys.executable, "-m", "app.cli"]
+
+
+def wait_for(condition, timeout: float, what: str):
+    """Poll ``condition()`` until it returns something true (returned), a refused
+    connection counting as not yet; AssertionError after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            if value := condition():
+                return value
+        except httpx.TransportError:
+            pass
+        time.sleep(0.2)
+    raise AssertionError(f"timed out waiting for {what}")
 
 
 @dataclass

@@ -1,5 +1,5 @@
 """The reliability scenarios, sized by their callers: small in tests/reliability, large in
-bench/ (crash.py, concurrency.py, hotswap.py). Each returns a report dict."""
+bench/reliability.py. Each drives a workload and returns a report dict; the callers judge it."""
 
 from __future__ import annotations
 
@@ -14,8 +14,8 @@ import httpx
 
 from app.framework import bundle
 from app.store.integrity import check_store
-from tests.reliability.harness import Cluster, wait_jobs_settled
-from tests.service_fixtures import list_all, quick_dataset
+from app.testing.harness import Cluster, wait_jobs_settled
+from app.testing.service import list_all, quick_dataset
 
 
 def _vectors(n: int) -> list[list[int]]:
@@ -482,7 +482,7 @@ def _create_api_key(cluster: Cluster) -> str:
     processes read it from there, so during an outage it works only if they kept it."""
     import subprocess
 
-    from tests.reliability.harness import tactile_zsl
+    from app.testing.harness import tactile_zsl
 
     out = subprocess.run(
         [*tactile_zsl(), "apikey", "create", "--scope", "admin", "--name", "outage-fleet"],
@@ -506,12 +506,12 @@ def pg_outage(
     settle_timeout: float = 300,
 ) -> dict:
     """The PostgreSQL server under the service (``server``, a
-    tests/reliability/pgserver.PostgresServer) stopped ``faults`` times at random moments
+    app.testing.pgserver.PostgresServer) stopped ``faults`` times at random moments
     (fast shutdown, immediate shutdown, SIGKILL of the postmaster, in turn in a random
     order) for a random while and started again, under a load of recognitions,
     descriptions, enrolments and /readyz probes on every API process; no service process
     is restarted. Returns every answer's timing, for the caller's checks."""
-    from tests.reliability.pgserver import STOP_MODES
+    from app.testing.pgserver import STOP_MODES
 
     rng = random.Random(seed)
     cluster.start()
@@ -678,9 +678,9 @@ def sqlite_faults(data_root, faults: int, requests_per_fault: int = 10, seed: in
     ``faults`` store faults in turn: a real full disk (a small tmpfs filled to the last byte,
     where this process may mount one), and injected 'database or disk is full' (after the
     first write of a transaction) and 'attempt to write a readonly database'
-    (tests/reliability/test_sqlite_faults.py). During each: ``requests_per_fault``
-    registrations and as many recognitions; then the fault goes and the same registrations
-    are retried with their Idempotency-Key. Recovery: from the fault's end to the first 202."""
+    (app/testing/faults.py). During each: ``requests_per_fault`` registrations and as many
+    recognitions; then the fault goes and the same registrations are retried with their
+    Idempotency-Key. Recovery: from the fault's end to the first 202."""
     import contextlib
     from pathlib import Path
 
@@ -688,14 +688,8 @@ def sqlite_faults(data_root, faults: int, requests_per_fault: int = 10, seed: in
     from sqlalchemy import text
 
     from app.api.main import create_app
-    from tests.reliability.test_sqlite_faults import (
-        MESSAGES,
-        Fault,
-        fill,
-        store_check,
-        tiny_filesystem,
-    )
-    from tests.service_fixtures import quick_settings, trained_base
+    from app.testing.faults import MESSAGES, Fault, fill, tiny_filesystem
+    from app.testing.service import quick_settings, store_check, trained_base
     from worker import Worker
 
     base = trained_base()

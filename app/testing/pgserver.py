@@ -17,7 +17,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from tests.reliability.harness import free_port
+from app.testing.harness import free_port
 
 STOP_MODES = ("fast", "immediate", "kill")  # pg_ctl -m fast / -m immediate / SIGKILL postmaster
 

@@ -20,8 +20,8 @@ import httpx
 import pytest
 
 from app.config import MAX_DEFAULT_PROCESSES, Settings
-from tests.reliability.harness import STARTUP_TIMEOUT, free_port, tactile_zsl
-from tests.service_fixtures import (
+from app.testing.harness import STARTUP_TIMEOUT, free_port, tactile_zsl, wait_for
+from app.testing.service import (
     QUICK_DATASET,
     QUICK_METHOD,
     QUICK_PARAMS,
@@ -76,18 +76,6 @@ def serving_pids(url: str) -> set[int]:
     """The processes behind the port, from the per-process model-version gauge."""
     text = httpx.get(f"{url}/metrics", timeout=10).text
     return {int(p) for p in re.findall(r'^tactile_active_model_version\{pid="(\d+)"\}', text, re.M)}
-
-
-def wait_for(condition, timeout: float, what: str):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            if value := condition():
-                return value
-        except httpx.TransportError:
-            pass
-        time.sleep(0.2)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 def test_processes_serve_together_restart_and_stop_together(tmp_path):
