@@ -6,16 +6,20 @@ and ``fit`` checks the values against the constraints the class declares once, i
 ``_parameter_constraints`` (parameter name -> ``Constraint``), before any work. A
 check that involves several parameters goes into the class's ``_validate_params``.
 
+``Hyperparameters`` gives a class (``TactileRecognizer``) ``get_params``, ``set_params``
+and the check of its constraints.
+
 A failed check raises ``FrameworkError`` (a ``ValueError``) naming the parameter,
 what it must be and the value it got: ``dap_clip must lie in (0, 0.5), got 0.7``.
 """
 
 from __future__ import annotations
 
+import inspect
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar, Self
 
 import numpy as np
 
@@ -115,3 +119,55 @@ def number(
 def positive_values() -> Constraint:
     """A non-empty sequence of positive numbers."""
     return Constraint(lambda v: len(v) > 0 and min(v) > 0, "be positive values")
+
+
+class Hyperparameters:
+    """``get_params``, ``set_params`` and ``_validate_params`` of a class whose constructor
+    takes every hyper-parameter as a named argument and only stores it under the same name
+    (scikit-learn's convention)."""
+
+    #: parameter name -> what its value must satisfy; checked by ``fit``. A subclass
+    #: extends its parent's: ``{**Parent._parameter_constraints, ...}``.
+    _parameter_constraints: ClassVar[dict[str, Constraint]] = {}
+
+    @classmethod
+    def _get_param_names(cls) -> list[str]:
+        """The constructor's parameter names, in its signature's order (scikit-learn's
+        ``BaseEstimator._get_param_names``, which sorts them)."""
+        init = cls.__init__
+        if init is object.__init__:
+            return []
+        names = []
+        for p in inspect.signature(init).parameters.values():
+            if p.name == "self":
+                continue
+            if p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD):
+                raise TypeError(
+                    f"{cls.__name__}.__init__ must name every hyper-parameter "
+                    f"(no *args or **kwargs), as scikit-learn requires"
+                )
+            names.append(p.name)
+        return names
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """The hyper-parameters, by name, as the constructor takes them (``deep`` is
+        scikit-learn's; a recognizer has no nested estimators)."""
+        return {name: getattr(self, name) for name in self._get_param_names()}
+
+    def set_params(self, **params: Any) -> Self:
+        """Set hyper-parameters by name; they are checked by the next ``fit``."""
+        valid = self._get_param_names()
+        for name, value in params.items():
+            if name not in valid:
+                raise FrameworkError(
+                    f"invalid parameter {name!r} for {type(self).__name__}; "
+                    f"its parameters are: {', '.join(valid)}"
+                )
+            setattr(self, name, value)
+        return self
+
+    def _validate_params(self) -> None:
+        """Check every hyper-parameter against ``_parameter_constraints``; a subclass adds
+        the checks that involve several parameters. Raises FrameworkError."""
+        for name, constraint in self._parameter_constraints.items():
+            constraint.check(name, getattr(self, name))

@@ -14,7 +14,7 @@ at several targets, the next procedure chosen by the model's expected gain
 - ``top_per_second`` and ``two_per_second``: ``top`` and ``two`` with the next procedure
   chosen by expected gain per second of robot time. ``two_per_second`` is the service's
   rule since 2026-11-26 (``MIN_PROCEDURES``, ``TARGET_CONFIDENCE`` in
-  ``app/framework/recognizer.py``).
+  ``app/framework/some_procedures.py``).
 
 Prints, per rule and target, the mean over development splits of known_acc, gzsl_h and the
 share of robot time (``app.evaluation.procedures.DURATIONS``), beside all procedures'.

@@ -1,0 +1,275 @@
+"""What a recognizer answers, and how its answers are ranked.
+
+``RecognitionBatch`` holds a batch's answers as arrays (what the service serialises);
+``Recognition`` and ``ClassScore`` are one answer as Python objects. ``rows_batch`` and
+``one_row_batch`` build a batch from the scores a recognizer computed: each row is routed
+by its novelty score to the known-class or the novel-class probabilities, and the top k of
+those are ranked by ``ranked`` (a stable order: among equal values the lower index first).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numpy as np
+
+
+class ClassScore(NamedTuple):
+    class_name: str
+    probability: float
+
+
+class Recognition(NamedTuple):
+    """The answer for one sample."""
+
+    class_name: str
+    kind: str  # "known" | "novel"
+    is_novel: bool
+    novelty_score: float
+    top_k: tuple[ClassScore, ...]
+    procedures_used: tuple[str, ...] = ()
+    next_procedure: str | None = None  # the procedure to do next; None: stop
+
+
+@dataclass(frozen=True)
+class RecognitionBatch:
+    """The answers for a batch as arrays: what the service serialises (building 4 Python
+    objects per sample first cost about as much as the forward pass). ``answers()`` gives
+    the same as ``Recognition`` objects; ``batch[a:b]`` is a batch of rows a … b-1.
+
+    Classes are indexed into ``class_names`` (known classes, then novel ones); a sample
+    answered from fewer classes than ``top_k`` has its ranking padded with index -1.
+    """
+
+    class_names: tuple[str, ...]
+    n_known: int
+    top_index: np.ndarray  # (N, k) int64, best first
+    top_probability: np.ndarray  # (N, k) float64
+    is_novel: np.ndarray  # (N,) bool: novelty score above the threshold
+    novelty_score: np.ndarray  # (N,) float64
+    #: the model's procedures, and which each answer used ((N, P) bool) and which it asks
+    #: for next ((N,) index into ``procedures``, -1: none); P = 0 for a model without them
+    procedures: tuple[str, ...] = ()
+    procedures_used: np.ndarray | None = None
+    next_procedure: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.novelty_score)
+
+    def __getitem__(self, rows: slice) -> RecognitionBatch:
+        return RecognitionBatch(
+            self.class_names,
+            self.n_known,
+            self.top_index[rows],
+            self.top_probability[rows],
+            self.is_novel[rows],
+            self.novelty_score[rows],
+            self.procedures,
+            None if self.procedures_used is None else self.procedures_used[rows],
+            None if self.next_procedure is None else self.next_procedure[rows],
+        )
+
+    def procedure_fields(self) -> list[tuple[list[str], str | None]]:
+        """(``procedures_used``, ``next_procedure``) of each answer, by name."""
+        names = self.procedures
+        if self.procedures_used is None or self.next_procedure is None:
+            return [(list(names), None)] * len(self)
+        return [
+            ([names[j] for j in np.flatnonzero(used)], names[nxt] if nxt >= 0 else None)
+            for used, nxt in zip(self.procedures_used, self.next_procedure.tolist(), strict=True)
+        ]
+
+    @property
+    def class_kinds(self) -> list[str]:
+        """``"known"`` or ``"novel"`` for each of ``class_names``."""
+        return ["known"] * self.n_known + ["novel"] * (len(self.class_names) - self.n_known)
+
+    @property
+    def is_novel_class(self) -> np.ndarray:
+        """(N,) bool: the answer is a novel class (FC_Z), not a known one (FC_Y)."""
+        return self.top_index[:, 0] >= self.n_known
+
+    def records(self, class_ids: Mapping[str, int | None] | None = None) -> list[dict[str, Any]]:
+        """The answers as JSON-ready dicts, in the shape of ``POST /v1/recognize``'s results;
+        with ``class_ids`` (class name → the store's id) every class named carries its
+        ``class_id`` too. Built straight from the arrays: building pydantic models first cost
+        more than the forward pass of a sample."""
+        names = self.class_names
+        label = (
+            [{"class_name": n} for n in names]
+            if class_ids is None
+            else [{"class_id": class_ids.get(n), "class_name": n} for n in names]
+        )
+        return self.labelled_records(label, self.class_kinds)
+
+    def labelled_records(
+        self, label: Sequence[Mapping[str, Any]], kinds: Sequence[str]
+    ) -> list[dict[str, Any]]:
+        """``records`` from each class's label dict and kind, which a caller answering many
+        batches of one model (the service) builds once."""
+        return [
+            {
+                **label[idx[0]],
+                "kind": kinds[idx[0]],
+                "is_novel": novel,
+                "novelty_score": score,
+                "top_k": [
+                    {**label[j], "probability": q}
+                    for j, q in zip(idx, top_p, strict=True)
+                    if j >= 0
+                ],
+                "procedures_used": used,
+                "next_procedure": nxt,
+            }
+            for idx, top_p, novel, score, (used, nxt) in zip(
+                self.top_index.tolist(),
+                self.top_probability.tolist(),
+                self.is_novel.tolist(),
+                self.novelty_score.tolist(),
+                self.procedure_fields(),
+                strict=True,
+            )
+        ]
+
+    def answers(self) -> list[Recognition]:
+        names, kinds = self.class_names, self.class_kinds
+        return [
+            Recognition(
+                names[idx[0]],
+                kinds[idx[0]],
+                nov,
+                score,
+                tuple(ClassScore(names[j], q) for j, q in zip(idx, tp, strict=True) if j >= 0),
+                tuple(used),
+                nxt,
+            )
+            for idx, tp, nov, score, (used, nxt) in zip(
+                self.top_index.tolist(),
+                self.top_probability.tolist(),
+                self.is_novel.tolist(),
+                self.novelty_score.tolist(),
+                self.procedure_fields(),
+                strict=True,
+            )
+        ]
+
+
+def rows_batch(
+    scores: np.ndarray,
+    known_p: np.ndarray,
+    novel_p: np.ndarray | None,
+    top_k: int,
+    threshold: float,
+    known_names: Sequence[str],
+    novel_names: Sequence[str],
+) -> RecognitionBatch:
+    """The answers of any number of rows: a row whose novelty score is above ``threshold``
+    is answered from ``novel_p`` (where there are novel classes), the others from
+    ``known_p``; each ranks its top ``top_k`` (at least 1). ``one_row_batch`` must match it
+    bit for bit."""
+    novel = scores > threshold
+    n, k, n_known = len(scores), max(1, top_k), len(known_names)
+    # Route, then rank top-k for each classifier's rows at once.
+    # Without novel classes a novel sample can only be answered from the known ones.
+    use_novel = novel & (novel_p is not None)
+    n_novel = int(np.count_nonzero(use_novel))
+    if n_novel in (0, n):
+        # one classifier answers every row (always so for one sample): no masked copies
+        probs, offset = (known_p, 0) if n_novel == 0 else (novel_p, n_known)
+        top_index, top_p = top_k_ranks(probs, k, offset)
+    else:
+        top_index = np.full((n, k), -1, np.int64)
+        top_p = np.full((n, k), np.nan)
+        for probs, offset, rows in ((known_p, 0, ~use_novel), (novel_p, n_known, use_novel)):
+            top_index[rows], top_p[rows] = top_k_ranks(probs[rows], k, offset)
+    return RecognitionBatch(
+        tuple([*known_names, *novel_names]),
+        n_known,
+        top_index,
+        top_p,
+        novel,
+        scores.astype(np.float64),
+    )
+
+
+def one_row_batch(
+    scores: np.ndarray,
+    known_p: np.ndarray,
+    novel_p: np.ndarray | None,
+    top_k: int,
+    threshold: float,
+    known_names: Sequence[str],
+    novel_names: Sequence[str],
+) -> RecognitionBatch:
+    """``rows_batch`` for a batch of one row, bit for bit: the same comparison routes it and
+    the same ``ranked`` orders its row, without the machinery for many rows (about half the
+    cost for one sample)."""
+    novel = scores > threshold
+    k = top_k if top_k > 1 else 1
+    if novel_p is not None and novel[0]:
+        row, offset = novel_p[0], len(known_names)
+    else:
+        row, offset = known_p[0], 0
+    order = ranked(row[None], k)[0]
+    value = row[order]
+    if offset:
+        order = order + offset
+    missing = k - len(order)
+    if missing > 0:
+        order = np.concatenate([order, np.full(missing, -1, np.int64)])
+        value = np.concatenate([value, np.full(missing, np.nan)])
+    batch = object.__new__(RecognitionBatch)
+    # the frozen dataclass's fields, set without its __init__'s object.__setattr__ calls
+    batch.__dict__.update(
+        class_names=(*known_names, *novel_names),
+        n_known=len(known_names),
+        top_index=order[None],
+        top_probability=value[None],
+        is_novel=novel,
+        novelty_score=scores.astype(np.float64),
+        procedures=(),
+        procedures_used=None,
+        next_procedure=None,
+    )
+    return batch
+
+
+def ranked(p: np.ndarray, k: int) -> np.ndarray:
+    """(N, min(k, K)) column indices of each row's k largest values, largest first and, among
+    equal values, the lower index first (the order of a stable sort).
+
+    A row of many classes (30,000 known objects) is not sorted: for a few places (k <= 8)
+    the largest is taken k times (``argmax`` gives the first of equal values), each a pass
+    over the row, O(k K); for more, a partition finds the k-th largest value and only the
+    values at least as large are sorted."""
+    n, width = p.shape
+    k = min(k, width)
+    if width <= 8 * k + 64:
+        return np.argsort(-p, axis=1, kind="stable")[:, :k]
+    out = np.empty((n, k), np.int64)
+    if k <= 8:
+        rows, left = np.arange(n), np.array(p, np.float64)  # a copy: the places taken go
+        for j in range(k):
+            out[:, j] = left.argmax(axis=1)
+            left[rows, out[:, j]] = -np.inf
+        return out
+    kth = np.partition(p, width - k, axis=1)[:, width - k]
+    for i in range(n):
+        candidates = np.flatnonzero(p[i] >= kth[i])
+        out[i] = candidates[np.argsort(-p[i, candidates], kind="stable")[:k]]
+    return out
+
+
+def top_k_ranks(p: np.ndarray, k: int, offset: int) -> tuple[np.ndarray, np.ndarray]:
+    """Class index (plus ``offset``) and probability of each row's k largest, best first
+    (``ranked``); a row of fewer than k classes is padded with index -1 and probability
+    NaN."""
+    order = ranked(p, k)
+    index, value = order + offset, p[np.arange(len(p))[:, None], order]
+    missing = k - order.shape[1]
+    if missing > 0:
+        index = np.concatenate([index, np.full((len(p), missing), -1, np.int64)], axis=1)
+        value = np.concatenate([value, np.full((len(p), missing), np.nan)], axis=1)
+    return index, value

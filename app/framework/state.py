@@ -1,0 +1,72 @@
+"""The state every recognizer carries besides its method's own parts: its classes
+(``ClassRegistry``) and how its novelty threshold was chosen (``NoveltyTuning``). A model
+bundle stores both."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from app.framework.errors import UnknownClassError
+
+
+@dataclass
+class NoveltyTuning:
+    """How the novelty threshold was chosen (Sect. VI-B, Fig. 7)."""
+
+    thresholds: np.ndarray
+    known_kept: np.ndarray  # accuracy of calling held-out known samples known, per threshold
+    val_novel: np.ndarray  # accuracy of calling validation-novel samples novel, per threshold
+    threshold: float
+    known_kept_at_threshold: float
+    val_novel_at_threshold: float
+    auroc: float = float("nan")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "thresholds": self.thresholds.tolist(),
+            "known_kept": self.known_kept.tolist(),
+            "val_novel": self.val_novel.tolist(),
+            "threshold": self.threshold,
+            "known_kept_at_threshold": self.known_kept_at_threshold,
+            "val_novel_at_threshold": self.val_novel_at_threshold,
+            "auroc": self.auroc,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> NoveltyTuning:
+        return cls(
+            thresholds=np.asarray(d["thresholds"], dtype=np.float64),
+            known_kept=np.asarray(d["known_kept"], dtype=np.float64),
+            val_novel=np.asarray(d["val_novel"], dtype=np.float64),
+            threshold=float(d["threshold"]),
+            known_kept_at_threshold=float(d["known_kept_at_threshold"]),
+            val_novel_at_threshold=float(d["val_novel_at_threshold"]),
+            auroc=float(d.get("auroc", float("nan"))),
+        )
+
+
+@dataclass
+class ClassRegistry:
+    """Known and novel classes with their attribute vectors, and novel classes' real samples."""
+
+    attribute_names: tuple[str, ...] = ()
+    known_names: list[str] = field(default_factory=list)
+    known_attributes: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.float32))
+    novel_names: list[str] = field(default_factory=list)
+    novel_attributes: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.float32))
+    # real samples that arrived for novel classes (one-shot learning), by class name
+    novel_samples: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def all_names(self) -> list[str]:
+        return self.known_names + self.novel_names
+
+    def kind_of(self, name: str) -> str:
+        if name in self.known_names:
+            return "known"
+        if name in self.novel_names:
+            return "novel"
+        raise UnknownClassError(f"unknown class '{name}'")
