@@ -8,7 +8,7 @@ hold and squeeze; 32 for PHAC-2's four procedures) and ``n_steps`` columns, rows
 order and, within a phase, in the order pdc, pac, tac, tdc, e0 … e3 (as the simulator's).
 
 - Phases: the trial's own ``[start, end)`` frame ranges when it has them, else found in
-  each finger's pdc by a ``PhaseRule`` (app/data/biotac.py).
+  each finger's pdc by a ``PhaseRule`` (app/data/biotac_phases.py).
 - Resampling: a phase of frames ``[s, e)`` spans the time ``[s - 0.5, e - 0.5)`` (frame k
   at time k, owning the unit interval around it); it is cut into ``n_steps`` bins of width
   ``w = (e - s) / n_steps`` and each sample is the mean of the signal, linearly
