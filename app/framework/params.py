@@ -124,7 +124,17 @@ def positive_values() -> Constraint:
 class Hyperparameters:
     """``get_params``, ``set_params`` and ``_validate_params`` of a class whose constructor
     takes every hyper-parameter as a named argument and only stores it under the same name
-    (scikit-learn's convention)."""
+    (scikit-learn's convention).
+
+    Not scikit-learn's ``BaseEstimator``, whose versions of these differ (checked with
+    scikit-learn 1.9): its ``_get_param_names`` sorts the names (``get_params`` keeps the
+    signature's order, which model bundles store and ``tests/framework/test_params.py``
+    pins) and skips ``**kwargs`` silently (refused here); its ``set_params`` raises a plain
+    ``ValueError`` worded otherwise (here ``FrameworkError``, the framework's error, naming
+    the valid parameters); and it adds a ``repr`` of the parameters and metadata-routing methods
+    (``set_fit_request``, as ``fit`` takes a ``dataset``). Keeping the behaviour would
+    override all but ``get_params``, whose ``deep`` would then differ only for a parameter
+    holding an estimator, which no method has."""
 
     #: parameter name -> what its value must satisfy; checked by ``fit``. A subclass
     #: extends its parent's: ``{**Parent._parameter_constraints, ...}``.
