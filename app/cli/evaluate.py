@@ -219,7 +219,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="also the figures against the exploratory procedures used: every subset of the "
         "dataset's procedures (each fixed order is a sequence of them), and the adaptive rule "
         "(first_procedure, then each answer's next_procedure) at several target confidences, "
-        "with the share of robot time it used (app/evaluation/procedures.py)",
+        "with the share of robot time it used (app/evaluation/procedures.py); for raw BioTac "
+        "trials, their phases on the trial splits, known objects only",
     )
     p.add_argument(
         "--durations",
@@ -227,7 +228,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default={},
         metavar="NAME=SECONDS,...",
         help="seconds of robot time of procedures, for --procedures (defaults: "
-        "app.evaluation.procedures.DURATIONS, whose sources docs/RESULTS.md gives)",
+        "app.data.procedures.SECONDS, whose comment gives their sources)",
     )
     p.add_argument(
         "--no-progress",
@@ -270,10 +271,10 @@ def run(args: argparse.Namespace) -> int:
     params = method_params(args.param, methods)
     dataset = open_dataset(args.dataset, seed=args.data_seed)
     if isinstance(dataset, BioTacDataset):
-        if args.ceilings or args.touches or args.rerun_splits or args.procedures:
+        if args.ceilings or args.touches or args.rerun_splits:
             raise ValueError(
-                "--ceilings, --touches, --rerun-splits and --procedures apply to known/novel "
-                "splits, not to raw BioTac trials"
+                "--ceilings, --touches and --rerun-splits apply to known/novel splits, not to "
+                "raw BioTac trials"
             )
         results = evaluate_raw(
             dataset,
@@ -286,6 +287,8 @@ def run(args: argparse.Namespace) -> int:
             dataset_label=args.dataset,
             held_out_pressure=not args.no_pressure,
             validation=args.validation,
+            procedures_measured=args.procedures,
+            durations=args.durations,
         )
     else:
         results = evaluate(

@@ -19,7 +19,10 @@ import numpy as np
 #: 10 s, slides 5 cm in 5 s (SLIDE_5CM) and 5 cm in 2 s (MOVE_DOWN_5CM); its squeeze runs
 #: until a set pressure, with no fixed time: 4.2 s is the median squeeze contact of the
 #: BioTac pilot's 74 trials, recorded by the same controller. The simulator's four take
-#: PHAC-2's times.
+#: PHAC-2's times. Raw BioTac trials' phases: tap 0.23 s, squeeze 4.2 s, the pilot's
+#: median contacts (``python -m bench.phase_seconds``); their hold shares the simulator's
+#: name and 10 s, where the pilot's hold lasts 16.93 s (give ``--durations hold=16.93`` to
+#: measure the pilot's robot time).
 SECONDS: dict[str, float] = {
     "SQUEEZE_SET_PRESSURE_SLOW": 4.2,
     "HOLD_FOR_10_SECONDS": 10.0,
@@ -29,6 +32,7 @@ SECONDS: dict[str, float] = {
     "hold": 10.0,
     "slide": 5.0,
     "move_down": 2.0,
+    "tap": 0.23,
 }
 
 

@@ -125,20 +125,86 @@ def measure(
     return out
 
 
-def explore(model: TactileRecognizer, x: np.ndarray, target: float) -> np.ndarray:
+def explore(
+    model: TactileRecognizer, x: np.ndarray, target: float, groups: np.ndarray | None = None
+) -> np.ndarray:
     """(N, P) bool: the procedures the adaptive rule uses on each complete sample of ``x``:
-    the model's first procedure, then each answer's next one until there is none."""
+    the model's first procedure, then each answer's next one until there is none. With
+    ``groups`` ((N,) 0 … G-1: the fingers of one trial), (G, P): one answer per group, from
+    its samples fused, as ``recognize_batch`` answers groups."""
     names = model.procedures
-    used = np.zeros((len(x), len(names)), bool)
+    g = np.arange(len(x)) if groups is None else np.asarray(groups, np.int64)
+    used = np.zeros((int(g.max()) + 1, len(names)), bool)
     used[:, names.index(model.first_procedure)] = True
-    active = np.arange(len(x))
+    active = np.arange(len(used))
     while len(active):
-        partial = _masked(x[active], used[active])
-        nxt = model.recognize_batch(partial, top_k=1, target_confidence=target).next_procedure
+        rows = np.flatnonzero(np.isin(g, active))
+        local = np.searchsorted(active, g[rows])  # active stays sorted
+        partial = _masked(x[rows], used[active][local])
+        nxt = model.recognize_batch(
+            partial,
+            top_k=1,
+            groups=None if groups is None else local,
+            target_confidence=target,
+        ).next_procedure
         go = nxt >= 0
         used[active[go], nxt[go]] = True
         active = active[go]
     return used
+
+
+#: the figures ``measure_known`` gives for every subset and target
+PER_SUBSET_KNOWN: tuple[str, ...] = ("known_acc", "nd_known_kept")
+
+
+def procedure_figures_known(
+    n_procedures: int, targets: Sequence[float] = TARGETS
+) -> tuple[str, ...]:
+    """The names of ``measure_known``'s figures."""
+    out = [
+        f"procs{bits(s, n_procedures)}_{f}" for s in subsets(n_procedures) for f in PER_SUBSET_KNOWN
+    ]
+    for t in targets:
+        out += [f"{target_key(t)}_{f}" for f in (*PER_SUBSET_KNOWN, "time", "procedures")]
+    return tuple(out)
+
+
+def measure_known(
+    model: TactileRecognizer,
+    x: np.ndarray,
+    y: np.ndarray,
+    groups: np.ndarray,
+    durations: np.ndarray,
+    targets: Sequence[float] = TARGETS,
+) -> dict[str, float]:
+    """``measure`` for known objects only (raw trials: no attributes, no novel objects):
+    ``x`` the test samples, ``groups`` the trial of each ((N,) 0 … G-1), ``y`` (G,) each
+    trial's class. Per subset and target: ``known_acc`` (trials named right, their samples
+    fused) and ``nd_known_kept`` (trials the model calls known); per target also ``time``
+    and ``procedures``."""
+    n = len(model.procedures)
+    y = np.asarray(y)
+    g = np.asarray(groups, np.int64)
+
+    def figures(used: np.ndarray, prefix: str) -> dict[str, float]:
+        answers = model.recognize_batch(_masked(x, used[g]), top_k=1, groups=g)
+        return {
+            prefix + "known_acc": float(np.mean(answers.top_index[:, 0] == y)),
+            prefix + "nd_known_kept": float(np.mean(~answers.is_novel)),
+        }
+
+    out: dict[str, float] = {}
+    for subset in subsets(n):
+        used = np.zeros((len(y), n), bool)
+        used[:, list(subset)] = True
+        out.update(figures(used, f"procs{bits(subset, n)}_"))
+    for t in targets:
+        used = explore(model, x, t, g)
+        prefix = f"{target_key(t)}_"
+        out.update(figures(used, prefix))
+        out[prefix + "time"] = float((used @ durations / durations.sum()).mean())
+        out[prefix + "procedures"] = float(used.sum(axis=1).mean())
+    return out
 
 
 def _masked(x: np.ndarray, used: np.ndarray) -> np.ndarray:
@@ -190,6 +256,9 @@ def procedure_markdown(results: dict[str, Any]) -> list[str]:
         splits = entry["splits"]
         if not all(f"procs{everything}_known_acc" in s for s in splits):
             continue
+        shown = [f for f in SHOWN if f"procs{everything}_{f}" in splits[0]]
+        paired = [f for f in ("known_acc", "gzsl_h") if f in shown]
+        novel = f"{target_key(results['procedure_targets'][0])}_time_novel" in splits[0]
         lines += [
             f"`{m}`, mean [95 % interval] over {len(splits)} splits. Procedures: "
             + ", ".join(
@@ -198,39 +267,39 @@ def procedure_markdown(results: dict[str, Any]) -> list[str]:
             )
             + ".",
             "",
-            "| procedures | robot time | " + " | ".join(f"`{f}`" for f in SHOWN) + " |",
-            "| --- | --- | " + " | ".join("---" for _ in SHOWN) + " |",
+            "| procedures | robot time | " + " | ".join(f"`{f}`" for f in shown) + " |",
+            "| --- | --- | " + " | ".join("---" for _ in shown) + " |",
         ]
         for subset in subsets(n):
             key = bits(subset, n)
             share = durations[list(subset)].sum() / durations.sum()
             label = " + ".join(str(j + 1) for j in subset)
-            cells = [cell([s[f"procs{key}_{f}"] for s in splits]) for f in SHOWN]
+            cells = [cell([s[f"procs{key}_{f}"] for s in splits]) for f in shown]
             lines.append(f"| {label} | {share:.2f} | " + " | ".join(cells) + " |")
+        time_head = "robot time (known / novel)" if novel else "robot time"
         lines += [
             "",
             "Adaptive rule at each target confidence; the differences from all procedures "
             "are paired on the same splits.",
             "",
-            "| target | robot time (known / novel) | procedures | `known_acc` | − all | "
-            "`gzsl_h` | − all |",
-            "| --- | --- | --- | --- | --- | --- | --- |",
+            f"| target | {time_head} | procedures | "
+            + " | ".join(f"`{f}` | − all" for f in paired)
+            + " |",
+            "| --- | --- | --- | " + " | ".join("--- | ---" for _ in paired) + " |",
         ]
         for t in results["procedure_targets"]:
             p = target_key(t) + "_"
-            diff = {
-                f: [s[p + f] - s[f"procs{everything}_{f}"] for s in splits]
-                for f in ("known_acc", "gzsl_h")
-            }
-            time = np.mean([s[p + "time"] for s in splits])
-            tk = np.mean([s[p + "time_known"] for s in splits])
-            tn = np.mean([s[p + "time_novel"] for s in splits])
+            time = f"{np.mean([s[p + 'time'] for s in splits]):.2f}"
+            if novel:
+                tk = np.mean([s[p + "time_known"] for s in splits])
+                tn = np.mean([s[p + "time_novel"] for s in splits])
+                time += f" ({tk:.2f} / {tn:.2f})"
             procs = np.mean([s[p + "procedures"] for s in splits])
-            lines.append(
-                f"| {t:g} | {time:.2f} ({tk:.2f} / {tn:.2f}) | {procs:.2f} | "
-                f"{cell([s[p + 'known_acc'] for s in splits])} | {cell(diff['known_acc'], True)} | "
-                f"{cell([s[p + 'gzsl_h'] for s in splits])} | {cell(diff['gzsl_h'], True)} |"
-            )
+            cells = []
+            for f in paired:
+                diff = [s[p + f] - s[f"procs{everything}_{f}"] for s in splits]
+                cells += [cell([s[p + f] for s in splits]), cell(diff, True)]
+            lines.append(f"| {t:g} | {time} | {procs:.2f} | " + " | ".join(cells) + " |")
         lines.append("")
     return lines
 
@@ -246,8 +315,10 @@ def plot_procedures(results: dict[str, Any], path: Path, title: str) -> None:
     durations = np.array(results["durations"], float)
     m = next(iter(results["methods"]))
     mean = results["methods"][m]["mean"]
-    fig, axes = plt.subplots(1, 2, figsize=(10.5, 4.2))
-    for ax, figure in zip(axes, ("known_acc", "gzsl_h"), strict=True):
+    drawn = [f for f in ("known_acc", "gzsl_h") if f"procs{bits(range(n), n)}_{f}" in mean]
+    fig, axes = plt.subplots(1, len(drawn), figsize=(5.25 * len(drawn), 4.2), squeeze=False)
+    axes = axes[0]
+    for ax, figure in zip(axes, drawn, strict=True):
         for order in itertools.permutations(range(n)):
             xs, ys = [0.0], [np.nan]
             for k in range(1, n + 1):

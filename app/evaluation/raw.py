@@ -45,14 +45,14 @@ from __future__ import annotations
 
 import platform
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 from tqdm.auto import tqdm
 
 from app.data.biotac import BioTacDataset
-from app.evaluation import metrics
+from app.evaluation import metrics, procedures
 from app.evaluation.protocol import make_recognizer, paired_summary
 from app.evaluation.splits import SplitError
 from app.framework.jsonable import jsonable
@@ -180,8 +180,11 @@ def evaluate_trial_split(
     method: str,
     params: dict[str, Any] | None,
     seed: int,
+    durations: Mapping[str, float] | None = None,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(figures, details) of one method on one trial-disjoint split."""
+    """(figures, details) of one method on one trial-disjoint split; with ``durations``
+    (seconds by procedure name, ``procedures.check_durations``), also the figures against
+    the phases used (``procedures.measure_known``) where the model answers from some."""
     t0 = time.perf_counter()
     model = _fit(raw, train, method, params, seed)
     fit_s = time.perf_counter() - t0
@@ -196,12 +199,16 @@ def evaluate_trial_split(
         "known_acc_finger": metrics.accuracy(truth[index], finger_pred),
         "nd_known_kept": float(np.mean(~answers.is_novel)),
     }
+    if durations is not None and model.answers_from_some_procedures:
+        seconds = procedures.check_durations(model.procedures, durations)
+        figures.update(procedures.measure_known(model, images, truth, index, seconds))
     details = {
         "test_trials": [raw.groups[i] for i in test],
         "confusion": metrics.confusion_matrix(truth, pred, raw.n_classes).tolist(),
         "novelty_threshold": float(model.novelty_threshold),
         "timings": {"fit_s": fit_s, "total_s": time.perf_counter() - t0},
         "model_metrics": jsonable(getattr(model, "metrics", {}) or {}),
+        "procedures": list(model.procedures),
     }
     return figures, details
 
@@ -224,13 +231,15 @@ def evaluate_pressure(
     return metrics.accuracy(truth, pred), cm, fit_s
 
 
-def _summary(values: Sequence[float]) -> tuple[float, float, list[float]]:
+def _summary(
+    values: Sequence[float], bounds: tuple[float, float] | None = (0.0, 1.0)
+) -> tuple[float, float, list[float]]:
     v = np.asarray(values, np.float64)
     v = v[np.isfinite(v)]
     if v.size == 0:
         return float("nan"), float("nan"), [float("nan"), float("nan")]
     std = float(v.std(ddof=1)) if v.size > 1 else float("nan")
-    return float(v.mean()), std, list(metrics.mean_interval(v, bounds=(0.0, 1.0)))
+    return float(v.mean()), std, list(metrics.mean_interval(v, bounds=bounds))
 
 
 def evaluate_raw(
@@ -244,9 +253,15 @@ def evaluate_raw(
     dataset_label: str | None = None,
     held_out_pressure: bool = True,
     validation: bool = False,
+    procedures_measured: bool = False,
+    durations: Mapping[str, float] | None = None,
 ) -> dict[str, Any]:
     """Both protocols (see the module docstring) for every method; a JSON-ready dict.
     ``validation``: measure on validation trials carved from the training trials only.
+    ``procedures_measured``: on the trial splits, also the figures against the phases used
+    (``procedures.measure_known``; each phase's seconds from ``durations``, else
+    ``procedures.DURATIONS``), with ``procedures``, ``durations`` and
+    ``procedure_targets`` in the results.
 
     Layout: {"dataset", "protocol": "raw-trials", "seed", "splits", "test_trials",
     "pressures", "config", "split_definitions", "methods": {name: {"splits": [per-split
@@ -297,6 +312,11 @@ def evaluate_raw(
         ],
         "methods": {},
     }
+    seconds = None
+    if procedures_measured:
+        seconds = {**procedures.DURATIONS, **(durations or {})}
+        results["procedures_measured"] = True
+        results["procedure_targets"] = list(procedures.TARGETS)
     k = raw.n_classes
     total = len(methods) * (len(splits) + n_splits * sum(map(len, by_pressure.values())))
     bar = tqdm(total=total, desc="evaluate", unit="fit", disable=not progress)
@@ -309,7 +329,13 @@ def evaluate_raw(
             confusion = np.zeros((k, k), np.int64)
             for i, (train, test) in enumerate(splits):
                 bar.set_postfix_str(f"{m} split {i + 1}/{len(splits)}")
-                figures, details = evaluate_trial_split(raw, train, test, m, params, seed + i)
+                figures, details = evaluate_trial_split(
+                    raw, train, test, m, params, seed + i, seconds
+                )
+                if seconds is not None and details["procedures"] and "procedures" not in results:
+                    names = details["procedures"]
+                    results["procedures"] = names
+                    results["durations"] = procedures.check_durations(names, seconds).tolist()
                 entry["splits"].append({"split": i + 1, **figures})
                 entry["details"].append({"split": i + 1, **details})
                 confusion += np.asarray(details["confusion"])
@@ -351,7 +377,8 @@ def evaluate_raw(
 
 def _series(entry: dict[str, Any], pressures: list[float], n_repeats: int) -> dict[str, list]:
     """Every figure's values in split (repeat) order: split i and repeat i share seed + i."""
-    series: dict[str, list[float]] = {f: [s[f] for s in entry["splits"]] for f in TRIAL_FIGURES}
+    present = [f for f in entry["splits"][0] if f != "split"] if entry["splits"] else []
+    series: dict[str, list[float]] = {f: [s[f] for s in entry["splits"]] for f in present}
     for level in pressures:
         series[pressure_figure(level)] = [
             p["accuracy"] for p in entry["pressure"] if p["pressure"] == level
@@ -385,7 +412,10 @@ def _summarise(entry: dict[str, Any], pressures: list[float], n_repeats: int) ->
     series = _series(entry, pressures, n_repeats)
     entry["mean"], entry["std"], entry["ci95"] = {}, {}, {}
     for figure, values in series.items():
-        entry["mean"][figure], entry["std"][figure], entry["ci95"][figure] = _summary(values)
+        # shares in [0, 1], but the adaptive rule's count of procedures
+        bounds = None if figure.endswith("_procedures") else (0.0, 1.0)
+        summary = _summary(values, bounds)
+        entry["mean"][figure], entry["std"][figure], entry["ci95"][figure] = summary
     entry["binomial95"] = {}
     for level in pressures:
         figure = pressure_figure(level)
@@ -394,10 +424,15 @@ def _summarise(entry: dict[str, Any], pressures: list[float], n_repeats: int) ->
 
 
 def raw_figures(results: dict[str, Any]) -> list[str]:
-    """The figures of raw-trial results, in report order."""
+    """The figures of raw-trial results, in report order; those against the phases used
+    (``procs…``, ``adaptive…``) have a section of their own."""
     present: list[str] = []
     for entry in results["methods"].values():
-        present += [f for f in entry.get("mean", {}) if f not in present]
+        present += [
+            f
+            for f in entry.get("mean", {})
+            if f not in present and not f.startswith(("procs", "adaptive"))
+        ]
     order = [*TRIAL_FIGURES, *(pressure_figure(p) for p in results.get("pressures", []))]
     order.append("pressure_mean")
     return [f for f in order if f in present] + [f for f in present if f not in order]

@@ -614,6 +614,7 @@ def raw_markdown(results: dict[str, Any], images: dict[str, list[str]] | None = 
                 _fmt_interval(results["methods"][m].get("binomial95", {}).get(f)) for m in methods
             ]
             lines.append(f"| `{f}` | {n} | " + " | ".join(cells) + " |")
+    lines += procedure_markdown(results)
     lines += ["", "## What each figure is", ""]
     lines += [f"- `{f}`: {_raw_description(f)}" for f in figures]
     lines += [
@@ -754,6 +755,13 @@ def write_raw_report(results: dict[str, Any], out_dir: str | Path) -> list[Path]
             f"Trial confusion matrices of {m}, summed over splits (rows: true object)",
         )
         images.setdefault("Trial confusion matrices", []).append(path.name)
+        written.append(path)
+    if results.get("procedures_measured") and results.get("procedures"):
+        from app.evaluation.procedures import plot_procedures
+
+        path = out / "procedures.png"
+        plot_procedures(results, path, "Trial accuracy against robot time, raw BioTac trials")
+        images["Figures against the phases used"] = [path.name]
         written.append(path)
     md = out / "report.md"
     md.write_text(raw_markdown(results, images))

@@ -29,7 +29,8 @@ classes have no training samples and are not candidates, so for a sample routed 
 the procedures are chosen by what tells its nearest known classes apart.
 
 **First procedure.** Before any touch, the procedure whose model answers the typical
-touch of each known class (its mean) with the most probability on that class.
+touch of each known class (its mean) with the most probability on that class above
+chance, per second of robot time.
 """
 
 from __future__ import annotations
@@ -147,14 +148,17 @@ class ProcedureModels:
         return out
 
     def _first_procedure(self) -> int:
-        """The procedure whose model puts most probability on each class's typical touch."""
+        """The procedure with the largest expected gain per second before any touch: the
+        probability its model puts on each class's typical touch, above chance (1 / K),
+        per second of robot time (``seconds_of``)."""
         k = len(self.class_means)
         score = np.zeros(len(self.procedures))
         for j, model in enumerate(self.models):
             for a in range(0, k, _ROWS):
                 q = model._known_proba(self.class_means[a : a + _ROWS][:, self._block(j)])
                 score[j] += q[np.arange(len(q)), np.arange(a, a + len(q))].sum()
-        return int(score.argmax())
+        gain = score / k - 1.0 / k
+        return int((gain / seconds_of(self.procedures)).argmax())
 
     # ---------------------------------------------------------------- lifecycle
     def synced(

@@ -208,10 +208,7 @@ def test_ceilings_on_raw_trials_exit_2_with_a_message(tmp_path, capsys):
         )
         assert code == 2
         err = capsys.readouterr().err
-        assert (
-            "--ceilings, --touches, --rerun-splits and --procedures apply to known/novel splits"
-            in err
-        )
+        assert "--ceilings, --touches and --rerun-splits apply to known/novel splits" in err
         assert not (tmp_path / "r.json").exists()
 
 

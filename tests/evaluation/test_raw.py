@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from app.cli import main
-from app.evaluation import metrics, raw
+from app.evaluation import metrics, procedures, raw
 from app.evaluation.report import write_report
 from app.evaluation.splits import SplitError
 from app.framework import registry
@@ -241,3 +241,51 @@ def test_the_evaluate_command_on_the_pilot_at_tiny_size(tmp_path, capsys):
     assert "known_acc" in printed and "pressure_200" in printed
     assert "paired difference from best" in printed and "paper - best" in printed
     assert (tmp_path / "report" / "accuracy.png").is_file()
+
+
+def test_procedures_on_raw_trials_give_figures_against_the_phases_used(data, tmp_path):
+    results = raw.evaluate_raw(
+        data,
+        ["best"],
+        n_splits=2,
+        seed=1,
+        test_trials=2,
+        method_params={"best": FAST},
+        progress=False,
+        held_out_pressure=False,
+        procedures_measured=True,
+        durations={"hold": 16.93},
+    )
+    assert results["procedures"] == ["tap", "hold", "squeeze"]  # the featurizer's phases
+    assert results["durations"] == [0.23, 16.93, 4.2]
+    entry = results["methods"]["best"]
+    for split in entry["splits"]:
+        # every phase: the protocol's own figures, one answer per trial from both fingers
+        assert split["procs111_known_acc"] == split["known_acc"]
+        assert split["procs111_nd_known_kept"] == split["nd_known_kept"]
+        for t in results["procedure_targets"]:
+            key = procedures.target_key(t)
+            assert 2 <= split[f"{key}_procedures"] <= 3  # two phases at least
+            assert 0 < split[f"{key}_time"] <= 1 and 0 <= split[f"{key}_known_acc"] <= 1
+    assert set(procedures.procedure_figures_known(3)) <= set(entry["ci95"])
+    # the main table leaves them to a section of their own
+    assert not any(f.startswith(("procs", "adaptive")) for f in raw.raw_figures(results))
+    files = write_report(results, tmp_path)
+    text = files[0].read_text()
+    assert "## Figures against the procedures used" in text and "| 1 + 3 |" in text
+    assert (tmp_path / "procedures.png").stat().st_size > 0
+
+
+def test_explore_answers_a_trial_from_its_fingers_together(data):
+    model = registry.make_method("best", **FAST).fit(data.subset(np.arange(len(data)) % 6 != 0))
+    trials = list(data.subset(np.arange(len(data)) % 6 == 0).trials)
+    images, index = model.trial_samples(trials)
+    used = procedures.explore(model, images, 1.0, index)  # sure only at probability 1
+    assert used.shape == (len(trials), 3) and (used.sum(axis=1) >= 2).all()
+    answers = model.recognize_batch(
+        procedures._masked(images, used[index]), top_k=1, groups=index, target_confidence=1.0
+    )
+    assert ((answers.top_probability[:, 0] == 1.0) | used.all(axis=1)).all()
+    used = procedures.explore(model, images, 1e-9, index)  # sure at once: two phases
+    first = model.procedures.index(model.first_procedure)
+    assert (used.sum(axis=1) == 2).all() and used[:, first].all()
