@@ -3,10 +3,8 @@ times ``app.data.procedures.SECONDS`` gives the phases tap, hold and squeeze.
 
 For every trial and finger, the phases ``PhaseRule`` finds in its pdc (``RawTrial.
 phase_bounds``), in frames, turned into seconds by the trial's own frame rate: its frames
-over the span of its whole-second ``timestamps``, read from the HDF5 file as the integers
-they are (``RawTrial.timestamps`` holds them as float32 today, which at 1.3e9 s keeps
-steps of 128 s). Prints each phase's median and quartiles over the trials' fingers, and
-the frame rates seen.
+over the span of its whole-second ``timestamps``. Prints each phase's median and quartiles
+over the trials' fingers, and the frame rates seen.
 
     .venv/bin/python -m bench.phase_seconds [--data ../shared/data/biotac_pilot]
 """
@@ -17,7 +15,6 @@ import argparse
 import json
 from pathlib import Path
 
-import h5py
 import numpy as np
 
 from app.data.biotac import load_biotac
@@ -31,10 +28,8 @@ def phase_seconds(path: Path) -> dict:
     seconds: list[list[float]] = [[] for _ in PHASES]
     rates = []
     for group, trial in zip(data.groups, data.trials, strict=True):
-        file, name = group.split("/", 1)
-        with h5py.File(path / file, "r") as h5:
-            ts = np.asarray(h5[name]["timestamps"][()], np.int64)
-        if ts[-1] <= ts[0]:
+        ts = trial.timestamps
+        if ts is None or ts[-1] <= ts[0]:
             raise SystemExit(f"{group}: its timestamps span no time; its frame rate is unknown")
         rate = (trial.n_frames - 1) / float(ts[-1] - ts[0])
         rates.append(rate)

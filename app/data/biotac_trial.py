@@ -29,8 +29,8 @@ MIN_FRAMES = 2
 _TRIAL_FIELDS = ("fingers", "phases", "timestamps")
 
 
-def _numbers(value: Any, channel: str) -> np.ndarray:
-    """``value`` as a float32 array; RawTrialError unless it is numeric and rectangular."""
+def _numbers(value: Any, channel: str, dtype: type = np.float32) -> np.ndarray:
+    """``value`` as a ``dtype`` array; RawTrialError unless it is numeric and rectangular."""
     try:
         raw = np.asarray(value)
     except ValueError:  # ragged nested lists
@@ -40,7 +40,7 @@ def _numbers(value: Any, channel: str) -> np.ndarray:
     if raw.dtype.kind not in "iuf":
         raise RawTrialError(f"values must be numbers, got {raw.dtype.name} values", channel=channel)
     with np.errstate(over="ignore"):
-        return np.asarray(raw, dtype=np.float32)
+        return np.asarray(raw, dtype=dtype)
 
 
 def _check_finite(x: np.ndarray, channel: str) -> None:
@@ -167,7 +167,8 @@ class RawTrial:
                 )
         object.__setattr__(self, "fingers", tuple(parsed))
         if self.timestamps is not None:
-            ts = _numbers(self.timestamps, "timestamps").astype(np.float64)
+            # float64 from the values as given: float32 keeps steps of 128 s at Unix times
+            ts = _numbers(self.timestamps, "timestamps", np.float64)
             if ts.shape != (n,):
                 raise RawTrialError(
                     f"expected shape ({n},), one time per frame, got {ts.shape}",

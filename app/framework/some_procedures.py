@@ -17,13 +17,15 @@ import numpy as np
 #: ``next_procedure`` says stop (None) once the answer's probability reaches the target
 #: confidence, this by default, and at least ``MIN_PROCEDURES`` procedures were done.
 #: Chosen on PHAC-2's development splits (seeds 1-2, 10 splits,
-#: ``bench/research/explore_stopping.py``): at 0.4 the rule used 0.42 of the robot time,
-#: known-object accuracy -0.005 and ``gzsl_h`` +0.008 from all procedures; at 0.3, 0.36 of
-#: the time with the same accuracy; at 0.5, 0.54.
+#: ``bench/research/explore_stopping.py``, each procedure chosen by gain per second): at
+#: 0.4 the rule used 0.39 of the robot time, known-object accuracy -0.009 and ``gzsl_h``
+#: +0.001 from all procedures; at 0.3, 0.33 of the time and ``gzsl_h`` +0.008; at 0.5,
+#: 0.51 of the time, known-object accuracy -0.007.
 TARGET_CONFIDENCE = 0.4
 #: One procedure alone answers confidently and wrongly too often: on the same splits,
-#: stopping at the first confident answer lost 0.017-0.023 of known-object accuracy at any
-#: target from 0.3 to 0.5; a second procedure before stopping lost 0.003-0.005.
+#: stopping at the first confident answer lost 0.059-0.067 of known-object accuracy at
+#: targets 0.3 to 0.5 (move down first) and 0.017-0.023 with squeeze first; a second
+#: procedure before stopping lost 0.003-0.009.
 MIN_PROCEDURES = 2
 
 

@@ -47,6 +47,15 @@ def test_one_finger_and_given_phases_and_timestamps():
     np.testing.assert_array_equal(trial.timestamps, np.arange(800))
 
 
+def test_unix_timestamps_are_kept_to_the_second():
+    # the pilot's frames carry whole Unix seconds near 1.34e9, where float32 steps by 128
+    data = trial_data(n_fingers=1)
+    data["timestamps"] = [1_342_570_368 + i // 100 for i in range(800)]
+    trial = parse_trial(data)
+    assert trial.timestamps.dtype == np.float64
+    assert trial.timestamps[-1] - trial.timestamps[0] == 7
+
+
 def _bad(mutate, trial=None, **kwargs):
     data = trial_data(**kwargs)
     mutate(data)
