@@ -342,10 +342,12 @@ class TrialIn(Strict):
     """One raw exploration (a trial): each finger's channels, of any length T."""
 
     fingers: list[FingerIn] = Field(min_length=1, description="One or more fingers.")
-    phases: list[tuple[int, int]] | None = Field(
+    phases: list[tuple[int, int] | None] | None = Field(
         None,
         description="`[start, end)` frames of each exploration phase (tap, hold, squeeze); "
-        "found from `pdc` when absent (docs/DATASETS.md).",
+        "found from `pdc` when absent (docs/DATASETS.md). A phase the robot has not done "
+        "is `null` (`[[150, 170], null, [600, 660]]`: no hold): the answer comes from the "
+        "others and names the `next_procedure`. Enrolment takes whole trials only.",
     )
     timestamps: list[float] | None = Field(None, description="Time of each frame, (T,).")
 

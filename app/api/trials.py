@@ -43,12 +43,25 @@ def parse(data: Any, batch_limit: int) -> list[RawTrial]:
     return [one(t, "trials", i) for i, t in enumerate(trials)]
 
 
-def one(data: Any, prefix: str = "trial", index: int | None = None) -> RawTrial:
-    """One trial's JSON form, validated; a 422 naming its place otherwise."""
+def one(
+    data: Any, prefix: str = "trial", index: int | None = None, whole: bool = False
+) -> RawTrial:
+    """One trial's JSON form, validated; a 422 naming its place otherwise. ``whole``: every
+    phase must be there (enrolment learns from whole trials; recognition answers from
+    the phases a trial holds)."""
     try:
-        return parse_trial(data, trial=index)
+        trial = parse_trial(data, trial=index)
     except RawTrialError as err:
         raise Problem(422, str(err), field_of(err, prefix)) from None
+    if whole and trial.phases is not None and None in trial.phases:
+        place = prefix if index is None else f"{prefix}[{index}]"
+        missing = ", ".join(str(k) for k, p in enumerate(trial.phases) if p is None)
+        raise Problem(
+            422,
+            f"phase(s) {missing} are null: a class learns from whole trials; send every phase",
+            f"{place}.phases",
+        )
+    return trial
 
 
 def from_hdf5(body: bytes, batch_limit: int) -> list[RawTrial]:

@@ -104,6 +104,10 @@ def write_biotac_h5(path: str | Path, trials: Mapping[str, RawTrial]) -> None:
                             compression_opts=4,
                         )
                 if trial.phases is not None:
+                    if any(p is None for p in trial.phases):
+                        raise ValueError(
+                            f"trial {name!r} lacks a phase; a recording keeps whole trials"
+                        )
                     group.create_dataset("phases", data=np.asarray(trial.phases, dtype=np.int64))
                 if trial.timestamps is not None:
                     group.create_dataset("timestamps", data=trial.timestamps)

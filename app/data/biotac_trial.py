@@ -134,12 +134,14 @@ class RawTrial:
     fingers: one ``FingerSignals`` per finger (or a mapping of channels each), all with
         the same number of frames T.
     phases: ``[start, end)`` frame ranges of the exploration phases, in time order, shared
-        by the fingers; None: found from each finger's pdc by a ``PhaseRule``.
+        by the fingers; None: found from each finger's pdc by a ``PhaseRule``. A phase the
+        robot did not do is None in that list (``[[10, 40], None, [60, 90]]``: no hold),
+        and a model that answers from some procedures answers from the others.
     timestamps: (T,) time of each frame, kept as given (not used by the features).
     """
 
     fingers: tuple[FingerSignals, ...]
-    phases: tuple[tuple[int, int], ...] | None = None
+    phases: tuple[tuple[int, int] | None, ...] | None = None
     timestamps: np.ndarray | None = None
 
     def __post_init__(self) -> None:
@@ -207,7 +209,7 @@ class RawTrial:
         """JSON-ready form, as ``parse_trial`` reads it."""
         out: dict[str, Any] = {"fingers": [f.to_dict() for f in self.fingers]}
         if self.phases is not None:
-            out["phases"] = [list(p) for p in self.phases]
+            out["phases"] = [None if p is None else list(p) for p in self.phases]
         if self.timestamps is not None:
             out["timestamps"] = self.timestamps.tolist()
         return out
@@ -227,29 +229,42 @@ class RawTrial:
         )
 
 
-def _phases(value: Any, n_frames: int) -> tuple[tuple[int, int], ...]:
+def _phases(value: Any, n_frames: int) -> tuple[tuple[int, int] | None, ...]:
     def bad(why: str) -> RawTrialError:
         return RawTrialError(
             f"{why}; phases are [start, end) frame pairs in time order, "
-            f"0 <= start < end <= {n_frames}",
+            f"0 <= start < end <= {n_frames}, or null for a phase not done",
             channel="phases",
         )
 
-    try:
-        arr = np.asarray(value)
-    except ValueError:
-        raise bad("not a list of pairs") from None
-    if arr.dtype.kind not in "iuf" or arr.ndim != 2 or arr.shape[1] != 2 or len(arr) == 0:
-        raise bad(f"expected a non-empty list of [start, end] pairs, got {arr.tolist()!r}"[:200])
-    if arr.dtype.kind == "f" and not (np.isfinite(arr).all() and (arr == np.round(arr)).all()):
-        raise bad("bounds must be whole frame numbers")
-    pairs = tuple((int(s), int(e)) for s, e in arr.tolist())
-    for k, (s, e) in enumerate(pairs):
+    if isinstance(value, str | bytes) or not isinstance(value, Sequence | np.ndarray):
+        raise bad(f"expected a list of [start, end] pairs, got {type(value).__name__}")
+    entries = list(value)
+    if not entries:
+        raise bad("expected a non-empty list of [start, end] pairs, got []")
+    pairs: list[tuple[int, int] | None] = []
+    for k, entry in enumerate(entries):
+        if entry is None:
+            pairs.append(None)
+            continue
+        try:
+            arr = np.asarray(entry)
+        except ValueError:
+            raise bad(f"phase {k} is not a [start, end] pair") from None
+        if arr.dtype.kind not in "iuf" or arr.shape != (2,):
+            raise bad(f"phase {k} is not a [start, end] pair: {entry!r}"[:200])
+        if arr.dtype.kind == "f" and not (np.isfinite(arr).all() and (arr == np.round(arr)).all()):
+            raise bad(f"phase {k}: bounds must be whole frame numbers")
+        pairs.append((int(arr[0]), int(arr[1])))
+    done = [(k, p) for k, p in enumerate(pairs) if p is not None]
+    if not done:
+        raise bad("every phase is null; a trial needs at least one phase done")
+    for i, (k, (s, e)) in enumerate(done):
         if not 0 <= s < e <= n_frames:
             raise bad(f"phase {k} is [{s}, {e})")
-        if k and s < pairs[k - 1][1]:
-            raise bad(f"phase {k} [{s}, {e}) starts before phase {k - 1} ends")
-    return pairs
+        if i and s < done[i - 1][1][1]:
+            raise bad(f"phase {k} [{s}, {e}) starts before phase {done[i - 1][0]} ends")
+    return tuple(pairs)
 
 
 def parse_trial(

@@ -208,6 +208,16 @@ class TactileImageFeaturizer:
         parsed = self._parse(trials)
         if not parsed:
             raise ValueError("fit needs at least one trial")
+        for i, trial in enumerate(parsed):
+            if trial.phases is not None and None in trial.phases:
+                missing = [
+                    n for n, p in zip(self.phase_names, trial.phases, strict=False) if p is None
+                ]
+                raise RawTrialError(
+                    f"lacks phase(s) {', '.join(missing)}; a featurizer learns from whole trials",
+                    trial=i,
+                    channel="phases",
+                )
         blocks = np.concatenate([self._blocks(t, i, 0.5) for i, t in enumerate(parsed)])
         electrodes = blocks[:, :, len(SIGNALS) :, :]  # (fingers, phases, 19, steps)
         rows = electrodes.transpose(0, 1, 3, 2).reshape(-1, N_ELECTRODES).astype(np.float64)
@@ -307,8 +317,10 @@ class TactileImageFeaturizer:
         return out
 
     def _finger_block(
-        self, finger: FingerSignals, bounds: tuple[tuple[int, int], ...], offset: float
+        self, finger: FingerSignals, bounds: tuple[tuple[int, int] | None, ...], offset: float
     ) -> np.ndarray:
+        """(phases, 4 + 19, n_steps); a phase not done (None) is NaN throughout, the block
+        a model that answers from some procedures reads as missing."""
         n = finger.n_frames
         frames = np.column_stack([finger.pdc, finger.tac, finger.tdc, finger.electrodes]).astype(
             np.float64
@@ -318,8 +330,11 @@ class TactileImageFeaturizer:
         pac_times = (
             frame_times[:, None] - 0.5 + (np.arange(PAC_SUBSAMPLES) + 0.5) / PAC_SUBSAMPLES
         ).ravel()
-        block = np.empty((len(bounds), len(SIGNALS) + N_ELECTRODES, self.n_steps))
-        for p, (s, e) in enumerate(bounds):
+        block = np.full((len(bounds), len(SIGNALS) + N_ELECTRODES, self.n_steps), np.nan)
+        for p, bound in enumerate(bounds):
+            if bound is None:
+                continue
+            s, e = bound
             lo, hi = s - 0.5, e - 0.5
             f = resample(frames, frame_times, lo, hi, self.n_steps, offset)  # (steps, 22)
             block[p, 0] = f[:, 0]  # pdc
@@ -328,7 +343,8 @@ class TactileImageFeaturizer:
             block[p, 3] = f[:, 2]  # tdc
             block[p, len(SIGNALS) :] = f[:, 3:].T
         if self.baseline == "rest":
-            rest = min(self.phase_rule.rest_frames, bounds[0][0])
+            first = next(b for b in bounds if b is not None)
+            rest = min(self.phase_rule.rest_frames, first[0])
             if rest < 1:
                 raise RawTrialError(
                     "baseline 'rest' needs frames at rest before the first "

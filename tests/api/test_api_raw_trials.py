@@ -295,3 +295,49 @@ def test_a_class_whose_only_trials_were_withdrawn_fails_to_register(raw_service,
     job = client.get(f"/v1/jobs/{r.json()['job']['id']}").json()
     assert job["status"] == "failed" and "no live sample" in job["error"], job
     assert not client.get(f"/v1/classes/{class_id}").json()["in_active_model"]
+
+
+def _lacking(trial: RawTrial, *missing: int) -> dict:
+    """``trial``'s JSON with the phases ``missing`` null (the others as the rule finds them)."""
+    data = trial.to_dict()
+    bounds = list(trial.phase_bounds()[0])
+    data["phases"] = [None if j in missing else list(b) for j, b in enumerate(bounds)]
+    return data
+
+
+def test_a_trial_lacking_phases_is_answered_from_the_others(raw_service, pilot):
+    client, _ = raw_service
+    held = pilot[2]
+    active = client.get("/v1/models/active").json()
+    assert active["procedures"] == ["tap", "hold", "squeeze"]
+    assert active["first_procedure"] in active["procedures"]
+    body = {"trials": [_lacking(t, 1) for t in held.trials]}  # no hold
+    r = client.post("/v1/recognize", json=body)
+    assert r.status_code == 200, r.text
+    results = r.json()["results"]
+    assert all(res["procedures_used"] == ["tap", "squeeze"] for res in results)
+    right = [
+        res["class_name"] == held.class_names[y]
+        for res, y in zip(results, held.labels, strict=True)
+    ]
+    assert np.mean(right) >= 0.8, right
+    one = client.post("/v1/recognize", json={"trials": [_lacking(held.trials[0], 0, 1)]}).json()[
+        "results"
+    ][0]
+    assert one["procedures_used"] == ["squeeze"]
+    assert one["next_procedure"] in ("tap", "hold")  # one phase is never enough
+
+
+def test_a_trial_with_no_phase_is_422_and_enrolment_takes_whole_trials(raw_service, pilot):
+    client, _ = raw_service
+    trial = pilot[2].trials[0]
+    body = problem(
+        client.post("/v1/recognize", json={"trials": [_lacking(trial, 0, 1, 2)]}), 422, None
+    )
+    assert "every phase is null" in body["detail"], body
+    new = pilot[3].trials[0]
+    r = client.post("/v1/classes", json={"name": "half-touched", "trials": [_lacking(new, 1)]})
+    body = problem(r, 422, "trials[0].phases")
+    assert "phase(s) 1 are null" in body["detail"], body
+    names = [c["name"] for c in client.get("/v1/classes", params={"limit": 1000}).json()["classes"]]
+    assert "half-touched" not in names  # nothing stored

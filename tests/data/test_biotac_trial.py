@@ -203,10 +203,13 @@ def test_malformed_trial_objects(data, expected):
         ([[10, 5]], r"phase 0 is \[10, 5\)"),
         ([[0, 801]], r"phase 0 is \[0, 801\)"),
         ([[10, 50], [40, 60]], "starts before phase 0 ends"),
-        ([10, 50], "list of \\[start, end\\] pairs"),
+        ([10, 50], "phase 0 is not a \\[start, end\\] pair"),
         ([], "non-empty list"),
         ([[1.5, 3]], "whole frame numbers"),
-        ([["a", "b"]], "list of \\[start, end\\] pairs"),
+        ([["a", "b"]], "phase 0 is not a \\[start, end\\] pair"),
+        ([None, None], "every phase is null"),
+        ([[10, 50], None, [40, 60]], "phase 2 .* starts before phase 0 ends"),
+        ("10-50", "expected a list of \\[start, end\\] pairs, got str"),
     ],
 )  # fmt: skip
 def test_bad_phases(phases, expected):
@@ -215,6 +218,15 @@ def test_bad_phases(phases, expected):
     with pytest.raises(RawTrialError, match=expected) as err:
         parse_trial(data, trial=1)
     assert (err.value.trial, err.value.channel) == (1, "phases")
+
+
+def test_a_phase_not_done_is_null_and_comes_back_as_null():
+    data = trial_data()
+    data["phases"] = [[10, 40], None, [60, 90]]
+    trial = parse_trial(data)
+    assert trial.phases == ((10, 40), None, (60, 90))
+    assert trial.to_dict()["phases"] == [[10, 40], None, [60, 90]]
+    assert parse_trial(trial.to_dict()).same_as(trial)
 
 
 def test_timestamps_of_the_wrong_length():

@@ -10,7 +10,7 @@ import zipfile
 import numpy as np
 import pytest
 
-from app.data.biotac import load_biotac
+from app.data.biotac import RawTrial, RawTrialError, load_biotac
 from app.data.simulator import simulate_dataset
 from app.framework import bundle
 from app.framework.errors import (
@@ -383,3 +383,32 @@ def test_held_out_pilot_trials_are_recognised_one_answer_per_trial():
     np.testing.assert_array_equal(
         loaded.recognize_trials(list(test.trials)).top_probability, answers.top_probability
     )
+
+
+def _without(trial: RawTrial, *missing: int) -> RawTrial:
+    bounds = trial.phase_bounds()[0]
+    phases = tuple(None if j in missing else b for j, b in enumerate(bounds))
+    return RawTrial(fingers=trial.fingers, phases=phases)
+
+
+def test_a_trial_lacking_a_phase_is_answered_from_the_others(best_raw, test_trials):
+    whole = list(test_trials.trials)
+    partial = [_without(t, 1) for t in whole]  # no hold
+    images, _ = best_raw.trial_samples(partial)
+    rows = best_raw.featurizer_.image_shape[0] // 3
+    assert np.isnan(images[:, rows : 2 * rows]).all()  # the hold's block: missing
+    assert np.isfinite(images[:, :rows]).all() and np.isfinite(images[:, 2 * rows :]).all()
+    full, _ = best_raw.trial_samples(whole)  # the phases done: as in the whole trial
+    np.testing.assert_array_equal(images[:, :rows], full[:, :rows])
+    batch = best_raw.recognize_trials(partial, top_k=1)
+    assert [used for used, _ in batch.procedure_fields()] == [["tap", "squeeze"]] * len(whole)
+    right = batch.top_index[:, 0] == test_trials.labels
+    assert right.mean() >= 0.6
+
+
+def test_a_featurizer_learns_from_whole_trials_only(train):
+    trials = list(train.trials)
+    trials[2] = _without(trials[2], 0)
+    with pytest.raises(RawTrialError, match="lacks phase\\(s\\) tap") as err:
+        TactileImageFeaturizer().fit(trials)
+    assert (err.value.trial, err.value.channel) == (2, "phases")

@@ -210,7 +210,7 @@ def _samples_for(body: ClassCreate, model: LoadedModel) -> list:
     rec = model.recognizer
     if body.trials is not None:
         kept = [
-            trials.one(t.model_dump(exclude_none=True), "trials", i)
+            trials.one(t.model_dump(exclude_none=True), "trials", i, whole=True)
             for i, t in enumerate(body.trials)
         ]
         with blame("trials"):
@@ -244,7 +244,7 @@ def _samples_for_store(body: ClassCreate, session: Session) -> list:
                 "trials",
             )
         return [
-            trials.one(t.model_dump(exclude_none=True), "trials", i)
+            trials.one(t.model_dump(exclude_none=True), "trials", i, whole=True)
             for i, t in enumerate(body.trials)
         ]
     if stored is not None and stored[0] == SampleForm.RAW_TRIAL:

@@ -144,7 +144,7 @@ def _read_and_recognize(body: SampleCreate, model: LoadedModel) -> tuple[Any, di
     before learning from it (one answer for all of it: both fingers of a trial)."""
     rec = model.recognizer
     if body.trial is not None:
-        kept = trials.one(body.trial.model_dump(exclude_none=True))
+        kept = trials.one(body.trial.model_dump(exclude_none=True), whole=True)
         with blame("trial"):  # 409 when the model takes samples
             x, _ = rec.trial_samples([kept])
     elif rec.input_kind == RAW_TRIALS:  # a later featurizer could not make anything of it
