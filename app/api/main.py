@@ -145,12 +145,8 @@ def create_app(
         )
     app.add_middleware(RequestMetrics, metrics=metrics)
     if not settings.opentelemetry:  # its spans name the route FastAPI's router selected
-        app.add_middleware(
-            RecognizeFastPath,
-            metrics=metrics,
-            max_bytes=settings.max_body_bytes,
-            cors=bool(settings.cors_origins),
-        )
+        # the outermost: it builds the route's own app from the middleware above
+        app.add_middleware(RecognizeFastPath)
     return app
 
 
