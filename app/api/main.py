@@ -191,11 +191,15 @@ class BodySizeLimit:
             await self.app(scope, receive, send)
             return
         declared = Headers(scope=scope).get("content-length", "")
-        if declared.isdigit() and int(declared) > self.max_bytes:
-            request = Request(scope)
-            exc = self._too_large()
-            response = problems.problem_response(request, 413, exc.detail, exc.errors)
-            await response(scope, receive, send)
+        if declared.isdigit():
+            if int(declared) > self.max_bytes:
+                request = Request(scope)
+                exc = self._too_large()
+                response = problems.problem_response(request, 413, exc.detail, exc.errors)
+                await response(scope, receive, send)
+                return
+            # the server reads no more than the declared length: nothing to count
+            await self.app(scope, receive, send)
             return
         seen = 0
 
