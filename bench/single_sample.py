@@ -2,7 +2,8 @@
 its batch-amortised cost per sample, and where the 1-sample call spends its time.
 
     .venv/bin/python -m bench.single_sample [--repeats 3000] [--batch 1024] [--novel 6]
-                                            [--clock wall|cpu]
+                                            [--clock wall|cpu] [--rounds 3] [--clients 32]
+                                            [--seconds 2]
 
 ``best`` is fitted on the embedded default (``simulate_dataset()``, seed 0), then, for a
 second model, given ``--novel`` zero-shot classes (attribute vectors no known class has)
@@ -13,6 +14,14 @@ forces the general path), then a cProfile of the 1-sample call on each path (the
 functions with most own time). ``--clock cpu`` times each call by its thread's CPU time
 instead of the wall clock: on a machine shared with other work it leaves out the time the
 process waits for a core (not what other work does to the caches).
+
+The scorer's gain is printed per round (general path's 1-sample time over the small-batch
+path's, median and range over the rounds), and, with ``--clients N`` (default 32; 0 skips
+it), once more through the service's ``RecognitionBatcher``: N concurrent 1-sample requests
+in one event loop, as the API process answers them (the batcher coalesces requests that
+arrive during a pass, so passes hold several samples), each path for ``--seconds`` a round,
+alternately; it prints requests a second on each path, their ratio, and the mean samples a
+pass.
 """
 
 from __future__ import annotations
@@ -68,6 +77,46 @@ def forcing_general(model):
     return general
 
 
+def spread(num: list[float], den: list[float]) -> str:
+    """Median and range of the per-round ratios num[i] / den[i]."""
+    r = np.asarray(num) / np.asarray(den)
+    return f"{np.median(r):.2f}x (rounds {r.min():.2f}-{r.max():.2f}, n={len(r)})"
+
+
+def through_batcher(model, one: np.ndarray, clients: int, seconds: float):
+    """(requests a second, mean samples a pass) of ``clients`` concurrent 1-sample requests
+    through the service's ``RecognitionBatcher`` on ``model``, for ``seconds``."""
+    import asyncio
+    from types import SimpleNamespace
+
+    from app.service.batcher import RecognitionBatcher
+
+    passes: list[int] = []
+
+    def recognize_batch(x, top_k):
+        passes.append(len(x))
+        return model.recognize_batch(x, top_k)
+
+    loaded = SimpleNamespace(recognizer=SimpleNamespace(recognize_batch=recognize_batch))
+
+    async def run() -> tuple[int, float]:
+        batcher, done = RecognitionBatcher(), 0
+        start = time.perf_counter()
+        stop = start + seconds
+
+        async def client() -> None:
+            nonlocal done
+            while time.perf_counter() < stop:
+                await batcher.recognize(loaded, one, 3)
+                done += 1
+
+        await asyncio.gather(*(client() for _ in range(clients)))
+        return done, time.perf_counter() - start
+
+    done, elapsed = asyncio.run(run())
+    return done / elapsed, float(np.mean(passes))
+
+
 def profile(model, one: np.ndarray, calls: int = 2000, lines: int = 14) -> str:
     prof = cProfile.Profile()
     prof.enable()
@@ -94,7 +143,7 @@ def measure(label: str, model, dataset, args) -> None:
     single = {name: [] for name in paths}
     per_sample = {name: [] for name in paths}
     clock = CLOCKS[args.clock]
-    for _ in range(3):
+    for _ in range(args.rounds):
         for name, m in paths.items():
             single[name].append(
                 median_seconds(lambda m=m: m.recognize_batch(one), args.repeats, clock)
@@ -109,6 +158,28 @@ def measure(label: str, model, dataset, args) -> None:
             f"{name:17s} ratio {s / b:5.2f}   1 sample {s * 1e6:7.1f} us   "
             f"batch of {args.batch} {b * 1e6:6.1f} us/sample"
         )
+    small, general = paths
+    print(
+        "scorer gain, 1 sample (general / small-batch): " + spread(single[general], single[small])
+    )
+    if args.clients:
+        rates = {name: [] for name in paths}
+        sizes = {name: [] for name in paths}
+        for _ in range(args.rounds):
+            for name, m in paths.items():
+                rate, size = through_batcher(m, one, args.clients, args.seconds)
+                rates[name].append(rate)
+                sizes[name].append(size)
+        for name in paths:
+            print(
+                f"{name:17s} through the batcher, {args.clients} clients: "
+                f"{np.median(rates[name]):7.0f} requests/s, "
+                f"{np.mean(sizes[name]):4.1f} samples a pass"
+            )
+        print(
+            "scorer gain through the batcher (small-batch / general requests/s): "
+            + spread(rates[small], rates[general])
+        )
     for name, m in paths.items():
         print(f"\n-- cProfile of the 1-sample call, {name} (own time, 2,000 calls)")
         print(profile(m, one))
@@ -121,6 +192,9 @@ def main() -> None:
     ap.add_argument("--batch-repeats", type=int, default=15)
     ap.add_argument("--novel", type=int, default=6)
     ap.add_argument("--clock", choices=sorted(CLOCKS), default="wall", help="time per call")
+    ap.add_argument("--rounds", type=int, default=3, help="alternating rounds of each path")
+    ap.add_argument("--clients", type=int, default=32, help="concurrent requests (0: none)")
+    ap.add_argument("--seconds", type=float, default=2.0, help="each batcher phase")
     args = ap.parse_args()
     print(f"machine: {cpu_model()}; numpy {np.__version__}")
     dataset = simulate_dataset()

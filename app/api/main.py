@@ -145,12 +145,8 @@ def create_app(
         )
     app.add_middleware(RequestMetrics, metrics=metrics)
     if not settings.opentelemetry:  # its spans name the route FastAPI's router selected
-        app.add_middleware(
-            RecognizeFastPath,
-            metrics=metrics,
-            max_bytes=settings.max_body_bytes,
-            cors=bool(settings.cors_origins),
-        )
+        # the outermost: it builds the route's own app from the middleware above
+        app.add_middleware(RecognizeFastPath)
     return app
 
 
@@ -195,11 +191,15 @@ class BodySizeLimit:
             await self.app(scope, receive, send)
             return
         declared = Headers(scope=scope).get("content-length", "")
-        if declared.isdigit() and int(declared) > self.max_bytes:
-            request = Request(scope)
-            exc = self._too_large()
-            response = problems.problem_response(request, 413, exc.detail, exc.errors)
-            await response(scope, receive, send)
+        if declared.isdigit():
+            if int(declared) > self.max_bytes:
+                request = Request(scope)
+                exc = self._too_large()
+                response = problems.problem_response(request, 413, exc.detail, exc.errors)
+                await response(scope, receive, send)
+                return
+            # the server reads no more than the declared length: nothing to count
+            await self.app(scope, receive, send)
             return
         seen = 0
 

@@ -69,6 +69,11 @@ class LinearAttributeModel:
         # to float64 cost more than the product, and logits need no more precision.
         self._weights_t32 = np.ascontiguousarray(self.weights.T, np.float32)
 
+    @property
+    def weights_t32(self) -> np.ndarray:
+        """(D, M) float32 C-ordered weights, the matrix ``predict_proba`` multiplies by."""
+        return self._weights_t32
+
     def __deepcopy__(self, memo: dict) -> LinearAttributeModel:
         return self  # never changed after its fit: models derived by enrolment share it
 

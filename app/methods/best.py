@@ -63,7 +63,7 @@ from app.methods.attributes import (
 )
 from app.methods.by_procedure import ProcedureModels
 from app.methods.known import CUES, KnownModel, relabelled
-from app.methods.small_batch import SmallBatchScorer
+from app.methods.small_batch import ScoringConstants, SmallBatchScorer
 
 
 def signatures(known_proba: np.ndarray) -> np.ndarray:
@@ -467,7 +467,7 @@ class BestRecognizer(TactileRecognizer):
     def _all_scores(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         if len(samples) <= self.small_batch_max and self.known_.cues_model.distances.index is None:
             if getattr(self, "_small_batch", None) is None:
-                self._small_batch = SmallBatchScorer(self)
+                self._small_batch = SmallBatchScorer(ScoringConstants.of(self))
             return self._small_batch.scores(flatten(samples))
         z, known, novelty = self.known_.scores(flatten(samples))
         novel = self._novel_from(z, known) if self.registry.novel_names else None

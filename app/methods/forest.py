@@ -307,6 +307,14 @@ class FlatForest:
         self._walk(x, leaves=out)
         return out
 
+    def walk_arrays(self) -> tuple[np.ndarray, ...]:
+        """What the compiled walk takes, for a caller that walks the trees itself: the packed
+        node records (feature, float32 threshold bits, left, right; built on first use),
+        ``roots``, ``leaf_ptr``, ``leaf_class``, ``leaf_value``. Read, never written."""
+        if self._nodes is None:
+            self._prepare_walk()
+        return self._nodes, self.roots, self.leaf_ptr, self.leaf_class, self.leaf_value
+
     def predict_proba(self, x: np.ndarray) -> np.ndarray:
         """(N, K) mean over trees of the reached leaf's class distribution."""
         x = self._inputs(x)

@@ -37,8 +37,11 @@ from app.methods.forest import FlatForest
 from app.methods.neighbours import ApproximateNeighbours
 
 CUES = ("one_minus_maxp", "entropy", "neg_gap", "log_knn3", "log_knn1", "log_top")
-_KNN = 3
-_EPS = 1e-6
+#: the reference samples whose mean squared distance is the ``log_knn3`` cue
+KNN = 3
+#: added to every squared distance before its log (public, as ``KNN`` and
+#: ``nearest_from_products``: ``best``'s small-batch scorer computes the same cues)
+DISTANCE_EPS = 1e-6
 _ROWS = 8192  # rows a blocked pass over the samples takes at a time
 
 
@@ -150,7 +153,7 @@ class ForestCues:
                 continue
             d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(axis=2)
             np.fill_diagonal(d2, np.inf)
-            spacing.append(float(np.median(np.log(d2.min(axis=1) + _EPS))))
+            spacing.append(float(np.median(np.log(d2.min(axis=1) + DISTANCE_EPS))))
         return ForestCues(
             self.scaler,
             self.forest.with_samples(
@@ -195,7 +198,7 @@ class ForestCues:
         )
         gap = first - second
         near = self.distances.nearest(z * self.weights, self.reference_labels, best)
-        log_d = np.log(near + _EPS)
+        log_d = np.log(near + DISTANCE_EPS)
         off = self.offsets
         return np.stack(
             [
@@ -374,14 +377,14 @@ class ReferenceDistances:
         the nearest one, and to the nearest one labelled ``top[i]`` (inf if none is)."""
         if self.index is not None:
             points = self.coordinates(q)
-            d2, _ = self.index.search(points, min(_KNN, len(self.reference)))
+            d2, _ = self.index.search(points, min(KNN, len(self.reference)))
             grouped, starts, _ = self._class_groups(np.asarray(labels, np.int64))
             own = _nearest_in_class(points, grouped, starts, np.asarray(top, np.int64))
             return np.stack([d2.mean(axis=1), d2[:, 0], own], axis=1)
         p, res = self._split(q)
         g = p @ self._ref.T
         no_res = np.zeros(0, np.float32)
-        return _nearest(
+        return nearest_from_products(
             g,
             (p**2).sum(axis=1),
             self._ref_sq,
@@ -389,8 +392,16 @@ class ReferenceDistances:
             no_res if self._ref_res is None else self._ref_res,
             np.asarray(labels, np.int64),
             np.asarray(top, np.int64),
-            _KNN,
+            KNN,
         )
+
+    def reference_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What ``nearest`` takes from the reference, for a caller that computes the queries'
+        products itself (exact search only: no ``index``): the (k, N) transposed view it
+        multiplies the queries' coordinates by, their squared norms, and the residual norms
+        (empty when exact). The arrays are this object's own: read, never written."""
+        res = np.zeros(0, np.float32) if self._ref_res is None else self._ref_res
+        return self._ref.T, self._ref_sq, res
 
     def to_reference(self, q: np.ndarray) -> np.ndarray:
         """(N, n_reference) squared distances, floored at 0."""
@@ -405,7 +416,7 @@ class ReferenceDistances:
 
 
 @njit(cache=True, nogil=True)
-def _nearest(g, q_sq, ref_sq, q_res, ref_res, labels, top, k):
+def nearest_from_products(g, q_sq, ref_sq, q_res, ref_res, labels, top, k):
     # One pass over the query-reference products instead of a full distance matrix and its
     # partition and masked minimum (each a pass of its own): the formula of to_reference.
     n, m = g.shape
@@ -485,7 +496,7 @@ def _principal_directions(rows: np.ndarray, components: int) -> np.ndarray:
 
 def _knn(d2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean of the (up to) 3 smallest squared distances per row, and the smallest."""
-    k = min(_KNN, d2.shape[1])
+    k = min(KNN, d2.shape[1])
     part = np.partition(d2, k - 1, axis=1)[:, :k]
     return part.mean(axis=1), part.min(axis=1)
 
@@ -526,14 +537,14 @@ def _approximate_spacing(
     """``_offsets``' per-sample distances through the index: its nearest samples in other
     trials (asking for as many more as a trial holds) and, exactly, within its class."""
     _, per_trial = np.unique(trials, return_counts=True)
-    k = min(len(y), _KNN + int(per_trial.max()))
+    k = min(len(y), KNN + int(per_trial.max()))
     knn3, knn1 = np.empty(len(y)), np.empty(len(y))
     for lo in range(0, len(y), _ROWS):
         rows = slice(lo, lo + _ROWS)
         d2, ids = distances.index.search(distances._points[rows], k)
         d2[(ids < 0) | (trials[np.maximum(ids, 0)] == trials[rows, None])] = np.inf
         d2.sort(axis=1)
-        knn3[rows], knn1[rows] = d2[:, :_KNN].mean(axis=1), d2[:, 0]
+        knn3[rows], knn1[rows] = d2[:, :KNN].mean(axis=1), d2[:, 0]
     grouped, starts, order = distances._class_groups(np.asarray(y, np.int64))
     own = np.empty(len(y))
     own[order] = _spacing_in_class(grouped, np.asarray(trials, np.int64)[order], starts)
@@ -543,7 +554,7 @@ def _approximate_spacing(
 def _median_offsets(knn3, knn1, own, y, n_classes) -> np.ndarray:
     def median_log(values: np.ndarray, default: float) -> float:
         finite = values[np.isfinite(values)]
-        return float(np.median(np.log(finite + _EPS))) if len(finite) else default
+        return float(np.median(np.log(finite + DISTANCE_EPS))) if len(finite) else default
 
     overall = median_log(own, 0.0)
     order = np.argsort(y, kind="stable")

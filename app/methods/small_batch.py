@@ -4,9 +4,10 @@ For one sample the general path (``KnownModel.scores`` and ``BestRecognizer._nov
 costs several times its batch-amortised cost per sample: dozens of numpy calls on tiny
 arrays, each paying its call overhead, plus constants recomputed on every call. This path:
 
-- computes the model's constants once (``SmallBatchScorer`` is built per fitted model and
-  novel part): DAP's prior term, the unit attribute vectors, the one-shot prototypes, the
-  attribute model's fixed columns;
+- computes the model's constants once (``ScoringConstants.of``, per fitted model and novel
+  part, through the parts' public methods; the scorer reads only that frozen object): DAP's
+  prior term, the unit attribute vectors, the one-shot prototypes, the attribute model's
+  fixed columns;
 - fuses every step whose bits IEEE or numpy define into five compiled kernels, each run
   between two rounds of the numpy calls that must stay: the exact element-wise steps
   (+ - * /, min, max, sqrt, copysign: IEEE gives the same bits in any order of
@@ -42,6 +43,7 @@ its product with 0 adds nothing to the weighted sum.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from threading import get_ident
 from typing import TYPE_CHECKING
 
@@ -49,7 +51,7 @@ import numpy as np
 from numba import njit
 
 from app.methods.attributes import dap_class_terms, impute
-from app.methods.known import _EPS, _KNN, CUES, _nearest
+from app.methods.known import CUES, DISTANCE_EPS, KNN, nearest_from_products
 
 if TYPE_CHECKING:
     from app.methods.best import BestRecognizer
@@ -61,56 +63,178 @@ _TREES = 8  # trees one sample takes down together (as forest._BLOCK samples)
 _NONE64 = np.zeros((0, 0))  # an array a kernel is given for a part the model lacks
 _NONE32 = np.zeros((0, 0), np.float32)
 _NO_ROWS = np.zeros(0)
-# SmallBatchScorer.settings: the scaler's clip, whether it log-compresses, whether there are
-# several known classes, the one-shot and autoencoder temperatures, DAP's clip bounds
-_CLIP, _LOG_COMPRESS, _SEVERAL, _SHOT_TEMPERATURE, _SAE_TEMPERATURE, _DAP_LO, _DAP_HI = range(7)
-_SETTINGS = 7
+# ScoringConstants.settings: the scaler's clip, whether it log-compresses, whether there are
+# several known classes, the one-shot and autoencoder temperatures, DAP's clip bounds, the
+# neighbours of the knn cue and the epsilon added to distances before their log
+(
+    _CLIP,
+    _LOG_COMPRESS,
+    _SEVERAL,
+    _SHOT_TEMPERATURE,
+    _SAE_TEMPERATURE,
+    _DAP_LO,
+    _DAP_HI,
+    _KNN,
+    _EPS,
+) = range(9)
+_SETTINGS = 9
+
+
+@dataclass(frozen=True, eq=False)
+class NovelConstants:
+    """What ``BestRecognizer._novel_from`` derives from the model alone; an array for a part
+    the model lacks (attributes, an autoencoder) is empty."""
+
+    n_novel: int
+    has_attributes: bool
+    shot_temperature: float
+    any_shot: bool
+    shot_columns: np.ndarray  # the novel classes with one-shot samples
+    zsl_columns: np.ndarray  # the others
+    prototypes_t: np.ndarray  # (K, L') one-shot prototypes, transposed as the general path
+    n_attributes: int
+    attr_weights_t: np.ndarray  # (D, M) float32, LinearAttributeModel.weights_t32
+    attr_bias: np.ndarray
+    fixed: np.ndarray  # the attributes constant over the known classes, and their values
+    fixed_values: np.ndarray
+    dap_clip: float
+    present_t: np.ndarray  # dap_class_terms' two matrices, transposed
+    absent_t: np.ndarray
+    log_prior: np.ndarray  # (1, L) DAP's prior term
+    sae_t: np.ndarray | None  # (D, M) float32 autoencoder, None without one
+    unit_vectors_t: np.ndarray  # (M, L) unit attribute vectors for the cosine
+    sae_temperature: float
+
+    @classmethod
+    def of(cls, model: BestRecognizer) -> NovelConstants:
+        reg = model.registry
+        has_attributes = model.has_attributes
+        has = model.shot_has_
+        # (L', K) prototypes; the general path multiplies by the transpose of this copy
+        prototypes = model.shot_prototypes_ if not has_attributes else model.shot_prototypes_[has]
+        out = dict(
+            n_novel=len(reg.novel_names),
+            has_attributes=has_attributes,
+            shot_temperature=float(model.shot_temperature),
+            any_shot=bool(has.any()),
+            shot_columns=np.flatnonzero(has),
+            zsl_columns=np.flatnonzero(~has),
+            prototypes_t=prototypes.T,
+            n_attributes=0,
+            attr_weights_t=_NONE32,
+            attr_bias=_NO_ROWS,
+            fixed=np.zeros(0, np.int64),
+            fixed_values=_NO_ROWS,
+            dap_clip=0.0,
+            present_t=_NONE64,
+            absent_t=_NONE64,
+            log_prior=_NONE64,
+            sae_t=None,
+            unit_vectors_t=_NONE64,
+            sae_temperature=0.0,
+        )
+        if has_attributes:
+            attrs = model.attributes_
+            fixed = np.flatnonzero(~np.isnan(attrs.constant))
+            # dap_log_scores' class-vector terms and prior term, as it computes them
+            clip = float(model.dap_clip)
+            present, absent = dap_class_terms(reg.novel_attributes)
+            q = np.clip(model.prior_, clip, 1 - clip)
+            out.update(
+                n_attributes=len(attrs.bias),
+                attr_weights_t=attrs.weights_t32,
+                attr_bias=attrs.bias,
+                fixed=fixed,
+                fixed_values=attrs.constant[fixed],
+                dap_clip=clip,
+                present_t=present.T,
+                absent_t=absent.T,
+                log_prior=(np.log(q) @ present.T + np.log1p(-q) @ absent.T)[None, :],
+            )
+            if model.sae_ is not None:
+                vectors = np.asarray(impute(reg.novel_attributes, model.prior_), np.float64)
+                out.update(
+                    sae_t=np.asarray(model.sae_, np.float32).T,
+                    unit_vectors_t=_unit(vectors).T,
+                    sae_temperature=float(model.sae_temperature),
+                )
+        return cls(**out)
+
+
+@dataclass(frozen=True, eq=False)
+class ScoringConstants:
+    """Everything ``SmallBatchScorer`` reads of a fitted ``best``, taken once through the
+    parts' public methods (``FlatForest.walk_arrays``, ``ReferenceDistances.reference_terms``,
+    ``LinearAttributeModel.weights_t32``, the scaler's fitted statistics): the scorer reads
+    nothing else of the model. The arrays are the parts' own, read and never written; a
+    model changed by enrolment builds new constants (``BestRecognizer`` drops its scorer)."""
+
+    n_classes: int
+    # per feature: the scaler's centre and scale, the distance weights, the distance centre
+    # (one float32 array: each argument of a compiled call costs time to check)
+    per_feature: np.ndarray
+    settings: np.ndarray  # the kernels' scalars in one array, indexed by _CLIP ... _EPS
+    log_compress: bool
+    walk: tuple[np.ndarray, ...]  # FlatForest.walk_arrays()
+    basis: np.ndarray | None  # the distances' subspace, None when exact
+    ref_t: np.ndarray  # ReferenceDistances.reference_terms()
+    ref_sq: np.ndarray
+    ref_res: np.ndarray
+    labels: np.ndarray  # the reference samples' classes
+    offsets: np.ndarray  # the log-distance cues' offsets
+    cue_weights: np.ndarray
+    entropy_used: bool  # a cue of weight 0 is not computed
+    novel: NovelConstants | None  # None without novel classes
+
+    @classmethod
+    def of(cls, model: BestRecognizer) -> ScoringConstants:
+        cues = model.known_.cues_model
+        forest, dist, scaler = cues.forest, cues.distances, cues.scaler
+        if dist.index is not None:
+            raise ValueError("the small-batch path needs exact distances (no index)")
+        per_feature = np.stack(
+            [scaler.center_.reshape(-1), scaler.scale_.reshape(-1), cues.weights, dist.center]
+        ).astype(np.float32)
+        if per_feature.shape[1] != forest.n_features:
+            raise ValueError("the small-batch path needs the scaler's statistics per feature")
+        cue_weights = model.known_.weights
+        novel = NovelConstants.of(model) if model.registry.novel_names else None
+        settings = np.zeros(_SETTINGS)
+        settings[_CLIP] = scaler.clip
+        settings[_LOG_COMPRESS] = bool(scaler.log_compress)
+        settings[_SEVERAL] = forest.n_classes > 1
+        settings[_KNN] = KNN
+        settings[_EPS] = DISTANCE_EPS
+        if novel is not None:
+            settings[_SHOT_TEMPERATURE] = novel.shot_temperature
+            if novel.has_attributes:
+                settings[_DAP_LO], settings[_DAP_HI] = novel.dap_clip, 1 - novel.dap_clip
+                settings[_SAE_TEMPERATURE] = novel.sae_temperature
+        ref_t, ref_sq, ref_res = dist.reference_terms()
+        return cls(
+            n_classes=forest.n_classes,
+            per_feature=per_feature,
+            settings=settings,
+            log_compress=bool(scaler.log_compress),
+            walk=forest.walk_arrays(),
+            basis=dist.basis,
+            ref_t=ref_t,
+            ref_sq=ref_sq,
+            ref_res=ref_res,
+            labels=cues.reference_labels,
+            offsets=cues.offsets,
+            cue_weights=cue_weights,
+            entropy_used=bool(cue_weights[_ENTROPY] != 0.0),
+            novel=novel,
+        )
 
 
 class SmallBatchScorer:
     """(novelty scores, known probabilities, novel probabilities) of flat float32 samples,
-    as ``BestRecognizer._all_scores`` computes them; built once per fitted model."""
+    as ``BestRecognizer._all_scores`` computes them, from a model's ``ScoringConstants``."""
 
-    def __init__(self, model: BestRecognizer) -> None:
-        cues = model.known_.cues_model
-        forest, dist = cues.forest, cues.distances
-        if forest._nodes is None:
-            forest._prepare_walk()
-        self.forest = forest
-        self.n_classes = forest.n_classes
-        # per feature: the scaler's centre and scale, the distance weights, the distance
-        # centre (one array: each argument of a compiled call costs time to check)
-        self.per_feature = np.stack(
-            [
-                cues.scaler.center_.reshape(-1),
-                cues.scaler.scale_.reshape(-1),
-                cues.weights,
-                dist.center,
-            ]
-        ).astype(np.float32)
-        if self.per_feature.shape[1] != forest.n_features:
-            raise ValueError("the small-batch path needs the scaler's statistics per feature")
-        self.log_compress = bool(cues.scaler.log_compress)
-        self.basis = dist.basis
-        self.ref_t = dist._ref.T  # the same transposed view the general path multiplies by
-        self.ref_sq = dist._ref_sq
-        # no residuals with exact distances (no subspace)
-        self.ref_res = np.zeros(0, np.float32) if dist.basis is None else dist._ref_res
-        self.labels = cues.reference_labels
-        self.offsets = cues.offsets
-        self.cue_weights = model.known_.weights
-        self.entropy_used = bool(self.cue_weights[_ENTROPY] != 0.0)
-        nv = self.novel = _NovelConstants(model) if model.registry.novel_names else None
-        # the kernels' scalars in one array (a scalar argument costs more than an array)
-        self.settings = np.zeros(_SETTINGS)
-        self.settings[_CLIP] = cues.scaler.clip
-        self.settings[_LOG_COMPRESS] = self.log_compress
-        self.settings[_SEVERAL] = self.n_classes > 1
-        if nv is not None:
-            self.settings[_SHOT_TEMPERATURE] = nv.shot_temperature
-            if nv.has_attributes:
-                self.settings[_DAP_LO], self.settings[_DAP_HI] = nv.dap_clip, 1 - nv.dap_clip
-                self.settings[_SAE_TEMPERATURE] = nv.sae_temperature
+    def __init__(self, constants: ScoringConstants) -> None:
+        self.constants = constants
         # one sample's intermediate arrays, one set per thread: allocating them anew cost
         # as much as a kernel (the arrays returned are new on every call)
         self._one: dict[int, tuple[np.ndarray, ...]] = {}
@@ -118,13 +242,14 @@ class SmallBatchScorer:
     def _buffers(self, n: int) -> tuple[np.ndarray, ...]:
         """The intermediate arrays of ``n`` samples; an array for a part the model lacks
         is empty."""
-        d, nv = self.per_feature.shape[1], self.novel
+        c = self.constants
+        d, nv = c.per_feature.shape[1], c.novel
         z, q = np.empty((n, d), np.float32), np.empty((n, d), np.float32)
         top, near, cues = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 6))
         if nv is None:
             return z, q, top, near, cues
         m = nv.n_attributes
-        sig = np.empty((n, self.n_classes)) if nv.any_shot else _NONE64
+        sig = np.empty((n, c.n_classes)) if nv.any_shot else _NONE64
         half, minus, unit = _NONE64, _NONE64, _NONE64
         if nv.has_attributes:
             half, minus = np.empty((n, m)), np.empty((n, m))
@@ -135,6 +260,7 @@ class SmallBatchScorer:
         return z, q, top, near, cues, sig, half, minus, unit, shifted
 
     def scores(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        c = self.constants
         n = len(x)
         if n == 1:
             buffers = self._one.get(get_ident())
@@ -143,38 +269,23 @@ class SmallBatchScorer:
         else:
             buffers = self._buffers(n)
         z, q, top, near, cues = buffers[:5]
-        if self.log_compress:  # RobustInputScaler._compress: log1p(|x|) with x's sign
+        if c.log_compress:  # RobustInputScaler._compress: log1p(|x|) with x's sign
             mag = np.abs(x)
             np.log1p(mag, out=mag)
         else:
             mag = x
-        f = self.forest
-        p = np.empty((n, self.n_classes))
-        _scale_and_walk(
-            x,
-            mag,
-            self.per_feature,
-            self.settings,
-            f._nodes,
-            f.roots,
-            f.leaf_ptr,
-            f.leaf_class,
-            f.leaf_value,
-            z,
-            q,
-            p,
-            top,
-        )
-        proj = q if self.basis is None else q @ self.basis
-        g = proj @ self.ref_t
+        p = np.empty((n, c.n_classes))
+        _scale_and_walk(x, mag, c.per_feature, c.settings, *c.walk, z, q, p, top)
+        proj = q if c.basis is None else q @ c.basis
+        g = proj @ c.ref_t
         entropy = _NO_ROWS
-        if self.entropy_used:
+        if c.entropy_used:
             entropy = -_add(p * np.log(np.clip(p, 1e-12, None)), axis=1)
-        nv = self.novel
+        nv = c.novel
         if nv is None:
-            _near(q, proj, g, self.ref_sq, self.ref_res, self.labels, top, near)
-            _cues(top, np.log(near), self.offsets, entropy, self.settings, cues)
-            return cues @ self.cue_weights, p, None
+            _near(q, proj, g, c.ref_sq, c.ref_res, c.labels, top, c.settings, near)
+            _cues(top, np.log(near), c.offsets, entropy, c.settings, cues)
+            return cues @ c.cue_weights, p, None
         # BestRecognizer._novel_from: LinearAttributeModel.predict_proba, dap_log_scores,
         # cosine_scores, the softmaxes and the one-shot mix
         sig, half, minus, unit, shifted = buffers[5:]
@@ -184,66 +295,26 @@ class SmallBatchScorer:
             if nv.sae_t is not None:
                 sae = z @ nv.sae_t
         _near_and_novel_inputs(
-            q, proj, g, self.ref_sq, self.ref_res, self.labels, p, top, near, attr, nv.attr_bias,
-            half, sae, unit, sig,
+            q, proj, g, c.ref_sq, c.ref_res, c.labels, p, top, c.settings, near, attr,
+            nv.attr_bias, half, sae, unit, sig,
         )  # fmt: skip
         log_d = np.log(near)
         sim = sig @ nv.prototypes_t if nv.any_shot else _NONE64
         present, absent, cosine = _NONE64, _NONE64, _NONE64
         if nv.has_attributes:
             t = np.tanh(half)
-            _attribute_clip(t, nv.fixed, nv.fixed_values, self.settings, minus)
+            _attribute_clip(t, nv.fixed, nv.fixed_values, c.settings, minus)
             present, absent = np.log(t) @ nv.present_t, np.log1p(minus) @ nv.absent_t
             if nv.sae_t is not None:
                 cosine = unit @ nv.unit_vectors_t
         _cues_and_shifts(
-            top, log_d, self.offsets, entropy, self.settings, cues, present, absent,
+            top, log_d, c.offsets, entropy, c.settings, cues, present, absent,
             nv.log_prior, cosine, sim, shifted,
         )  # fmt: skip
-        novelty = cues @ self.cue_weights
+        novelty = cues @ c.cue_weights
         out = np.empty((n, nv.n_novel))
         _mix(np.exp(shifted), nv.zsl_columns, nv.shot_columns, out)
         return novelty, p, out
-
-
-class _NovelConstants:
-    """What ``BestRecognizer._novel_from`` derives from the model alone, derived once."""
-
-    def __init__(self, model: BestRecognizer) -> None:
-        reg = model.registry
-        self.n_novel = len(reg.novel_names)
-        self.has_attributes = model.has_attributes
-        self.shot_temperature = float(model.shot_temperature)
-        has = model.shot_has_
-        self.any_shot = bool(has.any())
-        self.shot_columns = np.flatnonzero(has)
-        self.zsl_columns = np.flatnonzero(~has)
-        # (L', K) prototypes; the general path multiplies by the transpose of this copy
-        self.prototypes_t = (
-            model.shot_prototypes_ if not self.has_attributes else model.shot_prototypes_[has]
-        ).T
-        self.n_attributes, self.attr_bias, self.sae_t, self.log_prior = 0, _NO_ROWS, None, _NONE64
-        if not self.has_attributes:
-            return
-        attrs = model.attributes_
-        self.n_attributes = len(attrs.bias)
-        self.attr_weights_t = attrs._weights_t32
-        self.attr_bias = attrs.bias
-        self.fixed = np.flatnonzero(~np.isnan(attrs.constant))
-        self.fixed_values = attrs.constant[self.fixed]
-        # dap_log_scores' class-vector terms and prior term, as it computes them
-        clip = float(model.dap_clip)
-        self.dap_clip = clip
-        present, absent = dap_class_terms(reg.novel_attributes)
-        self.present_t, self.absent_t = present.T, absent.T
-        q = np.clip(model.prior_, clip, 1 - clip)
-        self.log_prior = (np.log(q) @ present.T + np.log1p(-q) @ absent.T)[None, :]
-        self.sae_temperature = 0.0
-        if model.sae_ is not None:
-            self.sae_t = np.asarray(model.sae_, np.float32).T
-            vectors = np.asarray(impute(reg.novel_attributes, model.prior_), np.float64)
-            self.unit_vectors_t = _unit(vectors).T
-            self.sae_temperature = float(model.sae_temperature)
 
 
 def _unit(m: np.ndarray) -> np.ndarray:
@@ -396,7 +467,7 @@ def _walk_trees(x, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, p
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _near(q, proj, g, ref_sq, ref_res, labels, top, near):
+def _near(q, proj, g, ref_sq, ref_res, labels, top, settings, near):
     """ReferenceDistances.nearest from the products ``g``, plus ForestCues.cues' epsilon
     (into ``near``): |P q|^2, and with a basis (``ref_res`` not empty) the residual norms
     sqrt(max(|q|^2 - |P q|^2, 0)) in float32 as ``_split`` takes them."""
@@ -416,10 +487,11 @@ def _near(q, proj, g, ref_sq, ref_res, labels, top, near):
     best = np.empty(n, np.int64)
     for i in range(n):
         best[i] = np.int64(top[i, 2])
-    found = _nearest(g, proj_sq, ref_sq, res, ref_res, labels, best, _KNN)
+    knn, eps = np.int64(settings[_KNN]), settings[_EPS]
+    found = nearest_from_products(g, proj_sq, ref_sq, res, ref_res, labels, best, knn)
     for i in range(n):
         for c in range(3):
-            near[i, c] = found[i, c] + _EPS
+            near[i, c] = found[i, c] + eps
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -438,13 +510,13 @@ def _unit_rows(m, out):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _near_and_novel_inputs(
-    q, proj, g, ref_sq, ref_res, labels, p, top, near, attr, bias, half, sae, unit, sig
+    q, proj, g, ref_sq, ref_res, labels, p, top, settings, near, attr, bias, half, sae, unit, sig
 ):
     """``_near``; 0.5 x the attribute logits (float32 products ``attr`` to float64, plus the
     bias) for the sigmoid by tanh; the autoencoder's projections ``sae`` as float64 over
     their norms; the signatures of the known-class posteriors (``best.signatures``). An
     empty output is a part the model lacks."""
-    _near(q, proj, g, ref_sq, ref_res, labels, top, near)
+    _near(q, proj, g, ref_sq, ref_res, labels, top, settings, near)
     for i in range(half.shape[0]):
         for j in range(half.shape[1]):
             half[i, j] = 0.5 * (np.float64(attr[i, j]) + bias[j])

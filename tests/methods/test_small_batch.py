@@ -6,7 +6,10 @@ row add in numpy's order."""
 
 from __future__ import annotations
 
+import ast
 import copy
+import dataclasses
+import inspect
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -16,8 +19,9 @@ from app.data.dataset import TactileDataset
 from app.data.simulator import simulate_dataset
 from app.framework.recognizer import RecognitionBatch
 from app.framework.registry import make_method
+from app.methods import small_batch
 from app.methods.known import KnownModel
-from app.methods.small_batch import _row_sum
+from app.methods.small_batch import ScoringConstants, _row_sum
 
 FIELDS = ("top_index", "top_probability", "is_novel", "novelty_score")
 SIZES = (1, 2, 7, 32)  # 32: BestRecognizer.small_batch_max
@@ -176,6 +180,27 @@ def test_default_threshold_sends_one_sample_down_the_small_path(models, data):
     assert_same_bits(model.recognize_batch(x), general(model).recognize_batch(x))
 
 
+def test_the_scorer_reads_only_its_frozen_constants(models):
+    """The scorer's contract with ``best``: a frozen ``ScoringConstants`` built through the
+    parts' public methods; no private field of another object is read in the module."""
+    model = models["one-shot"]
+    constants = ScoringConstants.of(model)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        constants.settings = None  # type: ignore[misc]
+    assert constants.novel is not None
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        constants.novel.n_novel = 0  # type: ignore[misc]
+    tree = ast.parse(inspect.getsource(small_batch))
+    private = [
+        ast.unparse(node)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Attribute)
+        and node.attr.startswith("_")
+        and not (isinstance(node.value, ast.Name) and node.value.id == "self")
+    ]
+    assert private == []
+
+
 def test_without_attributes_classes_from_samples_match(data):
     ds, train, novel = data
     bare = TactileDataset(
@@ -209,7 +234,7 @@ def test_a_weighted_entropy_cue_is_computed_as_the_general_path_does(models, dat
     x, fast = queries(data[0], seed=4), small(model)
     for n in SIZES:
         assert_same_bits(fast.recognize_batch(x[:n]), general(model).recognize_batch(x[:n]))
-    assert fast._small_batch.entropy_used
+    assert fast._small_batch.constants.entropy_used
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
@@ -267,4 +292,4 @@ def test_a_scaler_without_log_compression_matches(models, data):
     x, fast = queries(data[0], seed=7), small(model)
     for n in SIZES:
         assert_same_bits(fast.recognize_batch(x[:n]), general(model).recognize_batch(x[:n]))
-    assert not fast._small_batch.log_compress
+    assert not fast._small_batch.constants.log_compress
