@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from app.data.procedures import SECONDS, keep_only
-from app.evaluation import metrics
+from app.evaluation import metrics, plots
 from app.framework.recognizer import TactileRecognizer
 
 PER_SUBSET: tuple[str, ...] = (
@@ -307,9 +307,7 @@ def procedure_markdown(results: dict[str, Any]) -> list[str]:
 def plot_procedures(results: dict[str, Any], path: Path, title: str) -> None:
     """known_acc and gzsl_h against robot time: every fixed order's prefixes (grey), the
     adaptive rule at each target (black), all procedures (star)."""
-    from app.evaluation.report import _plt
-
-    plt = _plt()
+    plt = plots.plt()
     names = list(results["procedures"])
     n = len(names)
     durations = np.array(results["durations"], float)

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from app.evaluation import metrics
+from app.evaluation import metrics, plots
 from app.framework.recognizer import TactileRecognizer, group_mean
 
 OSL_GZSL_FIGURES: tuple[str, ...] = ("osl_gzsl_seen", "osl_gzsl_unseen", "osl_gzsl_h")
@@ -193,9 +193,7 @@ def touch_markdown(results: dict[str, Any]) -> list[str]:
 def plot_touches(results: dict[str, Any], path: Path, title: str) -> None:
     """Each method's figures against the number of touches (mean and 95 % interval over
     splits), and its mixed figure after one enrolled touch per novel object."""
-    from app.evaluation.report import _plt
-
-    plt = _plt()
+    plt = plots.plt()
     touches = list(results["touches"])
     methods = list(results["methods"])
     fig, axes = plt.subplots(1, len(methods), figsize=(5.2 * len(methods), 4.2), squeeze=False)
