@@ -1,6 +1,6 @@
-"""bench/side_by_side.py at tiny size: its floor server starts, answers the bench's request
-under load and stops with every process it started; the report's ratios and targets have
-the documented shape.
+"""bench/side_by_side.py at tiny size: its floor server (bench/floor_apps.py) starts, answers
+the bench's request under load and stops with every process it started; the report's ratios
+and targets have the documented shape.
 
 The full run trains the service's base model and takes minutes, so the ratios are checked
 here on figures of the same shape as the run's (nothing in a test is timed).
@@ -12,6 +12,7 @@ import os
 
 import orjson
 
+from bench import floor_apps
 from bench import side_by_side as sbs
 from bench.load import Connection
 
@@ -19,7 +20,7 @@ from bench.load import Connection
 def test_floor_server_under_load_and_stopped(tmp_path) -> None:
     body = orjson.dumps({"samples": [[[0.5] * 30] * 32]})
     request = Connection.prepare("POST", "/v1/recognize", body, "application/json")
-    with sbs.app_server("floor", 1, tmp_path) as (url, pid):
+    with floor_apps.app_server("floor", 1, tmp_path) as (url, pid):
         phase = sbs.load_phase(url, pid, 0.3, 2, request)
     assert phase["requests"] > 0 and phase["errors"] == 0
     assert {"rps", "p50_ms", "p99_ms", "cpu_us_per_request", "cores_used"} <= set(phase)
