@@ -18,11 +18,10 @@ import json
 import sys
 
 import numpy as np
-from dev_splits import add_split_arguments, splits, tiny
+from dev_splits import add_split_arguments, enrolled_best, splits, tiny
 
 from app.data.phac2 import load_phac2
 from app.evaluation import metrics
-from app.evaluation.protocol import make_recognizer
 
 
 def main() -> int:
@@ -35,13 +34,7 @@ def main() -> int:
     per_t: dict[float, list[tuple[float, float, float]]] = {t: [] for t in temps}
     for seed, split in splits(data, args):
         train = split.train_dataset(data)
-        model = (
-            make_recognizer("best", None, 0)
-            .fit(train)
-            .add_novel_classes(
-                list(split.novel_names), split.novel_attributes(data), allow_known_vectors=True
-            )
-        )
+        model = enrolled_best(data, split)
         xk, xn = data.samples[split.known_test_idx], data.samples[split.novel_test_idx]
         names_k, names_n = list(train.class_names), list(split.novel_names)
         true = [names_k[j] for j in split.known_labels(data, split.known_test_idx)] + [

@@ -29,13 +29,12 @@ import json
 import sys
 
 import numpy as np
-from dev_splits import add_split_arguments, splits, tiny
+from dev_splits import add_split_arguments, enrolled_best, splits, tiny
 
 from app.data.phac2 import load_phac2
 from app.data.procedures import keep_only
 from app.evaluation import metrics
 from app.evaluation.procedures import DURATIONS, check_durations
-from app.evaluation.protocol import make_recognizer
 
 RULES = ("top", "two", "agree", "top_per_second", "two_per_second")
 
@@ -99,13 +98,7 @@ def main() -> int:
     rows: dict[str, list[tuple[float, float, float]]] = {}
     for seed, split in splits(data, args, development_only=True):
         train = split.train_dataset(data)
-        model = (
-            make_recognizer("best", None, 0)
-            .fit(train)
-            .add_novel_classes(
-                list(split.novel_names), split.novel_attributes(data), allow_known_vectors=True
-            )
-        )
+        model = enrolled_best(data, split)
         xk, xn = data.samples[split.known_test_idx], data.samples[split.novel_test_idx]
         yk = split.known_labels(data, split.known_test_idx)
         yn = split.novel_labels(data, split.novel_test_idx)

@@ -3,6 +3,7 @@ procedures.txt; blocks, missing procedures and their errors."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -69,15 +70,7 @@ def test_a_procedures_txt_that_does_not_fit_is_named(tmp_path, text, why):
 def test_a_dataset_refuses_procedures_that_do_not_split_its_samples():
     data = simulate_dataset(n_objects=3, trials_per_object=2)
     with pytest.raises(DatasetError, match="5 procedures do not split"):
-        type(data)(
-            samples=data.samples,
-            labels=data.labels,
-            trials=data.trials,
-            class_attributes=data.class_attributes,
-            attribute_names=data.attribute_names,
-            class_names=data.class_names,
-            procedures=("a", "b", "c", "d", "e"),
-        )
+        dataclasses.replace(data, procedures=("a", "b", "c", "d", "e"))
 
 
 def test_missing_procedures_are_whole_nan_blocks():

@@ -3,6 +3,8 @@ rule, with the robot time it used (app/evaluation/procedures.py)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -92,14 +94,7 @@ def test_procedures_need_names_and_durations(dataset):
     with pytest.raises(ValueError, match="--durations press=SECONDS"):
         check_durations(["press"], {})
     assert check_durations(["press", "hold"], {"press": 2.5}).tolist() == [2.5, 10.0]
-    plain = type(dataset)(
-        samples=dataset.samples,
-        labels=dataset.labels,
-        trials=dataset.trials,
-        class_attributes=dataset.class_attributes,
-        attribute_names=dataset.attribute_names,
-        class_names=dataset.class_names,
-    )
+    plain = dataclasses.replace(dataset, procedures=())
     with pytest.raises(ValueError, match="names 0 procedures"):
         evaluate(plain, ["best"], n_novel=4, n_splits=1, progress=False, procedures=True)
 

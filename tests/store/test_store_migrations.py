@@ -84,6 +84,49 @@ def _database(backend: str, tmp_path) -> Iterator[str]:
         yield url
 
 
+def _insert_version(conn, **columns: str) -> None:
+    """Model version 1 and its bundle, as a store of an older revision holds them;
+    ``columns``: more columns of model_versions, as SQL literals."""
+    conn.execute(
+        text(
+            "INSERT INTO bundles (sha256, size, data, created_at) "
+            "VALUES ('ab', 1, :d, '2026-11-24')"
+        ),
+        {"d": b"x"},
+    )
+    names = ", ".join(
+        [
+            "version",
+            "created_at",
+            "method",
+            "reason",
+            "bundle_sha256",
+            "input_shape",
+            "metrics",
+            "classes",
+            "sample_ids",
+            "active",
+            *columns,
+        ]
+    )
+    values = ", ".join(
+        [
+            "1",
+            "'2026-11-24'",
+            "'best'",
+            "'bootstrap'",
+            "'ab'",
+            "'[2]'",
+            "'{}'",
+            "'[]'",
+            "'[]'",
+            "false",
+            *columns.values(),
+        ]
+    )
+    conn.execute(text(f"INSERT INTO model_versions ({names}) VALUES ({values})"))
+
+
 def _columns(engine, table: str) -> dict[str, dict]:
     return {c["name"]: c for c in inspect(engine).get_columns(table)}
 
@@ -272,21 +315,7 @@ def test_0007_rewrites_keys_lists_each_versions_vocabulary_and_refuses_to_lose_v
                     "VALUES ('mug', 'known', 'dataset', '101', '2026-11-24')"
                 )
             )
-            conn.execute(
-                text(
-                    "INSERT INTO bundles (sha256, size, data, created_at) "
-                    "VALUES ('ab', 1, :d, '2026-11-24')"
-                ),
-                {"d": b"x"},
-            )
-            conn.execute(
-                text(
-                    "INSERT INTO model_versions (version, created_at, method, reason, "
-                    "bundle_sha256, input_shape, metrics, classes, sample_ids, active) "
-                    "VALUES (1, '2026-11-24', 'best', 'bootstrap', 'ab', '[2]', '{}', '[]', "
-                    "'[]', false)"
-                )
-            )
+            _insert_version(conn)
         migrate.upgrade(engine)
         with engine.connect() as conn:
             assert conn.execute(text("SELECT attribute_key FROM classes")).scalar() == "1,0,1"
@@ -323,21 +352,7 @@ def test_0009_adds_procedures_to_model_versions_and_keeps_every_row(backend, tmp
         engine = make_engine(url)
         migrate.upgrade(engine, "0008")
         with engine.begin() as conn:
-            conn.execute(
-                text(
-                    "INSERT INTO bundles (sha256, size, data, created_at) "
-                    "VALUES ('ab', 1, :d, '2026-11-24')"
-                ),
-                {"d": b"x"},
-            )
-            conn.execute(
-                text(
-                    "INSERT INTO model_versions (version, created_at, method, reason, "
-                    "bundle_sha256, input_shape, metrics, classes, sample_ids, active, "
-                    "attribute_names) VALUES (1, '2026-11-24', 'best', 'bootstrap', 'ab', "
-                    "'[2]', '{}', '[]', '[]', false, '[]')"
-                )
-            )
+            _insert_version(conn, attribute_names="'[]'")
         migrate.upgrade(engine)
         assert {"procedures", "first_procedure"} <= set(_columns(engine, "model_versions"))
         with engine.connect() as conn:
