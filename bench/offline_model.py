@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import subprocess
 import sys
 import tempfile
@@ -35,7 +33,7 @@ from app.framework import bundle
 from app.framework.registry import DEFAULT_METHOD
 from app.testing.harness import tactile_zsl
 from bench.bench_framework import timed
-from bench.withdrawal import cpu_model, timed_round, unused_attributes
+from bench.withdrawal import print_report, timed_round, unused_attributes
 from worker import Worker
 
 
@@ -126,33 +124,27 @@ def main() -> int:
         cli_one = median_seconds(lambda: run_cli("one.npy"), args.repeats)
         cli_batch = median_seconds(lambda: run_cli("batch.npy"), args.repeats)
         per_line = lines_process_seconds(path, batch[0], 20 * args.repeats)
-    print(
-        json.dumps(
-            {
-                "dataset": args.dataset,
-                "method": args.method,
-                "model_version": version,
-                "classes": len(model.registry.known_names) + len(model.registry.novel_names),
-                "bundle_bytes": len(data),
-                "median_seconds": {
-                    "first download of a version (GET .../bundle, joins its parts)": round(
-                        first_download, 3
-                    ),
-                    "each later download of it": round(download, 4),
-                    "revalidate (304)": round(revalidate, 4),
-                    "bundle.load": round(load, 3),
-                    "recognize 1 sample in process": round(one, 4),
-                    "first tactile-zsl recognize process, 1 sample": round(first_process, 2),
-                    "tactile-zsl recognize process, 1 sample": round(cli_one, 2),
-                    "tactile-zsl recognize process, 1024 samples": round(cli_batch, 2),
-                    "tactile-zsl recognize --lines, 1 sample per line": round(per_line, 4),
-                },
-                "machine": (
-                    f"{cpu_model()}, {os.cpu_count()} CPUs, Python {platform.python_version()}"
+    print_report(
+        {
+            "dataset": args.dataset,
+            "method": args.method,
+            "model_version": version,
+            "classes": len(model.registry.known_names) + len(model.registry.novel_names),
+            "bundle_bytes": len(data),
+            "median_seconds": {
+                "first download of a version (GET .../bundle, joins its parts)": round(
+                    first_download, 3
                 ),
+                "each later download of it": round(download, 4),
+                "revalidate (304)": round(revalidate, 4),
+                "bundle.load": round(load, 3),
+                "recognize 1 sample in process": round(one, 4),
+                "first tactile-zsl recognize process, 1 sample": round(first_process, 2),
+                "tactile-zsl recognize process, 1 sample": round(cli_one, 2),
+                "tactile-zsl recognize process, 1024 samples": round(cli_batch, 2),
+                "tactile-zsl recognize --lines, 1 sample per line": round(per_line, 4),
             },
-            indent=2,
-        )
+        }
     )
     return 0
 

@@ -47,6 +47,12 @@ def cpu_model() -> str:
     return platform.machine()
 
 
+def print_report(report: dict) -> None:
+    """``report`` as indented JSON on stdout, with the machine it was measured on last."""
+    machine = f"{cpu_model()}, {os.cpu_count()} CPUs, Python {platform.python_version()}"
+    print(json.dumps({**report, "machine": machine}, indent=2))
+
+
 def timed_round(worker: Worker, client: TestClient, job_id: int) -> float:
     start = time.perf_counter()
     assert worker.run_once() >= 1
@@ -149,21 +155,15 @@ def main() -> int:
                 )
                 assert client.get(f"/v1/classes/{cid}").json()["kind"] == "novel"
                 print(json.dumps({k: round(v[-1], 2) for k, v in times.items()}), file=sys.stderr)
-    print(
-        json.dumps(
-            {
-                "dataset": args.dataset,
-                "method": args.method,
-                "repeats": args.repeats,
-                "median_seconds_to_active": {
-                    k: round(float(np.median(v)), 2) for k, v in times.items()
-                },
-                "machine": (
-                    f"{cpu_model()}, {os.cpu_count()} CPUs, Python {platform.python_version()}"
-                ),
+    print_report(
+        {
+            "dataset": args.dataset,
+            "method": args.method,
+            "repeats": args.repeats,
+            "median_seconds_to_active": {
+                k: round(float(np.median(v)), 2) for k, v in times.items()
             },
-            indent=2,
-        )
+        }
     )
     return 0
 

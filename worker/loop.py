@@ -26,8 +26,8 @@ from app.framework.errors import BundleError
 from app.framework.recognizer import TactileRecognizer
 from app.service.bootstrap import (
     FIRST_MODEL_SAMPLES,
+    add_model_version,
     first_model_missing,
-    model_classes,
     starts_empty,
 )
 from app.store import bundles, leases, repo, retention
@@ -221,21 +221,7 @@ class Worker:
         plan: Plan,
         job_ids: list[int],
     ) -> int:
-        row = repo.add_version(
-            s,
-            method=new.method,
-            reason=plan.reason,
-            base_version=base_version,
-            bundle_sha256=bundles.store_model(s, split),
-            input_shape=list(new.input_shape),
-            input_kind=new.input_kind,
-            attribute_names=list(new.registry.attribute_names),
-            procedures=list(new.procedures),
-            first_procedure=new.first_procedure,
-            metrics=repo.jsonable(new.metrics),
-            classes=model_classes(new),
-            sample_ids=plan.sample_ids,
-        )
+        row = add_model_version(s, new, split, plan.reason, base_version, plan.sample_ids)
         repo.activate(s, row.version)
         repo.finish_jobs(s, job_ids, JobStatus.SUCCEEDED, version=row.version)
         repo.promote_classes(s, [c.id for c in plan.promote])

@@ -35,7 +35,7 @@ name other code imports from here stays importable from here (``__all__``).
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, ClassVar, Self
 
 import numpy as np
@@ -349,24 +349,26 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
         return self._novelty_score(x), self._known_proba(x), novel_p
 
     def known_proba(self, samples: np.ndarray) -> np.ndarray:
-        x, used = self._checked(samples)
-        if used is None:
-            return self._known_proba(x)
-        return self._by_procedures(x, used, lambda x, keep: self._scores_from(x, keep)[1])
+        return self._one_score(samples, self._known_proba, 1)
 
     def novel_proba(self, samples: np.ndarray) -> np.ndarray:
         if not self.registry.novel_names:
             raise UnknownClassError("the model has no novel classes yet")
-        x, used = self._checked(samples)
-        if used is None:
-            return self._novel_proba(x)
-        return self._by_procedures(x, used, lambda x, keep: self._scores_from(x, keep)[2])
+        return self._one_score(samples, self._novel_proba, 2)
 
     def novelty_score(self, samples: np.ndarray) -> np.ndarray:
+        return self._one_score(samples, self._novelty_score, 0)
+
+    def _one_score(
+        self, samples: Any, direct: Callable[[np.ndarray], np.ndarray], part: int
+    ) -> np.ndarray:
+        """One of ``_scores_from``'s answers (``part``: its index there) for validated
+        ``samples``: ``direct`` where every sample is complete, else from the procedures
+        each holds."""
         x, used = self._checked(samples)
         if used is None:
-            return self._novelty_score(x)
-        return self._by_procedures(x, used, lambda x, keep: self._scores_from(x, keep)[0])
+            return direct(x)
+        return self._by_procedures(x, used, lambda x, keep: self._scores_from(x, keep)[part])
 
     def is_novel(self, samples: np.ndarray) -> np.ndarray:
         return self.novelty_score(samples) > self.novelty_threshold

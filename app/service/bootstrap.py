@@ -31,6 +31,7 @@ from app.framework.recognizer import RAW_TRIALS, TactileRecognizer
 from app.framework.registry import make_method
 from app.store import bundles, leases, migrate, repo
 from app.store.enums import ClassKind, Origin, VersionReason
+from app.store.models import ModelVersion
 from app.store.vocabulary import vector_key
 
 LEASE = "bootstrap"
@@ -165,21 +166,7 @@ def store_base_model(s: Session, model: TactileRecognizer, dataset: Dataset) -> 
     # graded values as they are, values not known as not known
     for name, vector in zip(dataset.class_names, dataset.attribute_values, strict=True):
         ids.append(repo.add_class(s, name, vector_key(vector), ClassKind.KNOWN, Origin.DATASET).id)
-    row = repo.add_version(
-        s,
-        method=model.method,
-        reason=VersionReason.BOOTSTRAP,
-        base_version=None,
-        bundle_sha256=bundles.store_model(s, bundle.split(model)),
-        input_shape=list(model.input_shape),
-        input_kind=model.input_kind,
-        attribute_names=list(model.registry.attribute_names),
-        procedures=list(model.procedures),
-        first_procedure=model.first_procedure,
-        metrics=repo.jsonable(model.metrics),
-        classes=model_classes(model),
-        sample_ids=[],
-    )
+    row = add_model_version(s, model, bundle.split(model), VersionReason.BOOTSTRAP, None, [])
     repo.activate(s, row.version)
     if isinstance(dataset, BioTacDataset):
         samples, trials = dataset.trials, dataset.trial_ids
@@ -187,6 +174,34 @@ def store_base_model(s: Session, model: TactileRecognizer, dataset: Dataset) -> 
         samples, trials = dataset.samples, dataset.trials
     repo.add_dataset_samples(s, np.asarray(ids)[dataset.labels], samples, trials)
     return row.version
+
+
+def add_model_version(
+    s: Session,
+    model: TactileRecognizer,
+    split: bundles.Split,
+    reason: str,
+    base_version: int | None,
+    sample_ids: list[int],
+) -> ModelVersion:
+    """A new, inactive version row for ``model`` (its bundle's parts ``split``, stored
+    here), with what the store keeps of it: method, input, attributes, procedures,
+    metrics and classes."""
+    return repo.add_version(
+        s,
+        method=model.method,
+        reason=reason,
+        base_version=base_version,
+        bundle_sha256=bundles.store_model(s, split),
+        input_shape=list(model.input_shape),
+        input_kind=model.input_kind,
+        attribute_names=list(model.registry.attribute_names),
+        procedures=list(model.procedures),
+        first_procedure=model.first_procedure,
+        metrics=repo.jsonable(model.metrics),
+        classes=model_classes(model),
+        sample_ids=sample_ids,
+    )
 
 
 def model_classes(model: TactileRecognizer) -> list[dict[str, str]]:

@@ -82,26 +82,26 @@ def test_no_model_is_the_routes_answer_too(client, stack, app, sample, monkeypat
     assert fast.json() == slow.json() and fast.headers["retry-after"] == "5"
 
 
+def metric(client, pattern: str) -> float:
+    """The value on the line of /metrics that ``pattern`` matches; 0 where none does."""
+    found = re.search(pattern, client.get("/metrics").text, re.M)
+    return float(found.group(1)) if found else 0.0
+
+
 def counted(client, status: int) -> float:
-    text = client.get("/metrics").text
-    found = re.search(
+    return metric(
+        client,
         rf'^tactile_http_requests_total\{{method="POST",route="/v1/recognize",'
         rf'status="{status}"\}} (\S+)$',
-        text,
-        re.M,
     )
-    return float(found.group(1)) if found else 0.0
 
 
 def latency_count(client) -> float:
-    text = client.get("/metrics").text
-    found = re.search(
+    return metric(
+        client,
         r'^tactile_http_request_duration_seconds_count\{method="POST",'
         r'route="/v1/recognize"\} (\S+)$',
-        text,
-        re.M,
     )
-    return float(found.group(1)) if found else 0.0
 
 
 def test_fast_path_requests_are_counted_by_status(client, sample):

@@ -146,27 +146,21 @@ def test_keys_older_than_the_ttl_are_purged_by_the_worker(client, app, worker, d
 
     from sqlalchemy import update
 
-    old, fresh = unused_vectors(dataset, 2)
-    assert (
-        client.post(
+    def register(name: str, vector: list) -> None:
+        r = client.post(
             "/v1/classes",
-            json={"name": "old", "attribute_vector": old},
-            headers={"Idempotency-Key": "k-old"},
-        ).status_code
-        == 202
-    )
+            json={"name": name, "attribute_vector": vector},
+            headers={"Idempotency-Key": f"k-{name}"},
+        )
+        assert r.status_code == 202
+
+    old, fresh = unused_vectors(dataset, 2)
+    register("old", old)
     with app.state.service.sessions.begin() as s:  # age the first record past the 24 h default
         s.execute(
             update(IdempotencyRecord).values(created_at=datetime.now(UTC) - timedelta(hours=25))
         )
-    assert (
-        client.post(
-            "/v1/classes",
-            json={"name": "fresh", "attribute_vector": fresh},
-            headers={"Idempotency-Key": "k-fresh"},
-        ).status_code
-        == 202
-    )
+    register("fresh", fresh)
     worker.run_once()
     with app.state.service.sessions() as s:
         assert set(s.scalars(select(IdempotencyRecord.key))) == {"k-fresh"}

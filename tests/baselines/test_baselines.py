@@ -11,10 +11,11 @@ from app.baselines.dap import DAPRecognizer, dap_log_scores, fit_logistic
 from app.baselines.eszsl import ESZSLRecognizer, eszsl_fit, signatures
 from app.baselines.extra_trees import ExtraTreesRecognizer
 from app.data.simulator import simulate_dataset
-from app.evaluation.protocol import FIGURES, evaluate
+from app.evaluation.protocol import FIGURES
 from app.framework import bundle
 from app.framework.errors import FrameworkError, InputShapeError, NonFiniteInputError
 from app.framework.registry import make_method
+from tests.simulated_protocol import N_NOVEL, small_protocol
 
 BASELINES = ["extratrees", "dap", "eszsl"]
 FAST = {  # fewer trees than the defaults, to keep the suite fast
@@ -22,22 +23,11 @@ FAST = {  # fewer trees than the defaults, to keep the suite fast
     "dap": {"n_estimators": 60, "C": 0.1},
     "eszsl": {"n_estimators": 60},
 }
-N_NOVEL = 6
 
 
 @pytest.fixture(scope="module")
 def protocol_results():
-    ds = simulate_dataset(n_objects=30, trials_per_object=6, seed=0)
-    return evaluate(
-        ds,
-        BASELINES,
-        n_novel=N_NOVEL,
-        n_splits=3,
-        seed=0,
-        test_trials=1,
-        method_params=FAST,
-        progress=False,
-    )
+    return small_protocol(BASELINES, 3, FAST)
 
 
 @pytest.mark.parametrize("method", BASELINES)

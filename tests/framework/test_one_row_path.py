@@ -88,20 +88,9 @@ def test_one_row_ranks_ties_as_the_general_path(n_known, n_novel, dtype):
         general = TactileRecognizer._rows(model, scores, known_p, novel_p, top_k)
         for i in range(n):
             rows = slice(i, i + 1)
-            one = TactileRecognizer._one_row(
-                model,
-                scores[rows],
-                known_p[rows],
-                None if novel_p is None else novel_p[rows],
-                top_k,
-            )
-            alone = TactileRecognizer._rows(
-                model,
-                scores[rows],
-                known_p[rows],
-                None if novel_p is None else novel_p[rows],
-                top_k,
-            )
+            row = (scores[rows], known_p[rows], None if novel_p is None else novel_p[rows])
+            one = TactileRecognizer._one_row(model, *row, top_k)
+            alone = TactileRecognizer._rows(model, *row, top_k)
             assert_same(one, alone)
             if dtype is np.float64:
                 assert_same(one, general[rows])

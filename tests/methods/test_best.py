@@ -10,7 +10,7 @@ import pytest
 
 from app.data.dataset import DatasetError, TactileDataset
 from app.data.simulator import simulate_dataset
-from app.evaluation.protocol import FIGURES, evaluate
+from app.evaluation.protocol import FIGURES
 from app.framework import bundle
 from app.framework.errors import (
     AttributeVectorError,
@@ -30,28 +30,18 @@ from app.methods.attributes import (
     semantic_autoencoder,
 )
 from app.methods.best import BestRecognizer
+from tests.simulated_protocol import N_NOVEL, small_protocol
 
 FAST = {
     "n_estimators": 40,
     "tuning_rounds": 2,
     "distance_components": 8,
 }  # 8 < rank: subspace distances
-N_NOVEL = 6
 
 
 @pytest.fixture(scope="module")
 def protocol_results():
-    ds = simulate_dataset(n_objects=30, trials_per_object=6, seed=0)
-    return evaluate(
-        ds,
-        ["best"],
-        n_novel=N_NOVEL,
-        n_splits=2,
-        seed=0,
-        test_trials=1,
-        method_params={"best": FAST},
-        progress=False,
-    )
+    return small_protocol(["best"], 2, {"best": FAST})
 
 
 def test_full_protocol_beats_chance_on_novel_classes(protocol_results):

@@ -15,13 +15,13 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 
-from app.data.dataset import TactileDataset
 from app.data.simulator import simulate_dataset
 from app.framework.recognizer import RecognitionBatch
 from app.framework.registry import make_method
 from app.methods import small_batch
 from app.methods.known import KnownModel
 from app.methods.small_batch import ScoringConstants, _row_sum
+from tests.framework.test_no_attributes import without_attributes
 
 FIELDS = ("top_index", "top_probability", "is_novel", "novelty_score")
 SIZES = (1, 2, 7, 32)  # 32: BestRecognizer.small_batch_max
@@ -203,15 +203,7 @@ def test_the_scorer_reads_only_its_frozen_constants(models):
 
 def test_without_attributes_classes_from_samples_match(data):
     ds, train, novel = data
-    bare = TactileDataset(
-        samples=train.samples,
-        labels=train.labels,
-        trials=train.trials,
-        class_attributes=np.zeros((train.n_classes, 0), np.float32),
-        attribute_names=(),
-        class_names=train.class_names,
-        name="no-attributes",
-    )
+    bare = without_attributes(train)
     model = make_method("best", n_estimators=30, tuning_rounds=1).fit(bare)
     x = queries(ds, seed=3)
     for m in (

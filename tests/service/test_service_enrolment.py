@@ -130,43 +130,21 @@ def test_samples_are_read_only_once_the_method_can_learn_from_them(sessions, dat
         return [dataset.samples[0]]
 
     cannot = SimpleNamespace(method="paper", learns_classes_from_samples=False)
-    with sessions() as s, pytest.raises(enrolment.CannotLearn, match="method 'paper'") as e:
-        enrolment.register_class(
-            s,
-            "cup",
-            described(),
-            None,
-            requested_by=ENROLLER,
-            samples=samples,
-            samples_field="trials",
-            method=cannot,
+    with pytest.raises(enrolment.CannotLearn, match="method 'paper'") as e:
+        register(
+            sessions, "cup", None, None, samples=samples, samples_field="trials", method=cannot
         )
     assert e.value.field == "trials" and read == []
     needs = SimpleNamespace(graded_attributes=False, learns_classes_from_samples=True)
-    with sessions() as s, pytest.raises(enrolment.CannotLearn, match="by attributes"):
-        enrolment.register_class(
-            s,
-            "cup",
-            described(),
-            None,
-            requested_by=ENROLLER,
-            samples=samples,
-            method=needs,
-            model_has_attributes=True,
+    with pytest.raises(enrolment.CannotLearn, match="by attributes"):
+        register(
+            sessions, "cup", None, None, samples=samples, method=needs, model_has_attributes=True
         )
     assert read == []
     learns = SimpleNamespace(graded_attributes=True, learns_classes_from_samples=True)
-    with sessions() as s:
-        done = enrolment.register_class(
-            s,
-            "cup",
-            described(),
-            None,
-            requested_by=ENROLLER,
-            samples=samples,
-            method=learns,
-            model_has_attributes=True,
-        )
+    done = register(
+        sessions, "cup", None, None, samples=samples, method=learns, model_has_attributes=True
+    )
     assert read == [1] and done.cls.attribute_key == ""  # described by nothing: its samples
 
 
