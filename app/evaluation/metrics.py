@@ -7,6 +7,18 @@ from collections.abc import Sequence
 import numpy as np
 from sklearn.metrics import roc_auc_score
 
+#: the figures of one model on a mixed test of known and novel objects, as the touches and
+#: procedures measurements repeat them for each number of touches or set of procedures
+MIXED_FIGURES: tuple[str, ...] = (
+    "known_acc",
+    "nd_known_kept",
+    "nd_novel_detected",
+    "zsl",
+    "gzsl_seen",
+    "gzsl_unseen",
+    "gzsl_h",
+)
+
 
 def accuracy(y_true: Sequence, y_pred: Sequence) -> float:
     """Fraction of equal entries (labels may be ints or class names)."""

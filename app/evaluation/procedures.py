@@ -31,15 +31,7 @@ from app.data.procedures import SECONDS, keep_only
 from app.evaluation import metrics, plots
 from app.framework.recognizer import TactileRecognizer
 
-PER_SUBSET: tuple[str, ...] = (
-    "known_acc",
-    "nd_known_kept",
-    "nd_novel_detected",
-    "zsl",
-    "gzsl_seen",
-    "gzsl_unseen",
-    "gzsl_h",
-)
+PER_SUBSET: tuple[str, ...] = metrics.MIXED_FIGURES
 PER_ADAPTIVE: tuple[str, ...] = (
     *PER_SUBSET,
     "time",

@@ -38,15 +38,7 @@ from app.evaluation import metrics, plots
 from app.framework.recognizer import TactileRecognizer, group_mean
 
 OSL_GZSL_FIGURES: tuple[str, ...] = ("osl_gzsl_seen", "osl_gzsl_unseen", "osl_gzsl_h")
-PER_TOUCHES: tuple[str, ...] = (
-    "known_acc",
-    "nd_known_kept",
-    "nd_novel_detected",
-    "zsl",
-    "gzsl_seen",
-    "gzsl_unseen",
-    "gzsl_h",
-)
+PER_TOUCHES: tuple[str, ...] = metrics.MIXED_FIGURES
 
 
 def touch_figures(touches: Sequence[int]) -> tuple[str, ...]:
