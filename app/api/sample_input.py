@@ -58,7 +58,8 @@ def _nulls_as_nan(data: list, field: str) -> list[Any]:
     if not filled:
         raise Problem(422, "every procedure is missing (null); a sample needs at least one", field)
     try:
-        nan = np.full(np.shape(np.asarray(filled[0], dtype=np.float32)), np.nan, np.float32)
+        with np.errstate(over="ignore"):  # only the shape is taken here; values are checked later
+            nan = np.full(np.shape(np.asarray(filled[0], dtype=np.float32)), np.nan, np.float32)
     except ValueError:
         raise Problem(422, "its rows have different lengths", field) from None
     return [nan if row is None else row for row in data]
