@@ -150,6 +150,14 @@ def guarded(session: Session, recheck: Callable[[], None] | None = None) -> Iter
         raise
 
 
+def _live_class(session: Session, class_id: int) -> ObjectClass:
+    """The live class ``class_id``; ``NotFound`` naming ``class_id`` otherwise."""
+    cls = repo.get_class(session, class_id)
+    if cls is None:
+        raise NotFound("class", "class_id", class_id)
+    return cls
+
+
 def _committing(session: Session) -> Callable[[ObjectClass | Attribute, Job], Enrolled]:
     def finish(cls: ObjectClass | Attribute, job: Job) -> Enrolled:
         session.commit()
@@ -367,9 +375,7 @@ def redescribe_class(
     for the dataset's attributes (``DatasetClass``); a mapping sets its values for
     attributes added since. An enrolled class may not take another's vector
     (``SameDescription``)."""
-    cls = repo.get_class(session, class_id)
-    if cls is None:
-        raise NotFound("class", "class_id", class_id)
+    cls = _live_class(session, class_id)
     vocab = repo.vocabulary(session)
     field = field_of(described)
     if cls.origin == Origin.DATASET:
@@ -390,9 +396,7 @@ def redescribe_class(
 def novel_class(session: Session, class_id: int) -> ObjectClass:
     """The live class ``class_id``, one samples can be added to: a novel class (a known
     class is learnt from its training samples; ``KnownClass``)."""
-    cls = repo.get_class(session, class_id)
-    if cls is None:
-        raise NotFound("class", "class_id", class_id)
+    cls = _live_class(session, class_id)
     if cls.kind != ClassKind.NOVEL:
         raise KnownClass(
             f"class '{cls.name}' is a known class; samples can be added to novel classes only",
@@ -432,9 +436,7 @@ def withdraw_class(
     """Withdraw the enrolled class ``class_id`` with its samples from the store's live data,
     and queue the ``withdraw_class`` job that takes it out of the served model. Classes of
     the training dataset stay (``DatasetClass``); the name can be registered again."""
-    cls = repo.get_class(session, class_id)
-    if cls is None:
-        raise NotFound("class", "class_id", class_id)
+    cls = _live_class(session, class_id)
     if cls.origin != Origin.ENROLLED:
         raise DatasetClass(
             f"class '{cls.name}' comes from the training dataset; only enrolled classes "
@@ -459,9 +461,7 @@ def withdraw_sample(
     """Withdraw the enrolled sample ``sample_id`` of class ``class_id`` from the store's live
     data, and queue the ``withdraw_sample`` job that takes it out of the served model.
     Samples of the training dataset stay (``DatasetClass``)."""
-    cls = repo.get_class(session, class_id)
-    if cls is None:
-        raise NotFound("class", "class_id", class_id)
+    cls = _live_class(session, class_id)
     row = repo.get_sample(session, class_id, sample_id)
     if row is None:
         raise NotFound("sample", "sample_id", sample_id)
