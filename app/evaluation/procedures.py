@@ -21,7 +21,7 @@ duration from ``durations``.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -95,24 +95,44 @@ def measure(
     """The figures of ``procedure_figures`` for one split. ``model`` has the split's novel
     objects enrolled; ``known`` / ``novel``: (samples, class index) of the test samples."""
     (xk, yk), (xn, yn) = known, novel
-    names = model.procedures
-    n = len(names)
     x = np.concatenate([xk, xn])
     is_known = np.r_[np.ones(len(xk), bool), np.zeros(len(xn), bool)]
+
+    def figures(used: np.ndarray, prefix: str) -> dict[str, float]:
+        return _figures(model, x, used, is_known, yk, yn, known_names, novel_names, prefix)
+
+    return _sweep(model, x, None, len(x), figures, durations, targets, is_known)
+
+
+def _sweep(
+    model: TactileRecognizer,
+    x: np.ndarray,
+    groups: np.ndarray | None,
+    n_answers: int,
+    figures: Callable[[np.ndarray, str], dict[str, float]],
+    durations: np.ndarray,
+    targets: Sequence[float],
+    is_known: np.ndarray | None = None,
+) -> dict[str, float]:
+    """``figures(used, prefix)`` of the ``n_answers`` answers for every subset of the
+    procedures and for the adaptive rule at every target, with the rule's share of robot
+    time (for the known and novel answers apart where ``is_known`` says which) and its
+    number of procedures."""
+    n = len(model.procedures)
     out: dict[str, float] = {}
     for subset in subsets(n):
-        used = np.zeros((len(x), n), bool)
+        used = np.zeros((n_answers, n), bool)
         used[:, list(subset)] = True
-        prefix = f"procs{bits(subset, n)}_"
-        out.update(_figures(model, x, used, is_known, yk, yn, known_names, novel_names, prefix))
+        out.update(figures(used, f"procs{bits(subset, n)}_"))
     for t in targets:
-        used = explore(model, x, t)
+        used = explore(model, x, t, groups)
         prefix = f"{target_key(t)}_"
-        out.update(_figures(model, x, used, is_known, yk, yn, known_names, novel_names, prefix))
+        out.update(figures(used, prefix))
         share = used @ durations / durations.sum()
         out[prefix + "time"] = float(share.mean())
-        out[prefix + "time_known"] = float(share[is_known].mean())
-        out[prefix + "time_novel"] = float(share[~is_known].mean())
+        if is_known is not None:
+            out[prefix + "time_known"] = float(share[is_known].mean())
+            out[prefix + "time_novel"] = float(share[~is_known].mean())
         out[prefix + "procedures"] = float(used.sum(axis=1).mean())
     return out
 
@@ -132,7 +152,7 @@ def explore(
     while len(active):
         rows = np.flatnonzero(np.isin(g, active))
         local = np.searchsorted(active, g[rows])  # active stays sorted
-        partial = _masked(x[rows], used[active][local])
+        partial = masked(x[rows], used[active][local])
         nxt = model.recognize_batch(
             partial,
             top_k=1,
@@ -174,32 +194,22 @@ def measure_known(
     trial's class. Per subset and target: ``known_acc`` (trials named right, their samples
     fused) and ``nd_known_kept`` (trials the model calls known); per target also ``time``
     and ``procedures``."""
-    n = len(model.procedures)
     y = np.asarray(y)
     g = np.asarray(groups, np.int64)
 
     def figures(used: np.ndarray, prefix: str) -> dict[str, float]:
-        answers = model.recognize_batch(_masked(x, used[g]), top_k=1, groups=g)
+        answers = model.recognize_batch(masked(x, used[g]), top_k=1, groups=g)
         return {
             prefix + "known_acc": float(np.mean(answers.top_index[:, 0] == y)),
             prefix + "nd_known_kept": float(np.mean(~answers.is_novel)),
         }
 
-    out: dict[str, float] = {}
-    for subset in subsets(n):
-        used = np.zeros((len(y), n), bool)
-        used[:, list(subset)] = True
-        out.update(figures(used, f"procs{bits(subset, n)}_"))
-    for t in targets:
-        used = explore(model, x, t, g)
-        prefix = f"{target_key(t)}_"
-        out.update(figures(used, prefix))
-        out[prefix + "time"] = float((used @ durations / durations.sum()).mean())
-        out[prefix + "procedures"] = float(used.sum(axis=1).mean())
-    return out
+    return _sweep(model, x, g, len(y), figures, durations, targets)
 
 
-def _masked(x: np.ndarray, used: np.ndarray) -> np.ndarray:
+def masked(x: np.ndarray, used: np.ndarray) -> np.ndarray:
+    """A float32 copy of complete samples ``x`` with the procedures ``used`` ((N, P) bool)
+    does not mark made missing (NaN), as a robot that stopped there would send them."""
     out = np.array(x, np.float32, copy=True)
     for pattern in np.unique(used, axis=0):
         rows = (used == pattern).all(axis=1)
@@ -208,7 +218,7 @@ def _masked(x: np.ndarray, used: np.ndarray) -> np.ndarray:
 
 
 def _figures(model, x, used, is_known, yk, yn, known_names, novel_names, prefix):
-    xm = _masked(x, used)
+    xm = masked(x, used)
     xk, xn = xm[is_known], xm[~is_known]
     threshold = model.novelty_threshold
     out = {

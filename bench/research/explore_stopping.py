@@ -19,7 +19,12 @@ at several targets, the next procedure chosen by the model's expected gain
 Prints, per rule and target, the mean over development splits of known_acc, gzsl_h and the
 share of robot time (``app.evaluation.procedures.DURATIONS``), beside all procedures'.
 
-    .venv/bin/python bench/research/explore_stopping.py --seeds 1,2 --novel 6
+The figures the code and docs/RESULTS.md cite (seeds 1-2, 5 splits each):
+
+    .venv/bin/python bench/research/explore_stopping.py --seeds 1,2 --splits 5 --novel 6 \
+        --targets 0.3,0.4,0.5 --rules top_per_second,two_per_second
+    .venv/bin/python bench/research/explore_stopping.py --seeds 1,2 --splits 5 --novel 6 \
+        --targets 0.3,0.4,0.5 --first SQUEEZE_SET_PRESSURE_SLOW
 """
 
 from __future__ import annotations
@@ -32,32 +37,25 @@ import numpy as np
 from dev_splits import add_split_arguments, enrolled_best, splits, tiny
 
 from app.data.phac2 import load_phac2
-from app.data.procedures import keep_only
 from app.evaluation import metrics
-from app.evaluation.procedures import DURATIONS, check_durations
+from app.evaluation.procedures import DURATIONS, check_durations, masked
 
 RULES = ("top", "two", "agree", "top_per_second", "two_per_second")
 
 
-def masked(x: np.ndarray, used: np.ndarray, n: int) -> np.ndarray:
-    out = np.array(x, np.float32, copy=True)
-    for pattern in np.unique(used, axis=0):
-        rows = (used == pattern).all(axis=1)
-        out[rows] = keep_only(x[rows], range(n), np.flatnonzero(pattern).tolist())
-    return out
-
-
-def explore(model, x: np.ndarray, rule: str, target: float, seconds: np.ndarray) -> np.ndarray:
-    """(N, P) procedures used under ``rule`` at ``target``."""
+def explore(
+    model, x: np.ndarray, rule: str, target: float, seconds: np.ndarray, first: int
+) -> np.ndarray:
+    """(N, P) procedures used under ``rule`` at ``target``, starting with ``first``."""
     n = len(model.procedures)
     per_second = rule.endswith("_per_second")
     cost = seconds if per_second else np.ones(n)
     used = np.zeros((len(x), n), bool)
-    used[:, model.procedures.index(model.first_procedure)] = True
-    last = np.full(len(x), model.procedures.index(model.first_procedure))
+    used[:, first] = True
+    last = np.full(len(x), first)
     active = np.arange(len(x))
     while len(active):
-        partial = masked(x[active], used[active], n)
+        partial = masked(x[active], used[active])
         batch = model.recognize_batch(partial, 1, None, 1.0)
         sure = batch.top_probability[:, 0] >= target
         count = used[active].sum(axis=1)
@@ -66,7 +64,7 @@ def explore(model, x: np.ndarray, rule: str, target: float, seconds: np.ndarray)
         elif rule == "agree":
             alone = np.zeros_like(used[active])
             alone[np.arange(len(active)), last[active]] = True
-            single = model.recognize_batch(masked(x[active], alone, n), 1, None, 1.0)
+            single = model.recognize_batch(masked(x[active], alone), 1, None, 1.0)
             same = single.top_index[:, 0] == batch.top_index[:, 0]
             sure &= (count >= 2) & same
         ask = ~sure & ~used[active].all(axis=1)
@@ -79,7 +77,7 @@ def explore(model, x: np.ndarray, rule: str, target: float, seconds: np.ndarray)
 
 
 def figures(model, x, used, is_known, yk, true) -> tuple[float, float]:
-    xm = masked(x, used, len(model.procedures))
+    xm = masked(x, used)
     known_acc = metrics.argmax_accuracy(model.known_proba(xm[is_known]), yk)
     answers = model.recognize_batch(xm, top_k=1)
     predicted = [answers.class_names[i] for i in answers.top_index[:, 0]]
@@ -91,10 +89,19 @@ def main() -> int:
     add_split_arguments(p)
     p.add_argument("--targets", default="0.5,0.7,0.9")
     p.add_argument("--rules", default=",".join(RULES), help=f"some of {', '.join(RULES)}")
+    p.add_argument(
+        "--first",
+        default=None,
+        help="the procedure every rule starts with (default: the model's first_procedure, "
+        "the largest gain per second; until 2026-11-26 the largest gain, squeeze: "
+        "SQUEEZE_SET_PRESSURE_SLOW)",
+    )
     args = tiny(p.parse_args())
     targets = [float(t) for t in args.targets.split(",")]
     data = load_phac2(args.data)
     durations = check_durations(data.procedures, DURATIONS)
+    if args.first is not None and args.first not in data.procedures:
+        p.error(f"--first: one of {', '.join(data.procedures)}, got {args.first!r}")
     rows: dict[str, list[tuple[float, float, float]]] = {}
     for seed, split in splits(data, args, development_only=True):
         train = split.train_dataset(data)
@@ -107,9 +114,10 @@ def main() -> int:
         is_known = np.r_[np.ones(len(xk), bool), np.zeros(len(xn), bool)]
         every = np.ones((len(x), len(data.procedures)), bool)
         rows.setdefault("all", []).append((*figures(model, x, every, is_known, yk, true), 1.0))
+        first = model.procedures.index(args.first or model.first_procedure)
         for rule in args.rules.split(","):
             for t in targets:
-                used = explore(model, x, rule, t, durations)
+                used = explore(model, x, rule, t, durations, first)
                 share = float((used @ durations / durations.sum()).mean())
                 got = (*figures(model, x, used, is_known, yk, true), share)
                 rows.setdefault(f"{rule}@{t}", []).append(got)

@@ -283,7 +283,7 @@ def test_explore_answers_a_trial_from_its_fingers_together(data):
     used = procedures.explore(model, images, 1.0, index)  # sure only at probability 1
     assert used.shape == (len(trials), 3) and (used.sum(axis=1) >= 2).all()
     answers = model.recognize_batch(
-        procedures._masked(images, used[index]), top_k=1, groups=index, target_confidence=1.0
+        procedures.masked(images, used[index]), top_k=1, groups=index, target_confidence=1.0
     )
     assert ((answers.top_probability[:, 0] == 1.0) | used.all(axis=1)).all()
     used = procedures.explore(model, images, 1e-9, index)  # sure at once: two phases
