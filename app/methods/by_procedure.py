@@ -21,7 +21,8 @@ touch of c (the mean of c's training samples on j's block, ``q_c``); fused with 
 expected rise of the probability on the true class, ``sum_c w_c (fused_c[c] - p[c])``,
 and the procedure chosen has the largest gain per second of robot time
 (``app.data.procedures.seconds_of``). On PHAC-2's development splits (seeds 1-2, 10
-splits, target 0.5, two procedures at least; ``bench/research/explore_stopping.py``) the
+splits, target 0.5, two procedures at least, squeeze first;
+``bench/research/explore_stopping.py --first SQUEEZE_SET_PRESSURE_SLOW``) the
 gain alone used 0.66 of the robot time, the gain per second 0.54, with known-object
 accuracy alike (-0.001 and -0.003 from all procedures) and ``gzsl_h`` -0.026 and +0.005.
 Class means are kept per known class (K x D, one pass over the training samples); novel
