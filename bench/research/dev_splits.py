@@ -72,13 +72,14 @@ def splits(
             yield seed, split
 
 
-def enrolled_best(dataset: TactileDataset, split: ZslSplit):
-    """``best`` (default parameters, seed 0) fitted on the split's known objects, its novel
-    objects enrolled by their attribute vectors (taken ones allowed, as PHAC-2 has them)."""
+def enrolled_best(dataset: TactileDataset, split: ZslSplit, params: dict | None = None):
+    """``best`` (default parameters, or ``params`` in their place; seed 0) fitted on the
+    split's known objects, its novel objects enrolled by their attribute vectors (taken ones
+    allowed, as PHAC-2 has them)."""
     from app.evaluation.protocol import make_recognizer
 
     return (
-        make_recognizer("best", None, 0)
+        make_recognizer("best", params, 0)
         .fit(split.train_dataset(dataset))
         .add_novel_classes(
             list(split.novel_names), split.novel_attributes(dataset), allow_known_vectors=True

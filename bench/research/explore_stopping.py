@@ -96,6 +96,12 @@ def main() -> int:
         "the largest gain per second; until 2026-11-26 the largest gain, squeeze: "
         "SQUEEZE_SET_PRESSURE_SLOW)",
     )
+    p.add_argument(
+        "--params",
+        type=json.loads,
+        default=None,
+        help="best's parameters in place of its defaults, as JSON (e.g. '{\"procedure_estimators\": 100}')",
+    )
     args = tiny(p.parse_args())
     targets = [float(t) for t in args.targets.split(",")]
     data = load_phac2(args.data)
@@ -105,7 +111,7 @@ def main() -> int:
     rows: dict[str, list[tuple[float, float, float]]] = {}
     for seed, split in splits(data, args, development_only=True):
         train = split.train_dataset(data)
-        model = enrolled_best(data, split)
+        model = enrolled_best(data, split, args.params)
         xk, xn = data.samples[split.known_test_idx], data.samples[split.novel_test_idx]
         yk = split.known_labels(data, split.known_test_idx)
         yn = split.novel_labels(data, split.novel_test_idx)

@@ -120,13 +120,15 @@ def test_bundles_carry_the_parameter_names_they_always_had():
         "novelty_holdout_trials",
         "tuning_rounds", "tuning_objects", "distance_components", "forest_codes",
         "approximate_above", "sae_lambda", "sae_temperature", "n_jobs", "featurizer_params",
-        "by_procedure",
+        "by_procedure", "procedure_estimators",
     ]  # fmt: skip
     # tuning_objects, forest_codes, approximate_above and attribute_samples came with the
     # forest grown on class codes; a bundle without them loads as what it was made with (0:
     # every tuning round, a classifier's forest, exact distances, every sample;
     # tests/methods/test_scale_parts.py); by_procedure came with answers from some
-    # procedures, and a bundle without it loads as one whole model (False)
+    # procedures, and a bundle without it loads as one whole model (False);
+    # procedure_estimators came later, and a bundle without it refits its per-procedure
+    # models with n_estimators trees, as it was made (None)
 
 
 def test_a_constructor_with_kwargs_is_refused():

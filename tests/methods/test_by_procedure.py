@@ -47,6 +47,15 @@ def test_complete_samples_are_answered_as_by_the_whole_model_alone(data, model):
     assert batch.procedures_used.all() and (batch.next_procedure == -1).all()
 
 
+def test_each_procedure_model_has_procedure_estimators_trees(data, model):
+    # the default, 50, but never more than the whole model's (30 here)
+    assert {m.known_.cues_model.forest.n_trees for m in model.procedures_.models} == {30}
+    assert all(m.procedures_ is None for m in model.procedures_.models)
+    fewer = BestRecognizer(**PARAMS, procedure_estimators=7).fit(data[0])
+    assert {m.known_.cues_model.forest.n_trees for m in fewer.procedures_.models} == {7}
+    assert fewer.known_.cues_model.forest.n_trees == 30
+
+
 def test_every_subset_of_procedures_is_answered_from_its_procedures(data, model):
     _, test, _ = data
     chance = 1 / test.n_classes
