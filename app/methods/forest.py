@@ -198,22 +198,35 @@ class FlatForest:
         """A forest that has also learnt samples ``x`` (N, D) of classes ``y`` (in 0 …
         ``n_classes``-1, ``n_classes`` at least this forest's), without growing it again.
 
-        ``seen_x``, ``seen_y``: the samples it was grown on (or those it has learnt since).
-        In every tree, a leaf that the new samples reach is grown further on its own samples,
-        seen and new, by scikit-learn's ``ExtraTreeClassifier`` (``max_features`` as grown),
-        until its leaves are pure; a leaf that stays one class only counts the new samples.
+        ``seen_x``, ``seen_y``: the samples it was grown on (or those it has learnt since);
+        ``seen_x`` is anything whose rows ``seen_x[rows]`` gives. In every tree, a leaf that
+        the new samples reach is grown further on its own samples, seen and new, by an
+        extremely randomised tree of scikit-learn (``max_features`` as grown) until its
+        leaves are pure; a leaf that stays one class only counts the new samples. Only the seen
+        samples of the classes those leaves hold are taken through the trees (a leaf's
+        distribution names every class that reached it), so the cost does not grow with the
+        number of seen samples beyond picking them out.
         The splits above those leaves were chosen without the new samples, so the result
         differs from a forest grown on everything (bounded in tests/methods/test_grow_known.py).
         """
-        from sklearn.tree import ExtraTreeClassifier
+        from sklearn import config_context
+        from sklearn.tree import ExtraTreeRegressor
 
         y, seen_y = np.asarray(y, np.int64), np.asarray(seen_y, np.int64)
         if n_classes < self.n_classes or len(y) != len(x) or len(seen_y) != len(seen_x):
             raise ValueError("with_samples needs one class per sample and no fewer classes")
         if len(y) and (y.min() < 0 or y.max() >= n_classes):
             raise ValueError(f"sample classes must lie in 0 … {n_classes - 1}")
-        x, seen_x = self._inputs(x), self._inputs(seen_x)
-        new_leaf, seen_leaf = self.apply(x), self.apply(seen_x)  # (N, trees) leaf nodes
+        x = self._inputs(x)
+        new_leaf = self.apply(x)  # (N, trees) leaf nodes
+        leaves = self.leaf_of_node[np.unique(new_leaf)]
+        starts, ends = self.leaf_ptr[leaves], self.leaf_ptr[leaves + 1]
+        entries = np.repeat(ends - np.cumsum(ends - starts), ends - starts) + np.arange(
+            int((ends - starts).sum())
+        )
+        near_rows = np.flatnonzero(np.isin(seen_y, self.leaf_class[entries]))
+        seen_x, seen_y = self._inputs(np.asarray(seen_x[near_rows])), seen_y[near_rows]
+        seen_leaf = self.apply(seen_x)
         feature, threshold = self.feature.copy(), self.threshold.copy()
         left, right, leaf_of_node = self.left.copy(), self.right.copy(), self.leaf_of_node.copy()
         n_nodes, n_leaves = len(feature), len(self.leaf_count)
@@ -235,10 +248,20 @@ class FlatForest:
                 labels = np.concatenate([seen_y[here], y[members]])
                 leaf = int(self.leaf_of_node[node])
                 sub = None
-                if len(np.unique(labels)) > 1:
-                    local = ExtraTreeClassifier(
-                        max_features=max_features, random_state=int(rng.integers(2**31))
-                    ).fit(np.concatenate([seen_x[here], x[members]]), labels)
+                classes, local_y = np.unique(labels, return_inverse=True)
+                if len(classes) > 1:
+                    # Thousands of tiny fits a promotion, where scikit-learn's checks of the
+                    # parameters, inputs and targets cost more than the fit: a regression
+                    # tree on the one-hot classes (its squared error is the Gini impurity)
+                    # with the checks off, on float32 C-ordered inputs as it wants them.
+                    with config_context(skip_parameter_validation=True):
+                        local = ExtraTreeRegressor(
+                            max_features=max_features, random_state=int(rng.integers(2**31))
+                        ).fit(
+                            np.concatenate([seen_x[here], x[members]]),
+                            np.eye(len(classes))[local_y],
+                            check_input=False,
+                        )
                     sub = local.tree_ if local.tree_.node_count > 1 else None
                 if sub is None:  # one class, or no split separates them: count them in
                     found, k = np.unique(y[members], return_counts=True)
@@ -263,12 +286,12 @@ class FlatForest:
                 extra["left"].append(lft[1:])
                 extra["right"].append(rgt[1:])
                 extra["leaf_of_node"].append(leaf_ids[1:])
-                value = sub.value[is_leaf, 0, :]
+                value = sub.value[is_leaf, :, 0]  # class shares
                 lr, lc = np.nonzero(value)
                 share = value[lr, lc] / value[lr].sum(axis=1)
                 n_here = sub.n_node_samples[is_leaf]
                 rows.append(n_leaves + lr)
-                cols.append(local.classes_[lc])
+                cols.append(classes[lc])
                 mass.append(share * n_here[lr])
                 counts.append(n_here.astype(np.int64))
                 n_nodes += sub.node_count - 1

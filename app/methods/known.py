@@ -71,6 +71,20 @@ def class_means(z: np.ndarray, y: np.ndarray, n_classes: int) -> np.ndarray:
     return np.asarray(onehot @ np.asarray(z, np.float64))
 
 
+class _Unweighted:
+    """Rows of the weighted reference samples ``reference / weights``, divided on demand: a
+    promotion reads a few of them, and the whole quotient is the size of the reference."""
+
+    def __init__(self, reference: np.ndarray, weights: np.ndarray) -> None:
+        self.reference, self.weights = reference, weights
+
+    def __len__(self) -> int:
+        return len(self.reference)
+
+    def __getitem__(self, rows: np.ndarray) -> np.ndarray:
+        return self.reference[rows] / self.weights
+
+
 class ForestCues:
     """Scaler + forest + weighted reference samples: the known-class model and raw cues."""
 
@@ -160,7 +174,7 @@ class ForestCues:
                 z,
                 y,
                 n_classes,
-                self.reference / self.weights,  # the scaled samples it has learnt
+                _Unweighted(self.reference, self.weights),  # the scaled samples it has learnt
                 self.reference_labels,
                 max_features,
                 seed,

@@ -48,6 +48,33 @@ def test_grown_forest_keeps_what_it_knew_and_learns_the_new_class():
     assert (FlatForest.from_state(state, OBJECTS - 1, x.shape[1]).leaf_count == 1).all()
 
 
+def test_growing_reads_only_the_seen_samples_of_the_classes_it_reaches():
+    ds, train = _split(1)
+    x = ds.samples.reshape(len(ds.samples), -1)[train]
+    y = ds.labels[train]
+    old = y < OBJECTS - 1
+    forest = FlatForest.grow(x[old], y[old], OBJECTS - 1, 20, "sqrt", 0, 1, codes=8)
+
+    class Seen:  # the seen samples, counting the rows read
+        read: list = []
+
+        def __len__(self):
+            return int(old.sum())
+
+        def __getitem__(self, rows):
+            Seen.read.extend(np.asarray(rows).tolist())
+            return x[old][rows]
+
+    partial = forest.with_samples(x[~old], y[~old], OBJECTS, Seen(), y[old], "sqrt", 0)
+    whole = forest.with_samples(x[~old], y[~old], OBJECTS, x[old], y[old], "sqrt", 0)
+    for key, value in whole.get_state().items():
+        np.testing.assert_array_equal(partial.get_state()[key], value, err_msg=key)
+    reached = forest.leaf_of_node[np.unique(forest.apply(x[~old]))]
+    held = {int(forest.leaf_class[e]) for n in reached for e in range(*forest.leaf_ptr[n : n + 2])}
+    assert {int(c) for c in y[old][Seen.read]} == held  # those classes' samples, no others
+    assert len(Seen.read) < old.sum()
+
+
 def test_promotion_without_a_refit_stays_near_a_full_fit():
     """Over 3 seeds, 4 promotions into a 36-object model against a fit on all 40: held-out
     accuracy within 0.05 of the full fit's, and on the promoted objects' 24 held-out trials
