@@ -48,8 +48,10 @@ def test_complete_samples_are_answered_as_by_the_whole_model_alone(data, model):
 
 
 def test_each_procedure_model_has_procedure_estimators_trees(data, model):
-    # the default, 50, but never more than the whole model's (30 here)
+    # the default: as many as the whole model's (30 here), and never more
     assert {m.known_.cues_model.forest.n_trees for m in model.procedures_.models} == {30}
+    more = BestRecognizer(**{**PARAMS, "n_estimators": 10}, procedure_estimators=50)
+    assert {m.n_estimators for m in more.fit(data[0]).procedures_.models} == {10}
     assert all(m.procedures_ is None for m in model.procedures_.models)
     fewer = BestRecognizer(**PARAMS, procedure_estimators=7).fit(data[0])
     assert {m.known_.cues_model.forest.n_trees for m in fewer.procedures_.models} == {7}
