@@ -482,12 +482,47 @@ def _walk_block(x, lo, hi, nodes, thresholds, root, at):
 
 
 @njit(cache=True, nogil=True)
+def _walk_trees(
+    x, i, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, at, leaves, proba
+):
+    """``_walk`` of sample i alone: _BLOCK trees taken down together (independent load
+    chains, which a single sample's one path per tree lacks), their leaves then added in
+    tree order, so the sums have the same bits as ``_walk``'s."""
+    for lo in range(0, roots.shape[0], _BLOCK):
+        hi = min(lo + _BLOCK, roots.shape[0])
+        for k in range(hi - lo):
+            at[k] = roots[lo + k]
+        descending = True
+        while descending:
+            descending = False
+            for k in range(hi - lo):
+                node = at[k]
+                f = nodes[node, 0]
+                if f >= 0:
+                    at[k] = nodes[node, 2 + (x[i, f] > thresholds[node, 1])]
+                    descending = True
+        for k in range(hi - lo):
+            if leaves.shape[0] > 0:
+                leaves[i, lo + k] = at[k]
+            if proba.shape[0] > 0:
+                leaf = nodes[at[k], 2]
+                for j in range(leaf_ptr[leaf], leaf_ptr[leaf + 1]):
+                    proba[i, leaf_class[j]] += leaf_value[j]
+
+
+@njit(cache=True, nogil=True)
 def _walk(x, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, leaves, proba):
     """Every sample through every tree: the leaf node reached into ``leaves`` (N, T) and/or
     the leaf distributions summed into ``proba`` (N, K); an empty array skips that output.
     Sums go tree by tree in tree order (the same bits on every call and after a bundle
     round-trip)."""
     at = np.empty(_BLOCK, np.int32)
+    if x.shape[0] < _BLOCK:  # too few samples for a block: take a block of trees down instead
+        for i in range(x.shape[0]):
+            _walk_trees(
+                x, i, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, at, leaves, proba
+            )
+        return
     for lo in range(0, x.shape[0], _BLOCK):
         hi = min(lo + _BLOCK, x.shape[0])
         for t in range(roots.shape[0]):

@@ -33,6 +33,20 @@ def test_matches_sklearn(data, cls):
     assert flat.n_trees == 25
 
 
+@pytest.mark.parametrize("rows", [1, 3, 7])
+def test_a_few_samples_walk_blocks_of_trees_to_the_same_bits(data, rows):
+    # fewer samples than a block take blocks of trees down instead; 25 trees leave a
+    # partial block of trees
+    x, y = data
+    flat = FlatForest.from_sklearn(ExtraTreesClassifier(n_estimators=25, random_state=0).fit(x, y))
+    q = np.random.default_rng(2).normal(size=(40, 7)).astype(np.float32)
+    every = flat.predict_proba(q)
+    few = np.concatenate([flat.predict_proba(q[i : i + rows]) for i in range(0, 40, rows)])
+    assert np.array_equal(few, every)
+    leaves = np.concatenate([flat.apply(q[i : i + rows]) for i in range(0, 40, rows)])
+    assert np.array_equal(leaves, flat.apply(q))
+
+
 def test_inputs_at_the_thresholds_go_where_sklearn_sends_them(data):
     """The walk compares in float32; values on and right beside each float64 threshold
     must still take scikit-learn's branch."""
