@@ -466,48 +466,44 @@ _BLOCK = 8  # samples taken through a tree together (independent load chains)
 
 
 @njit(cache=True, nogil=True)
-def _walk_block(x, lo, hi, nodes, thresholds, root, at):
-    """The leaf node each sample lo … hi-1 reaches from ``root``, into ``at[:hi-lo]``."""
-    for k in range(hi - lo):
-        at[k] = root
+def _descend(x, rows, nodes, thresholds, at, n):
+    """Chains k < n, each sample ``x[rows[k]]`` from node ``at[k]``, down to their leaf
+    nodes (into ``at``), a step of every chain at a time: independent load chains."""
     descending = True
     while descending:
         descending = False
-        for k in range(hi - lo):
+        for k in range(n):
             node = at[k]
             f = nodes[node, 0]
             if f >= 0:
-                at[k] = nodes[node, 2 + (x[lo + k, f] > thresholds[node, 1])]
+                at[k] = nodes[node, 2 + (x[rows[k], f] > thresholds[node, 1])]
                 descending = True
 
 
 @njit(cache=True, nogil=True)
-def _walk_trees(
-    x, i, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, at, leaves, proba
-):
-    """``_walk`` of sample i alone: _BLOCK trees taken down together (independent load
-    chains, which a single sample's one path per tree lacks), their leaves then added in
-    tree order, so the sums have the same bits as ``_walk``'s."""
+def _reached(i, t, node, nodes, leaf_ptr, leaf_class, leaf_value, leaves, proba):
+    """Sample i reached leaf ``node`` in tree t: into ``leaves`` and/or ``proba``."""
+    if leaves.shape[0] > 0:
+        leaves[i, t] = node
+    if proba.shape[0] > 0:
+        leaf = nodes[node, 2]
+        for j in range(leaf_ptr[leaf], leaf_ptr[leaf + 1]):
+            proba[i, leaf_class[j]] += leaf_value[j]
+
+
+@njit(cache=True, nogil=True)
+def walk_trees(x, i, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, leaves, proba):
+    """``_walk`` of sample i alone: _BLOCK trees taken down together (a single sample has
+    one path per tree, so a block of samples gives it no independent chains), their leaves
+    then added in tree order, so the sums have the same bits as ``_walk``'s."""
+    at = np.empty(_BLOCK, np.int32)
+    rows = np.full(_BLOCK, i, np.int64)
     for lo in range(0, roots.shape[0], _BLOCK):
         hi = min(lo + _BLOCK, roots.shape[0])
+        at[: hi - lo] = roots[lo:hi]
+        _descend(x, rows, nodes, thresholds, at, hi - lo)
         for k in range(hi - lo):
-            at[k] = roots[lo + k]
-        descending = True
-        while descending:
-            descending = False
-            for k in range(hi - lo):
-                node = at[k]
-                f = nodes[node, 0]
-                if f >= 0:
-                    at[k] = nodes[node, 2 + (x[i, f] > thresholds[node, 1])]
-                    descending = True
-        for k in range(hi - lo):
-            if leaves.shape[0] > 0:
-                leaves[i, lo + k] = at[k]
-            if proba.shape[0] > 0:
-                leaf = nodes[at[k], 2]
-                for j in range(leaf_ptr[leaf], leaf_ptr[leaf + 1]):
-                    proba[i, leaf_class[j]] += leaf_value[j]
+            _reached(i, lo + k, at[k], nodes, leaf_ptr, leaf_class, leaf_value, leaves, proba)
 
 
 @njit(cache=True, nogil=True)
@@ -515,22 +511,20 @@ def _walk(x, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, leaves,
     """Every sample through every tree: the leaf node reached into ``leaves`` (N, T) and/or
     the leaf distributions summed into ``proba`` (N, K); an empty array skips that output.
     Sums go tree by tree in tree order (the same bits on every call and after a bundle
-    round-trip)."""
-    at = np.empty(_BLOCK, np.int32)
-    if x.shape[0] < _BLOCK:  # too few samples for a block: take a block of trees down instead
+    round-trip). _BLOCK samples go down a tree together; fewer take trees in blocks."""
+    if x.shape[0] < _BLOCK:
         for i in range(x.shape[0]):
-            _walk_trees(
-                x, i, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, at, leaves, proba
+            walk_trees(
+                x, i, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, leaves, proba
             )
         return
+    at = np.empty(_BLOCK, np.int32)
+    rows = np.empty(_BLOCK, np.int64)
     for lo in range(0, x.shape[0], _BLOCK):
         hi = min(lo + _BLOCK, x.shape[0])
         for t in range(roots.shape[0]):
-            _walk_block(x, lo, hi, nodes, thresholds, roots[t], at)
             for k in range(hi - lo):
-                if leaves.shape[0] > 0:
-                    leaves[lo + k, t] = at[k]
-                if proba.shape[0] > 0:
-                    leaf = nodes[at[k], 2]
-                    for j in range(leaf_ptr[leaf], leaf_ptr[leaf + 1]):
-                        proba[lo + k, leaf_class[j]] += leaf_value[j]
+                at[k], rows[k] = roots[t], lo + k
+            _descend(x, rows, nodes, thresholds, at, hi - lo)
+            for k in range(hi - lo):
+                _reached(lo + k, t, at[k], nodes, leaf_ptr, leaf_class, leaf_value, leaves, proba)

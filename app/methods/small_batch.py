@@ -11,11 +11,11 @@ arrays, each paying its call overhead, plus constants recomputed on every call. 
 - fuses every step whose bits IEEE or numpy define into five compiled kernels, each run
   between two rounds of the numpy calls that must stay: the exact element-wise steps
   (+ - * /, min, max, sqrt, copysign: IEEE gives the same bits in any order of
-  elements), the forest walk (one sample walks a block of trees at once: ``_walk_trees``,
-  independent load chains, as ``forest._walk`` gets from a block of samples; the leaves
-  are summed in tree order), and every sum along an axis, which ``_row_sum`` adds in
-  numpy's own order (its pairwise summation: 8 accumulators up to 128 elements, halves
-  above; ``tests/methods/test_small_batch.py`` checks it against ``np.add.reduce``);
+  elements), the forest walk (``forest.walk_trees``: one sample walks a block of trees at
+  once, independent load chains; the leaves are summed in tree order), and every sum
+  along an axis, which ``_row_sum`` adds in numpy's own order (its pairwise summation: 8
+  accumulators up to 128 elements, halves above; ``tests/methods/test_small_batch.py``
+  checks it against ``np.add.reduce``);
 - leaves to numpy exactly what the general path does with numpy and no order of IEEE
   operations defines: every transcendental function (log, log1p, exp, tanh: numpy's SIMD
   versions need not round like libm) and every matrix product (BLAS: a 1-row product
@@ -51,6 +51,7 @@ import numpy as np
 from numba import njit
 
 from app.methods.attributes import dap_class_terms, impute
+from app.methods.forest import walk_trees
 from app.methods.known import CUES, DISTANCE_EPS, KNN, nearest_from_products
 
 if TYPE_CHECKING:
@@ -59,7 +60,6 @@ if TYPE_CHECKING:
 _add = np.add.reduce
 _ENTROPY = CUES.index("entropy")
 _BLOCK = 128  # numpy's pairwise sum adds up to this many elements in one block
-_TREES = 8  # trees one sample takes down together (as forest._BLOCK samples)
 _NONE64 = np.zeros((0, 0))  # an array a kernel is given for a part the model lacks
 _NONE32 = np.zeros((0, 0), np.float32)
 _NO_ROWS = np.zeros(0)
@@ -426,8 +426,9 @@ def _scale_and_walk(
             q[i, j] = v * feature_weights[j] - dist_center[j]
     p[:] = 0.0
     thresholds = nodes.view(np.float32)
+    no_leaves = np.zeros((0, 0), np.int32)
     for i in range(n):
-        _walk_trees(z[i], nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, p[i])
+        walk_trees(z, i, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, no_leaves, p)
     n_trees = np.float64(roots.shape[0])
     for i in range(n):
         first, second, arg = -np.inf, -np.inf, 0
@@ -439,31 +440,6 @@ def _scale_and_walk(
             elif v > second:
                 second = v
         top[i, 0], top[i, 1], top[i, 2] = first, second, arg
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _walk_trees(x, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, proba):
-    """forest._walk for one sample: it takes a block of trees down together instead of a
-    block of samples (independent load chains again), then adds the leaves' distributions
-    in tree order, as _walk does, so the sums have the same bits."""
-    at = np.empty(_TREES, np.int32)
-    for lo in range(0, roots.shape[0], _TREES):
-        hi = min(lo + _TREES, roots.shape[0])
-        for k in range(hi - lo):
-            at[k] = roots[lo + k]
-        descending = True
-        while descending:
-            descending = False
-            for k in range(hi - lo):
-                node = at[k]
-                f = nodes[node, 0]
-                if f >= 0:
-                    at[k] = nodes[node, 2 + (x[f] > thresholds[node, 1])]
-                    descending = True
-        for k in range(hi - lo):
-            leaf = nodes[at[k], 2]
-            for j in range(leaf_ptr[leaf], leaf_ptr[leaf + 1]):
-                proba[leaf_class[j]] += leaf_value[j]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

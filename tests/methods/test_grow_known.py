@@ -28,12 +28,17 @@ def fitted():
     return ds, train, base
 
 
-def test_grown_forest_keeps_what_it_knew_and_learns_the_new_class():
+def _one_new_class():
+    """(x, y, mask of the older classes, a forest grown on them) of seed 1's training trials."""
     ds, train = _split(1)
     x = ds.samples.reshape(len(ds.samples), -1)[train]
     y = ds.labels[train]
     old = y < OBJECTS - 1
-    forest = FlatForest.grow(x[old], y[old], OBJECTS - 1, 20, "sqrt", 0, 1, codes=8)
+    return x, y, old, FlatForest.grow(x[old], y[old], OBJECTS - 1, 20, "sqrt", 0, 1, codes=8)
+
+
+def test_grown_forest_keeps_what_it_knew_and_learns_the_new_class():
+    x, y, old, forest = _one_new_class()
     grown = forest.with_samples(x[~old], y[~old], OBJECTS, x[old], y[old], "sqrt", 0)
     # the leaves the new samples reach are grown on: its own training samples are its class
     assert (grown.predict_proba(x[~old]).argmax(axis=1) == OBJECTS - 1).all()
@@ -49,11 +54,7 @@ def test_grown_forest_keeps_what_it_knew_and_learns_the_new_class():
 
 
 def test_growing_reads_only_the_seen_samples_of_the_classes_it_reaches():
-    ds, train = _split(1)
-    x = ds.samples.reshape(len(ds.samples), -1)[train]
-    y = ds.labels[train]
-    old = y < OBJECTS - 1
-    forest = FlatForest.grow(x[old], y[old], OBJECTS - 1, 20, "sqrt", 0, 1, codes=8)
+    x, y, old, forest = _one_new_class()
 
     class Seen:  # the seen samples, counting the rows read
         read: list = []
