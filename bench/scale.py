@@ -3,15 +3,21 @@
 
     .venv/bin/python -m bench.scale [--sizes 60,300,1000,3000,10000,30000] [--max N]
                                     [--novel 20] [--trials 10] [--seed 0]
-                                    [--out results/scale/]
+                                    [--separation none|phac2] [--out results/scale/]
 
 For each size N (up to ``--max``) a child process of its own (so each peak RSS is that
-size's alone) simulates ``simulate_dataset(N + novel, trials, seed)``: the first N objects
-are known, the last ``--novel`` are novel. Two whole trials per known object are held out.
+size's alone) simulates ``simulate_dataset(N + novel, trials, seed, separation)``: the
+first N objects are known, the last ``--novel`` are novel. ``--separation phac2`` keeps
+the simulator's objects as far apart as PHAC-2's at every size (``bench/separation.py``
+measures it); ``none``, the default, is the simulator as it is, whose objects crowd together
+as N grows. Two whole trials per known object are held out.
 The child fits ``best`` (its defaults, ``n_jobs`` = the cores) on the rest and measures:
 
 - ``fit_s`` and ``fit_peak_gb``: the fit's wall time and the process's peak RSS while it
-  ran (read every 0.1 s; the dataset is in memory already), ``bundle_mb``;
+  ran (read every 0.1 s; the dataset is in memory already), ``bundle_mb``; ``fit_timings``:
+  the fitted model's own breakdown (``metrics["timings"]``: novelty tuning, known model,
+  attributes, ``by_procedure_s`` for the per-procedure models, total), whose
+  ``by_procedure_s`` is a column of the table;
 - ``enrol_ms``: ``add_novel_classes`` of one class by attribute vector (median of 5), and
   ``one_shot_ms``: ``add_one_shot`` of one sample to a zero-shot class (median of 5);
 - ``promote_s``: ``with_known_samples`` of one novel object's samples, the promotion the
@@ -66,14 +72,16 @@ def _rss_gb() -> float:
         return int(f.read().split("VmRSS:")[1].split()[0]) / 1e6
 
 
-def measure(n: int, novel: int, trials: int, seed: int) -> dict:
+def measure(n: int, novel: int, trials: int, seed: int, separation: str = "none") -> dict:
     """Every figure of one size, in this process (``--one``)."""
     from app.data.simulator import simulate_dataset
     from app.framework import bundle
     from app.framework.registry import make_method
     from app.framework.scaling import RobustInputScaler, flatten
 
-    ds = simulate_dataset(n + novel, trials, seed=seed)
+    ds = simulate_dataset(
+        n + novel, trials, seed=seed, separation=None if separation == "none" else separation
+    )
     held = (ds.trials % trials) >= trials - 2
     known = ds.labels < n
     train = ds.subset(np.flatnonzero(known & ~held)).select_classes(np.arange(n))
@@ -93,8 +101,10 @@ def measure(n: int, novel: int, trials: int, seed: int) -> dict:
     threading.Thread(target=watch, daemon=True).start()
     t = time.perf_counter()
     model = make_method("best", seed=seed, n_jobs=os.cpu_count()).fit(train, progress=True)
-    out: dict = {"objects": n, "fit_s": time.perf_counter() - t}
+    out: dict = {"objects": n, "separation": separation, "fit_s": time.perf_counter() - t}
     done.set()
+    out["fit_timings"] = dict(model.metrics.get("timings", {}))
+    out["by_procedure_s"] = out["fit_timings"].get("by_procedure_s")
     out["fit_peak_gb"] = max(peak[0], _rss_gb())
     out["bundle_mb"] = len(bundle.to_bytes(model)) / 1e6
 
@@ -203,7 +213,8 @@ def exponents(records: list[dict]) -> dict[str, float | None]:
 
 
 def table(records: list[dict], slopes: dict) -> str:
-    cols = ("objects", *COSTS, "throughput_per_s", "known_acc", "nn1_acc", "zsl_acc")
+    cols = ("objects", *COSTS, "by_procedure_s", "throughput_per_s", "known_acc", "nn1_acc")
+    cols += ("zsl_acc",)
     cols += ("vectors_distinct", "novel_vectors_taken")
     lines = ["| " + " | ".join(cols) + " |", "|" + " --- |" * len(cols)]
     for r in records:
@@ -262,6 +273,11 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--novel", type=int, default=20)
     p.add_argument("--trials", type=int, default=10)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--separation",
+        default="none",
+        help="none (the simulator as it is) or phac2 (objects as far apart as PHAC-2's)",
+    )
     p.add_argument("--out", default="results/scale")
     p.add_argument("--one", type=int, help=argparse.SUPPRESS)  # a child's own size
     args = p.parse_args(argv)
@@ -275,6 +291,10 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
         if args.max < args.sizes[0]:
             p.error(f"--max {args.max} is below the smallest size {args.sizes[0]}")
         args.sizes = [s for s in args.sizes if s <= args.max]
+    from app.data.simulator import SEPARATIONS
+
+    if args.separation != "none" and args.separation not in SEPARATIONS:
+        p.error(f"--separation takes none or {', '.join(SEPARATIONS)}, got {args.separation!r}")
     if args.novel < 1 or args.trials < 4:
         p.error("--novel must be at least 1 and --trials at least 4 (2 are held out)")
     return args
@@ -283,7 +303,7 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     if args.one is not None:
-        print(json.dumps(measure(args.one, args.novel, args.trials, args.seed)))
+        print(json.dumps(measure(args.one, args.novel, args.trials, args.seed, args.separation)))
         return 0
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -292,13 +312,19 @@ def main(argv: list[str] | None = None) -> int:
         print(f"scale: {n} known objects ...", file=sys.stderr, flush=True)
         cmd = [sys.executable, "-m", "bench.scale", "--one", str(n)]
         cmd += ["--novel", str(args.novel), "--trials", str(args.trials), "--seed", str(args.seed)]
+        cmd += ["--separation", args.separation]
         done = subprocess.run(cmd, stdout=subprocess.PIPE, text=True)
         if done.returncode != 0:
             print(f"scale: {n} objects failed (exit {done.returncode})", file=sys.stderr)
             break
         records.append(json.loads(done.stdout.strip().splitlines()[-1]))
         slopes = exponents(records)
-        report = {"machine": machine(), "sizes": records, "exponents": slopes}
+        report = {
+            "machine": machine(),
+            "separation": args.separation,
+            "sizes": records,
+            "exponents": slopes,
+        }
         (out / "scale.json").write_text(json.dumps(report, indent=2))
     if not records:
         return 1

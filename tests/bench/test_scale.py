@@ -12,7 +12,8 @@ ROOT = Path(__file__).resolve().parents[2]
 FIELDS = (
     "objects", "fit_s", "fit_peak_gb", "bundle_mb", "enrol_ms", "one_shot_ms", "promote_s",
     "recognise_1_us", "batch_per_sample_us", "throughput_per_s", "known_acc", "nn1_acc",
-    "zsl_acc", "vectors_distinct", "novel_vectors_taken",
+    "zsl_acc", "vectors_distinct", "novel_vectors_taken", "separation", "fit_timings",
+    "by_procedure_s",
 )  # fmt: skip
 
 
@@ -28,7 +29,7 @@ def run(*args: str) -> subprocess.CompletedProcess:
 
 def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
     done = run("--sizes", "12,24,40", "--max", "24", "--novel", "12", "--trials", "4",
-               "--out", str(tmp_path))  # fmt: skip
+               "--separation", "phac2", "--out", str(tmp_path))  # fmt: skip
     assert done.returncode == 0, done.stderr[-3000:]
     report = json.loads((tmp_path / "scale.json").read_text())
     assert [r["objects"] for r in report["sizes"]] == [12, 24]  # --max stops before 40
@@ -36,6 +37,9 @@ def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
         assert set(FIELDS) <= set(r)
         assert r["fit_s"] > 0 and r["fit_peak_gb"] > 0 and r["recognise_1_us"] > 0
         assert 0 < r["promote_s"] < r["fit_s"]
+        assert r["separation"] == "phac2"
+        assert 0 < r["fit_timings"]["total_s"] <= r["fit_s"]  # the model's own breakdown
+        assert r["by_procedure_s"] == r["fit_timings"].get("by_procedure_s")
         for acc in ("known_acc", "nn1_acc", "zsl_acc"):
             assert 0.0 <= r[acc] <= 1.0
         assert r["vectors_distinct"] <= r["objects"]
@@ -43,7 +47,9 @@ def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
         assert set(r["zsl_by_novel"]) == {"10"} and 0 <= r["zsl_by_novel"]["10"]["zsl"] <= 1
     assert set(report["exponents"]) >= {"fit_s", "fit_peak_gb", "recognise_1_us"}
     assert report["machine"]["cpus"] >= 1 and report["machine"]["commit"]
+    assert report["separation"] == "phac2"
     assert done.stdout.startswith("| objects | fit_s |") and "| exponent |" in done.stdout
+    assert "| by_procedure_s |" in done.stdout.splitlines()[0]
     assert (tmp_path / "scale.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -53,6 +59,7 @@ def test_bad_arguments_exit_2_with_a_message(tmp_path):
         (("--sizes", "ten"), "--sizes must be integers"),
         (("--sizes", "60,300", "--max", "10"), "below the smallest size"),
         (("--trials", "3"), "--trials at least 4"),
+        (("--separation", "far"), "--separation takes none or phac2"),
     ):
         done = run(*args, "--out", str(tmp_path))
         assert done.returncode == 2 and words in done.stderr, (args, done.stderr)

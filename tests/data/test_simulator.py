@@ -1,5 +1,7 @@
-"""Built-in tactile simulator: layout, determinism, attribute vectors, traces, difficulty."""
+"""Built-in tactile simulator: layout, determinism, attribute vectors, traces, difficulty,
+and the separation option."""
 
+import hashlib
 import time
 
 import numpy as np
@@ -14,6 +16,7 @@ from app.data.simulator import (
     PAPER_ATTRIBUTES,
     channel,
     sample_attributes,
+    signature_scale,
     simulate_dataset,
 )
 
@@ -226,3 +229,64 @@ def test_zero_shot_baseline_above_chance_below_perfect(sim):
                 log_p += np.where(a[novel, m] == 1, np.log(p)[:, None], np.log1p(-p)[:, None])
             accs.append((novel[log_p.argmax(axis=1)] == sim.labels[~seen]).mean())
     assert 0.35 <= np.mean(accs) <= 0.9, accs
+
+
+# ---------------------------------------------------------------- separation
+
+# simulate_dataset() and simulate_dataset(120, 3, seed=4) as they were before the
+# ``separation`` option existed (2026-11-27): the default must keep every value.
+BEFORE = {
+    (60, 10, 0): (112703.0083409439, [0.31159395, 0.06141759, 0.01877488]),
+    (120, 3, 4): (70838.2237381391, [0.05795791, 0.15193410, -0.03377444]),
+}
+ATTRIBUTES_SHA256 = {
+    (60, 10, 0): "438c6bafa6cf268c0ae3a543b242eaa3bad627bf884a759a0205bf47f98cda91",
+    (120, 3, 4): "e540c26cb4d472885b8d3cc1866396877d1332ce0619f6fc5c57605942ee0cf4",
+}
+
+
+@pytest.mark.parametrize("size", list(BEFORE))
+def test_default_is_unchanged_by_the_separation_option(size):
+    n, trials, seed = size
+    ds = simulate_dataset(n, trials, seed=seed)
+    total, first = BEFORE[size]
+    np.testing.assert_allclose(ds.samples[0, 0, :3], first, rtol=1e-6)
+    np.testing.assert_allclose(ds.samples.sum(dtype=np.float64), total, rtol=1e-9)
+    digest = hashlib.sha256(ds.class_attributes.tobytes() + ds.labels.tobytes()).hexdigest()
+    assert digest == ATTRIBUTES_SHA256[size]
+    explicit = simulate_dataset(n, trials, seed=seed, separation=None)
+    np.testing.assert_array_equal(explicit.samples, ds.samples)
+
+
+def test_separation_adds_only_a_per_object_signature():
+    plain = simulate_dataset(300, 4, seed=5)
+    apart = simulate_dataset(300, 4, seed=5, separation="phac2")
+    np.testing.assert_array_equal(apart.class_attributes, plain.class_attributes)
+    np.testing.assert_array_equal(apart.labels, plain.labels)
+    added = (apart.samples - plain.samples).reshape(300, 4, 32, 30)
+    np.testing.assert_allclose(added, added[:, :1].repeat(4, axis=1), atol=1e-5)  # per object
+    assert 0.005 < added.std() < 0.05
+    again = simulate_dataset(300, 4, seed=5, separation="phac2")
+    np.testing.assert_array_equal(again.samples, apart.samples)
+    # up to 60 objects the default is already at PHAC-2's level: nothing is added
+    small = simulate_dataset(40, 3, seed=1, separation="phac2")
+    np.testing.assert_array_equal(small.samples, simulate_dataset(40, 3, seed=1).samples)
+    assert signature_scale("phac2", 30_000) > signature_scale("phac2", 3_000) > 0
+
+
+def test_separation_holds_the_nearest_object_at_phac2s_distance():
+    """bench/separation.py's statistic (median over objects of the nearest other object's
+    distance in trial spreads along that line) is 5.50 on PHAC-2's 60 real objects."""
+    from bench.separation import statistic
+
+    plain = simulate_dataset(800, 10, seed=0)
+    apart = simulate_dataset(800, 10, seed=0, separation="phac2")
+    crowded = statistic(plain.samples, plain.labels, nn1=False)["sep_median"]
+    held = statistic(apart.samples, apart.labels, nn1=False)["sep_median"]
+    assert crowded < 5.2 and 5.2 < held < 5.8, (crowded, held)
+
+
+@pytest.mark.parametrize("bad", ["far", "PHAC2", "", 1.0, 5])
+def test_bad_separation_is_refused_by_name(bad):
+    with pytest.raises(ValueError, match="separation"):
+        simulate_dataset(10, 2, separation=bad)
