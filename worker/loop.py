@@ -58,7 +58,7 @@ class Worker:
         # reading only the parts not held (an enrollment changes none of the large ones)
         self._parts = bundles.PartCache()
         # parts unchanged since the last version are not encoded again
-        self._encoder = bundle.PartEncoder()
+        self._encoder = bundle.PartEncoder(freeze=True)
         # kept heads' parts, so pruning reads new heads only
         self._part_refs: dict[str, set[str]] = {}
 
