@@ -48,6 +48,7 @@ class Worker:
         settings: Settings,
         sessions: sessionmaker[Session],
         on_activate: Callable[[int, TactileRecognizer], None] | None = None,
+        parts: bundles.PartCache | None = None,
     ) -> None:
         self.settings = settings
         self.sessions = sessions
@@ -55,10 +56,13 @@ class Worker:
         self.on_activate = on_activate
         self._cache: tuple[int, TactileRecognizer] | None = None  # last model built or loaded
         # parts of the versions loaded, by SHA-256: a version built elsewhere is loaded by
-        # reading only the parts not held (an enrollment changes none of the large ones)
-        self._parts = bundles.PartCache()
+        # reading only the parts not held (an enrollment changes none of the large ones).
+        # ``parts``: the cache of the process's model holder (the embedded worker's), so that
+        # the model the worker loads shares the served model's arrays and the cues built
+        # from them instead of holding a copy of its own (GBs at 10,000 objects)
+        self._parts = parts if parts is not None else bundles.PartCache()
         # parts unchanged since the last version are not encoded again
-        self._encoder = bundle.PartEncoder()
+        self._encoder = bundle.PartEncoder(freeze=True)
         # kept heads' parts, so pruning reads new heads only
         self._part_refs: dict[str, set[str]] = {}
 

@@ -24,6 +24,7 @@ attributes (``app.store.vocabulary``), NaN where a value is not known.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from enum import StrEnum
 
@@ -293,7 +294,9 @@ def _holds_withdrawn(
             for name, vector in zip(names, vectors, strict=True):
                 if name not in live or not vocabulary.active:
                     continue
-                if vocabulary.key_of_vector(vector) != live[name].attribute_key:
+                if _key_of(vocabulary, np.asarray(vector, np.float32).tobytes()) != (
+                    live[name].attribute_key
+                ):
                     if name in known:
                         known_values = True
                     else:
@@ -301,6 +304,14 @@ def _holds_withdrawn(
     stale_classes |= {name for name in known if name in live and live[name].kind == ClassKind.NOVEL}
     unplaced = stale_classes - known - novel  # cannot happen; if it does, retrain it all
     return bool(stale_classes & known or unplaced), bool(stale_classes & novel), known_values
+
+
+@functools.lru_cache(maxsize=1 << 17)
+def _key_of(vocabulary: Vocabulary, vector: bytes) -> str:
+    """``vocabulary.key_of_vector`` of a float32 vector's bytes, remembered: every plan
+    compares each class of the base model with the store (~70 µs a class, 0.7 s a job at
+    10,000 objects), and from one job to the next the vectors are the same."""
+    return vocabulary.key_of_vector(np.frombuffer(vector, np.float32).tolist())
 
 
 def build(

@@ -86,7 +86,7 @@ def create_app(
             from worker import Worker, start_in_thread
 
             # the worker hands each model it builds to this process's holder: no reload
-            worker = Worker(settings, sessions, on_activate=holder.serve)
+            worker = Worker(settings, sessions, on_activate=holder.serve, parts=holder.parts)
             embedded = start_in_thread(worker)
         try:
             yield

@@ -81,28 +81,71 @@ class PartEncoder:
     """``split`` for a process that writes one version after another: arrays that are
     byte for byte those of its previous split keep their encoded part instead of being
     deflated again (an enrollment changes kilobytes; writing a version of the default model
-    takes ~38 ms from scratch and ~6 ms through the encoder, bench/model_swap.py)."""
+    takes ~38 ms from scratch and ~6 ms through the encoder, bench/model_swap.py), and
+    read-only arrays that are the very objects of its previous split are not even read.
+    ``freeze``: make the arrays it splits read-only (the worker's: a version, once stored,
+    never changes, and the models enrolment derives from it share its arrays)."""
 
-    def __init__(self, min_bytes: int = PART_MIN_BYTES) -> None:
+    def __init__(self, min_bytes: int = PART_MIN_BYTES, freeze: bool = False) -> None:
         self.min_bytes = min_bytes
+        self.freeze = freeze
         self._previous: dict[bytes, tuple[str, bytes]] = {}  # digest of .npy bytes -> part
+        # read-only arrays of the previous split by id (each held, so that its id is not
+        # taken by another array meanwhile) -> their part
+        self._frozen: dict[int, tuple[np.ndarray, str, bytes]] = {}
 
     def split(self, model: TactileRecognizer) -> tuple[bytes, dict[str, bytes]]:
         manifest, arrays = _contents(model)
         parts: dict[str, bytes] = {}
         refs: dict[str, str] = {}
         encoded: dict[bytes, tuple[str, bytes]] = {}
+        frozen: dict[int, tuple[np.ndarray, str, bytes]] = {}
         for name in [n for n, a in arrays.items() if np.asanyarray(a).nbytes >= self.min_bytes]:
-            data = _npy(arrays.pop(name))
-            key = hashlib.sha256(data).digest()
-            if key not in encoded:
-                encoded[key] = self._previous.get(key) or _encode_npy(data)
-            sha, blob = encoded[key]
+            array = np.asanyarray(arrays.pop(name))
+            held = self._frozen.get(id(array))
+            if held is not None and held[0] is array:
+                # the very array of the previous version, which nothing can have changed: the
+                # shared parts of a large model (300 MB at 10,000 objects) are neither
+                # copied to .npy bytes nor hashed again for every enrolment
+                sha, blob = held[1], held[2]
+            else:
+                data = _npy(array)
+                key = hashlib.sha256(data).digest()
+                if key not in encoded:
+                    encoded[key] = self._previous.get(key) or _encode_npy(data)
+                sha, blob = encoded[key]
+            if self.freeze:
+                freeze(array)
+            if unchangeable(array):
+                frozen[id(array)] = (array, sha, blob)
             parts[sha] = blob
             refs[name] = sha
         self._previous = encoded  # only the latest model's parts are kept
+        self._frozen = frozen
         manifest["parts"] = refs
         return _zip(manifest, arrays), parts
+
+
+def unchangeable(array: Any) -> bool:
+    """Whether no reference can write into ``array``: read-only, and so is every array its
+    memory comes from (a store's parts, an index's serialisation). Enrolment derives a model
+    from its base sharing such arrays, never copying them (``PartCache``)."""
+    while isinstance(array, np.ndarray):
+        if array.flags.writeable:
+            return False
+        array = array.base
+    return array is None or isinstance(array, bytes)
+
+
+def freeze(array: np.ndarray) -> None:
+    """``array`` read-only, and the arrays its memory comes from where that memory is
+    their own or immutable bytes (``unchangeable`` is true then)."""
+    chain, memory = [], array
+    while isinstance(memory, np.ndarray):
+        chain.append(memory)
+        memory = memory.base
+    for a in reversed(chain if memory is None or isinstance(memory, bytes) else chain[:1]):
+        a.flags.writeable = False
 
 
 def _encode_npy(data: bytes) -> tuple[str, bytes]:

@@ -4,7 +4,8 @@ bundle stores both."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import copy
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -63,6 +64,21 @@ class ClassRegistry:
     @property
     def all_names(self) -> list[str]:
         return self.known_names + self.novel_names
+
+    def __deepcopy__(self, memo: dict) -> ClassRegistry:
+        # Class names are strings, which a deep copy shares anyway: a copy of each list is
+        # its deep copy, without copy.deepcopy visiting every name (~3 ms a registry at
+        # 10,000 classes; an enrolment of best copies its own and each procedure model's
+        # registry, 13 of them: 37 ms of its 38).
+        out = copy.copy(self)
+        memo[id(self)] = out
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name.endswith("_names") and type(value) in (list, tuple):
+                setattr(out, f.name, type(value)(value))
+            else:
+                setattr(out, f.name, copy.deepcopy(value, memo))
+        return out
 
     def kind_of(self, name: str) -> str:
         if name in self.known_names:

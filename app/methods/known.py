@@ -26,6 +26,7 @@ and docs/RESULTS.md).
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable
 
 import numpy as np
@@ -242,6 +243,24 @@ class ForestCues:
     def from_state(
         cls, arrays: dict[str, np.ndarray], n_classes: int, n_features: int
     ) -> ForestCues:
+        """The cues ``get_state`` stored. Built from a store's read-only parts, the cues of
+        those very arrays are built once while they live: a process that loads version
+        after version (an API process, after each enrolment) shares them between versions,
+        as enrolment does (``KnownModel.__deepcopy__``), instead of projecting every
+        reference sample and reading the neighbour index again (seconds at 10,000
+        objects)."""
+        key = _built_key(arrays, n_classes, n_features)
+        if key is not None and (built := _built(key, arrays)) is not None:
+            return built
+        out = cls._from_state(arrays, n_classes, n_features)
+        if key is not None:
+            _remember(key, arrays, out)
+        return out
+
+    @classmethod
+    def _from_state(
+        cls, arrays: dict[str, np.ndarray], n_classes: int, n_features: int
+    ) -> ForestCues:
         def part(prefix: str) -> dict[str, np.ndarray]:
             return {k[len(prefix) :]: v for k, v in arrays.items() if k.startswith(prefix)}
 
@@ -271,6 +290,51 @@ class ForestCues:
             arrays["reference_labels"],
             arrays["offsets"],
         )
+
+
+# ForestCues built from read-only arrays: key -> (the cues, those arrays), weakly held, so
+# an entry lives exactly as long as what it names
+_BUILT: dict[tuple, tuple[weakref.ref, dict[str, weakref.ref]]] = {}
+_BY_VALUE_BYTES = 1 << 16  # smaller arrays (a bundle's head holds them) are named by value
+
+
+def _built_key(arrays: dict[str, np.ndarray], n_classes: int, n_features: int) -> tuple | None:
+    """What names cues built from ``arrays``: the identities of the large ones, where
+    nothing can write into any of them, and the bytes of the small ones (None otherwise:
+    such cues are built each time)."""
+    from app.framework.bundle import unchangeable
+
+    key: list = [n_classes, n_features]
+    for name in sorted(arrays):
+        a = arrays[name]
+        if not isinstance(a, np.ndarray):
+            return None
+        if unchangeable(a):
+            key.append((name, id(a)))
+        elif a.nbytes < _BY_VALUE_BYTES:
+            key.append((name, a.dtype.str, a.shape, a.tobytes()))
+        else:
+            return None
+    return tuple(key)
+
+
+def _built(key: tuple, arrays: dict[str, np.ndarray]) -> ForestCues | None:
+    entry = _BUILT.get(key)
+    if entry is None:
+        return None
+    cues, refs = entry[0](), entry[1]
+    if cues is None or any(ref() is not arrays[name] for name, ref in refs.items()):
+        return None  # gone, or another array took a dead one's id
+    return cues
+
+
+def _remember(key: tuple, arrays: dict[str, np.ndarray], cues: ForestCues) -> None:
+    from app.framework.bundle import unchangeable
+
+    for old in [k for k, (c, _) in _BUILT.items() if c() is None]:
+        del _BUILT[old]
+    held = {name: weakref.ref(a) for name, a in arrays.items() if unchangeable(a)}
+    _BUILT[key] = (weakref.ref(cues), held)
 
 
 class ReferenceDistances:

@@ -29,6 +29,9 @@ class ApproximateNeighbours:
             )
         index.hnsw.efSearch = SEARCH_CANDIDATES
         self.index = index
+        # its serialisation, once: the index never changes (``with_points`` makes a copy),
+        # and every model version stored is split again (tens of MB at 10,000 objects)
+        self._bytes: np.ndarray | None = None
 
     @classmethod
     def build(cls, points: np.ndarray) -> ApproximateNeighbours:
@@ -56,9 +59,14 @@ class ApproximateNeighbours:
         return d2, ids
 
     def to_bytes(self) -> np.ndarray:
-        import faiss
+        """faiss's serialisation, read-only: the same array on every call."""
+        if self._bytes is None:
+            import faiss
 
-        return faiss.serialize_index(self.index)
+            data = faiss.serialize_index(self.index)
+            data.flags.writeable = False
+            self._bytes = data
+        return self._bytes
 
     @classmethod
     def from_bytes(cls, data: np.ndarray, n_points: int, dim: int) -> ApproximateNeighbours:
@@ -73,4 +81,7 @@ class ApproximateNeighbours:
             raise ValueError(f"the neighbour index cannot be read: {exc}") from None
         if not hasattr(index, "hnsw"):
             raise ValueError("the neighbour index is not an HNSW index")
-        return cls(index, n_points, dim)
+        out = cls(index, n_points, dim)
+        if not data.flags.writeable:  # a store's part: it is the serialisation, unchanged
+            out._bytes = data
+        return out

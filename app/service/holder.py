@@ -66,6 +66,11 @@ class ModelHolder(Poller):
     def current(self) -> LoadedModel | None:
         return self._current
 
+    @property
+    def parts(self) -> bundles.PartCache:
+        """The decoded parts of the served model, which an embedded worker loads through."""
+        return self._parts
+
     def refresh(self) -> bool:
         """Load the active version if it is not the one served; True when swapped. When
         its bundle is damaged, keep the served model, or, with none yet, load the newest

@@ -41,7 +41,7 @@ class PartCache:
         array = self._arrays.get(sha256)
         if array is None:
             array = read_part(session, sha256)
-            array.flags.writeable = False
+            bundle.freeze(array)  # the array it views too: nothing can change it then
             self._arrays[sha256] = array
         return array
 

@@ -205,3 +205,37 @@ def test_the_part_encoder_does_not_encode_unchanged_arrays_again(with_novel, sim
     assert shared  # the encoder, the known-class classifier, ... are unchanged
     assert all(after[sha] is before[sha] for sha in shared)  # the same bytes, not encoded again
     assert after.keys() == bundle.split(grown, min_bytes=1024)[1].keys()  # as a fresh split
+
+
+def test_a_freezing_encoder_reads_the_arrays_a_version_shares_once(sim_split, monkeypatch):
+    from app.methods.best import BestRecognizer
+
+    novel = sim_split["novel"]
+    model = BestRecognizer(n_estimators=10).fit(sim_split["train"])
+    model = model.add_novel_classes(novel.class_names[:1], novel.class_attributes[:1])
+    encoder = bundle.PartEncoder(min_bytes=1024, freeze=True)
+    _, before = encoder.split(model)
+    _, arrays = model.get_state()
+    assert not any(a.flags.writeable for a in arrays.values() if a.nbytes >= 1024)
+    grown = model.add_one_shot(novel.class_names[0], novel.samples[:1])
+    read = []
+    npy = bundle._npy
+    monkeypatch.setattr(bundle, "_npy", lambda a: read.append(a.nbytes) or npy(a))
+    _, after = encoder.split(grown)
+    # the arrays it shares are its base's very objects, frozen: only what changed is read
+    assert sum(read) < sum(a.nbytes for a in arrays.values()) / 2
+    assert after.keys() == bundle.split(grown, min_bytes=1024)[1].keys()  # as a fresh split
+    assert all(after[sha] is before[sha] for sha in before.keys() & after.keys())
+
+
+def test_only_arrays_nobody_can_write_count_as_unchanged():
+    a = np.arange(4096, dtype=np.float64)
+    assert not bundle.unchangeable(a)  # writable: always read
+    view = a[:2048]
+    a.flags.writeable = False
+    view.flags.writeable = False
+    assert bundle.unchangeable(view) and bundle.unchangeable(a)
+    b = np.arange(4096.0)
+    ro_view = b[:2048]
+    ro_view.flags.writeable = False
+    assert not bundle.unchangeable(ro_view)  # its base can still be written

@@ -175,3 +175,25 @@ def test_enrolment_shares_the_fitted_parts_instead_of_copying_them(indexed_model
     assert enrolled.registry is not model.registry and model.registry.novel_names == []
     after = model.recognize_batch(x)
     assert after.top_index.tobytes() == before.top_index.tobytes()
+
+
+def test_versions_loaded_from_the_same_parts_share_their_known_part(sim):
+    """An API process loads each new version from the store's read-only parts: the cues of
+    parts it already holds (reference projection, neighbour index, forest walk) are not
+    built again; loaded from other arrays, they are."""
+    ds = sim[0]
+    model = make_method("best", n_estimators=10, approximate_above=100, by_procedure=False)
+    model = model.fit(ds)
+    head, parts = bundle.split(model)
+    decoded = {sha: bundle.decode_part(blob) for sha, blob in parts.items()}
+    for array in decoded.values():
+        bundle.freeze(array)  # as bundles.PartCache holds them
+    first = bundle.from_bytes(head, part=decoded.__getitem__)
+    again = bundle.from_bytes(head, part=decoded.__getitem__)
+    assert first.known_.cues_model.distances.index is not None
+    assert again.known_.cues_model is first.known_.cues_model
+    fresh = bundle.from_bytes(head, part=lambda sha: bundle.decode_part(parts[sha]))
+    assert fresh.known_.cues_model is not first.known_.cues_model
+    x = ds.samples[:5]
+    np.testing.assert_array_equal(fresh.known_proba(x), again.known_proba(x))
+    np.testing.assert_array_equal(fresh.novelty_score(x), again.novelty_score(x))

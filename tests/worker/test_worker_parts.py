@@ -74,3 +74,18 @@ def test_a_process_reads_only_the_parts_it_lacks_after_a_version_it_built(
     assert held & p3, "version 3 shares parts with versions 1 and 2"
     for read in (by_holder, by_worker):
         assert sorted(p for p in read if p in p1 | p2 | p3) == sorted(p3 - held)
+
+
+def test_an_embedded_worker_loads_the_served_version_without_reading_its_parts(settings, client):
+    engine = make_engine(settings.sqlalchemy_url)
+    sessions = make_sessionmaker(engine)
+    holder = ModelHolder(sessions)
+    worker = Worker(settings, sessions, on_activate=holder.serve, parts=holder.parts)
+    try:
+        assert holder.refresh()
+        with bundle_reads(engine) as read:
+            worker.warm_up()  # through the holder's cache: the served model's very parts
+        assert worker._cache[0] == holder.current.version
+    finally:
+        engine.dispose()
+    assert not set(read) & parts_of(sessions, holder.current.version)

@@ -81,3 +81,18 @@ def test_a_separable_method_rebuilds_its_novel_part_alone(best_service, best_bas
         (Rebuild.NOVEL_PART, VersionReason.UPDATE),
         (Rebuild.NONE, None),
     ]
+
+
+def test_a_plan_reads_each_vector_of_the_base_as_the_vocabulary_does_once():
+    import numpy as np
+
+    from app.store.vocabulary import Vocabulary
+    from worker.retrain import _key_of
+
+    vocab = Vocabulary(names=("hard", "soft", "rough"), retired=frozenset({"soft"}))
+    for vector in ([1.0, 0.0], [0.5, np.nan], [np.nan, np.nan]):
+        data = np.asarray(vector, np.float32).tobytes()
+        assert _key_of(vocab, data) == vocab.key_of_vector(vector)
+        assert _key_of(vocab, data) is _key_of(vocab, data)  # remembered
+    other = Vocabulary(names=("hard", "soft", "rough"))
+    assert _key_of(other, np.float32([1, 0, 1]).tobytes()) == other.key_of_vector([1, 0, 1])

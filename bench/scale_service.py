@@ -1,0 +1,458 @@
+"""Scale in objects through the service: how soon enrolments go live over HTTP with
+10,000 known objects of the built-in simulator, on the service's defaults.
+
+    .venv/bin/python -m bench.scale_service [--objects 10000] [--novel 200] [--repeats 5]
+                                            [--seed 0] [--model FILE] [--recognise 200]
+                                            [--processes N] [--out results/scale-service/]
+
+``simulate_dataset(objects + novel, 10 trials, seed)``: the first ``--objects`` objects are
+known, the rest novel (as ``bench.scale`` draws them). ``best`` (its defaults, ``n_jobs`` =
+the cores) is fitted on every trial of the known objects and saved as
+``OUT/best-<objects>-<novel>-<seed>.bundle``, or read from ``--model FILE`` (a bundle this
+script wrote for the same ``--objects``, ``--novel`` and ``--seed``: the known classes'
+names are checked, their samples cannot be). The known objects are written as a
+``folder:`` dataset, and the real service starts on it as a subprocess: ``tactile-zsl serve
+--dataset folder:DIR --model FILE`` on a temporary SQLite store and a free port, with the
+default number of API processes (``--processes`` sets another, for a machine whose memory
+holds fewer), the embedded worker and every other setting at its default (no
+``TACTILE_*`` variable is passed on). Then, over HTTP with
+``app.client.TactileClient``, for each of ``--repeats`` novel objects whose attribute
+vector no known object and no earlier repeat has (the service answers a taken vector with
+a 409; ``free_novel`` and ``novel_vectors_taken`` say how many there were):
+
+- ``register_s``: ``POST /v1/classes`` with its attribute vector, from the 202 to its job
+  succeeded (``GET /v1/jobs/{id}?wait=``, which answers once the version holding it is
+  served by the process that answers);
+- ``one_shot_s``: its first real sample (``POST /v1/classes/{id}/samples``), from the 202
+  to its job succeeded; the next ``promotion_threshold - 2`` samples follow, each waited for;
+- ``promote_s``: the sample that brings it to ``promotion_threshold`` samples, from the 202
+  to its job succeeded; the class must then be known, in a version of reason
+  ``promotion`` whose ``n_grown_samples`` grew (learnt into the known part, no refit);
+- ``*_everywhere_s``: the same until ``EVERYWHERE`` fresh connections in a row (spread
+  over the API processes by the kernel) answer ``/healthz`` with that version or newer;
+- ``post_ms``: each enrolment POST's own latency (to its 202).
+
+Besides: ``startup_s`` (the service's first start: storing the dataset and the bundle, to
+``/readyz``), ``recognise_1_ms`` (``POST /v1/recognize`` of one known object's sample, an
+.npy body over one kept-alive connection, ``--recognise`` different samples). Each figure
+is given as its median and worst over the repeats. The JSON (``scale_service.json`` in
+``--out``) has every repeat's figures, the machine, the commit and the load averages at
+start and end; a Markdown table goes to stdout, progress to stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+TRIALS = 10
+EVERYWHERE = 8  # fresh connections in a row that must see a version
+JOB_WAIT_S = 20  # the longest wait GET /v1/jobs/{id} takes
+STARTUP_TIMEOUT_S = 1800
+FIGURES = ("register", "one_shot", "promote")
+
+
+def say(msg: str) -> None:
+    print(f"scale_service: {msg}", file=sys.stderr, flush=True)
+
+
+# ------------------------------------------------------------------------------ data
+def simulate(objects: int, novel: int, seed: int):
+    """``simulate_dataset(objects + novel, 10 trials, seed)``: the first ``objects`` known."""
+    from app.data.simulator import simulate_dataset
+
+    return simulate_dataset(objects + novel, TRIALS, seed=seed)
+
+
+def free_novel(ds, objects: int) -> tuple[list[int], int]:
+    """The novel objects (indices past ``objects``) whose attribute vector no known object
+    and no earlier novel one has, and how many novel vectors a known object has already."""
+    vectors = ds.class_attributes
+    seen = {tuple(v) for v in vectors[:objects].tolist()}
+    taken = sum(tuple(v) in seen for v in vectors[objects:].tolist())
+    free = []
+    for i in range(objects, ds.n_classes):
+        v = tuple(vectors[i].tolist())
+        if v not in seen:
+            free.append(i)
+            seen.add(v)
+    return free, taken
+
+
+def build(known, seed: int, path: Path) -> Path:
+    """Fit ``best`` (its defaults, ``n_jobs`` = the cores) on ``known`` and save it."""
+    from app.framework import bundle
+    from app.framework.registry import make_method
+
+    t = time.perf_counter()
+    say(f"fitting best on {known.n_classes} known objects ({len(known)} samples); minutes ...")
+    model = make_method("best", seed=seed, n_jobs=os.cpu_count()).fit(known, progress=True)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    bundle.save(model, path)
+    say(f"fitted in {time.perf_counter() - t:.0f} s, saved as {path}")
+    return path
+
+
+def check_model(path: Path, known) -> None:
+    """``--model`` must have been fitted on these known objects (their names, at least,
+    read from its manifest: the whole bundle is GBs at 10,000 objects)."""
+    from app.framework import bundle
+
+    with zipfile.ZipFile(path) as zf:
+        manifest = json.loads(zf.read(bundle._MANIFEST))
+    names = [c["name"] for c in manifest["classes"] if c["kind"] == "known"]
+    if names != list(known.class_names):
+        raise SystemExit(
+            f"--model {path} was not fitted on the first {known.n_classes} of "
+            "simulate_dataset(objects + novel): its known classes differ; fit it with this "
+            "script's --objects, --novel and --seed"
+        )
+
+
+# --------------------------------------------------------------------------- service
+class Service:
+    """``tactile-zsl serve`` on a folder dataset and a bundle, its store in ``root``, on a
+    free port, with every setting at its default."""
+
+    def __init__(
+        self, root: Path, dataset_dir: Path, model: Path, processes: int | None = None
+    ) -> None:
+        from app.testing.harness import free_port, tactile_zsl
+
+        self.root = root
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        env = {k: v for k, v in os.environ.items() if not k.startswith("TACTILE_")}
+        args = ["serve", "--dataset", f"folder:{dataset_dir}", "--model", str(model)]
+        args += ["--data-dir", str(root / "store"), "--port", str(self.port)]
+        args += [] if processes is None else ["--processes", str(processes)]
+        self.log_path = root / "serve.log"
+        self._log = self.log_path.open("wb")
+        self.popen = subprocess.Popen(
+            [*tactile_zsl(), *args],
+            env=env,
+            cwd=root,
+            stdout=self._log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,  # its API processes stop with it
+        )
+
+    def wait_ready(self, timeout: float) -> None:
+        import httpx
+
+        deadline, last = time.monotonic() + timeout, 0.0
+        while time.monotonic() < deadline:
+            if self.popen.poll() is not None:
+                raise RuntimeError(f"serve exited with {self.popen.returncode}:\n{self.tail()}")
+            try:
+                if httpx.get(f"{self.url}/readyz", timeout=2).status_code == 200:
+                    return
+            except httpx.TransportError:
+                pass
+            if time.monotonic() - last > 30:
+                last = time.monotonic()
+                lines = self.tail(400).strip().splitlines()
+                say(f"  ... starting: {lines[-1] if lines else ''}")
+            time.sleep(0.3)
+        raise RuntimeError(f"serve not ready after {timeout:.0f} s:\n{self.tail()}")
+
+    def processes(self) -> int | None:
+        """How many API processes serve (from its log)."""
+        found = re.search(r"with (\d+) API process", self.log_path.read_text(errors="replace"))
+        return int(found.group(1)) if found else None
+
+    def tail(self, chars: int = 3000) -> str:
+        return self.log_path.read_text(errors="replace")[-chars:]
+
+    def stop(self) -> None:
+        if self.popen.poll() is None:
+            self.popen.send_signal(signal.SIGTERM)
+            try:
+                self.popen.wait(60)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.popen.pid, signal.SIGKILL)
+                self.popen.wait()
+        self._log.close()
+
+
+# ------------------------------------------------------------------------ measuring
+def wait_job(client, job_id: int, timeout: float) -> dict:
+    """The job once it has succeeded or failed (RuntimeError after ``timeout`` seconds)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        job = client.job(job_id, wait=JOB_WAIT_S)
+        if job["status"] in ("succeeded", "failed"):
+            return job
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"job {job_id} still {job['status']} after {timeout:.0f} s")
+
+
+def everywhere(url: str, version: int, timeout: float = 60) -> None:
+    """Until ``EVERYWHERE`` fresh connections in a row answer ``/healthz`` with ``version``
+    or newer: with P API processes, one still serving an older version is missed with
+    probability ((P - 1) / P) ** EVERYWHERE (under 4 % for 2)."""
+    import httpx
+
+    deadline, row = time.monotonic() + timeout, 0
+    while row < EVERYWHERE:
+        served = httpx.get(f"{url}/healthz", timeout=5).json().get("model_version") or 0
+        row = row + 1 if served >= version else 0
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"version {version} not served everywhere after {timeout:.0f} s")
+        if not row:
+            time.sleep(0.01)
+
+
+def enrol(client, url: str, send, job_timeout: float) -> dict:
+    """One enrolment: ``send()`` POSTs it and returns its job; the times to the 202, from
+    it to the job succeeded, and to every process serving it."""
+    t0 = time.perf_counter()
+    job = send()
+    t1 = time.perf_counter()
+    done = wait_job(client, job["id"], job_timeout)
+    t2 = time.perf_counter()
+    if done["status"] != "succeeded":
+        raise RuntimeError(f"job {done['id']} ({done['kind']}) failed: {done['error']}")
+    everywhere(url, done["model_version"])
+    t3 = time.perf_counter()
+    return {
+        "post_ms": (t1 - t0) * 1e3,
+        "live_s": t2 - t1,
+        "everywhere_s": t3 - t1,
+        "job": done,
+    }
+
+
+def one_object(client, url: str, name: str, vector, samples, threshold: int) -> dict:
+    """Register one novel object by its vector, add its samples one at a time up to the
+    promotion, and check it was promoted by growing the known part."""
+    before = client.http.get("/v1/models/active").json()
+    grown_before = int(before["metrics"].get("n_grown_samples", 0))
+    reg = enrol(
+        client,
+        url,
+        lambda: client.register_class(name, attribute_vector=[float(v) for v in vector]),
+        120,
+    )
+    cid = reg["job"]["class_id"]
+    add = lambda i: lambda: client.add_sample(cid, samples[i])["job"]  # noqa: E731
+    shot = enrol(client, url, add(0), 120)
+    for i in range(1, threshold - 1):
+        wait_job(client, add(i)()["id"], 120)
+    promote = enrol(client, url, add(threshold - 1), 600)
+    cls = client.http.get(f"/v1/classes/{cid}").json()
+    version = client.http.get(f"/v1/models/{promote['job']['model_version']}").json()
+    grown_after = int(version["metrics"].get("n_grown_samples", 0))
+    return {
+        "name": name,
+        "class_id": cid,
+        **{f"register_{k}": v for k, v in reg.items() if k != "job"},
+        **{f"one_shot_{k}": v for k, v in shot.items() if k != "job"},
+        **{f"promote_{k}": v for k, v in promote.items() if k != "job"},
+        "promoted_kind": cls["kind"],
+        "promotion_reason": version["reason"],
+        "grown_samples_added": grown_after - grown_before,
+        "versions": [reg["job"]["model_version"], promote["job"]["model_version"]],
+    }
+
+
+def recognise_latency(client, samples: np.ndarray) -> list[float]:
+    """Seconds per ``POST /v1/recognize`` of one sample, each sample once."""
+    client.recognize(samples[0][None])  # the connection, opened once
+    times = []
+    for x in samples:
+        t = time.perf_counter()
+        answer = client.recognize(x[None])
+        times.append(time.perf_counter() - t)
+        if answer["source"] != "service":
+            raise RuntimeError("recognize was answered offline")
+    return times
+
+
+# --------------------------------------------------------------------------- report
+def summary(repeats: list[dict], recognise: list[float]) -> dict:
+    out = {}
+    for fig in FIGURES:
+        for part in ("live_s", "everywhere_s", "post_ms"):
+            values = [r[f"{fig}_{part}"] for r in repeats]
+            out[f"{fig}_{part}"] = {"median": float(np.median(values)), "worst": max(values)}
+    ms = np.asarray(recognise) * 1e3
+    out["recognise_1_ms"] = {"median": float(np.median(ms)), "worst": float(ms.max())}
+    out["recognise_1_ms"]["p90"] = float(np.percentile(ms, 90))
+    return out
+
+
+GOALS_S = {"register": 1.0, "one_shot": 1.0, "promote": 10.0}
+
+
+def table(report: dict) -> str:
+    s, n = report["summary"], report["objects"]
+    lines = [
+        f"{n} known objects, {len(report['repeats'])} repeats, "
+        f"{report['api_processes']} API processes (median / worst):",
+        "",
+        "| enrolment | 202 → job succeeded | 202 → every process serves it | POST to 202 | goal |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for fig in FIGURES:
+        live, every, post = (s[f"{fig}_{p}"] for p in ("live_s", "everywhere_s", "post_ms"))
+        lines.append(
+            f"| {fig.replace('_', '-')} | {live['median']:.3g} / {live['worst']:.3g} s "
+            f"| {every['median']:.3g} / {every['worst']:.3g} s "
+            f"| {post['median']:.3g} / {post['worst']:.3g} ms | ≤ {GOALS_S[fig]:g} s |"
+        )
+    r = s["recognise_1_ms"]
+    lines.append(
+        f"| recognise 1 sample | {r['median']:.3g} / {r['worst']:.3g} ms "
+        f"(p90 {r['p90']:.3g} ms) | | | |"
+    )
+    lines.append(f"\nservice start (dataset and bundle stored): {report['startup_s']:.0f} s")
+    return "\n".join(lines)
+
+
+def machine() -> dict:
+    commit = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+    ).stdout.strip()
+    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                           capture_output=True, text=True).stdout.strip()  # fmt: skip
+    pages = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    return {
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "cpus": os.cpu_count(),
+        "memory_gb": round(pages / 1e9, 1),
+        "python": platform.python_version(),
+        "commit": commit + ("+changes" if dirty else ""),
+    }
+
+
+# ----------------------------------------------------------------------------- main
+def parse(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--objects", type=int, default=10_000, help="known objects (default 10000)")
+    p.add_argument("--novel", type=int, default=200, help="novel objects drawn (default 200)")
+    p.add_argument("--repeats", type=int, default=5, help="novel objects enrolled (default 5)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--model", type=Path, help="a bundle this script fitted before")
+    p.add_argument("--recognise", type=int, default=200, help="samples recognised one by one")
+    p.add_argument(
+        "--processes", type=int, help="API processes (default: the service's, one per core)"
+    )
+    p.add_argument("--out", type=Path, default=Path("results/scale-service"))
+    p.add_argument("--keep", action="store_true", help="keep the service's store and log")
+    args = p.parse_args(argv)
+    if args.objects < 2:
+        p.error("--objects must be at least 2")
+    if args.repeats < 1 or args.novel < args.repeats:
+        p.error("--repeats must be at least 1 and --novel at least --repeats")
+    if args.processes is not None and args.processes < 1:
+        p.error("--processes must be at least 1")
+    if args.recognise < 1:
+        p.error("--recognise must be at least 1")
+    if args.model is not None and not args.model.is_file():
+        p.error(f"--model {args.model}: no such file")
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    from app.client import TactileClient
+    from app.config import Settings
+    from app.data.folder import write_folder
+
+    args = parse(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    load_start = os.getloadavg()
+    say(f"simulating {args.objects} + {args.novel} objects ...")
+    ds = simulate(args.objects, args.novel, args.seed)
+    free, taken = free_novel(ds, args.objects)
+    if len(free) < args.repeats:
+        raise SystemExit(
+            f"only {len(free)} of the {args.novel} novel objects have an attribute vector "
+            f"nobody has; --repeats {args.repeats} needs more: raise --novel"
+        )
+    known = ds.select_classes(np.arange(args.objects))
+    if args.model is None:
+        name = f"best-{args.objects}-{args.novel}-{args.seed}.bundle"
+        model = build(known, args.seed, args.out / name)
+    else:
+        model = args.model.resolve()
+        check_model(model, known)
+    root = Path(tempfile.mkdtemp(prefix="scale-service-"))
+    service = None
+    try:
+        say(f"writing the known objects as a folder dataset in {root} ...")
+        write_folder(known, root / "dataset")
+        say(f"starting tactile-zsl serve (log: {root / 'serve.log'}) ...")
+        t = time.perf_counter()
+        service = Service(root, root / "dataset", model, args.processes)
+        service.wait_ready(STARTUP_TIMEOUT_S)
+        startup = time.perf_counter() - t
+        processes = service.processes()
+        say(f"ready in {startup:.0f} s on {service.url} with {processes} API processes")
+        threshold = Settings.model_fields["promotion_threshold"].default
+        repeats = []
+        with TactileClient(service.url, timeout=60) as client:
+            for r, k in enumerate(free[: args.repeats]):
+                samples = ds.samples[ds.labels == k]
+                if len(samples) < threshold:
+                    raise SystemExit(f"{TRIALS} trials per object, promotion needs {threshold}")
+                say(f"repeat {r + 1}/{args.repeats}: {ds.class_names[k]} ...")
+                one = one_object(
+                    client, service.url, ds.class_names[k], ds.class_attributes[k],
+                    samples, threshold,
+                )  # fmt: skip
+                say(
+                    f"  registered {one['register_live_s']:.2f} s, one-shot "
+                    f"{one['one_shot_live_s']:.2f} s, promoted {one['promote_live_s']:.2f} s "
+                    f"({one['promoted_kind']}, {one['grown_samples_added']} samples grown)"
+                )
+                repeats.append(one)
+            rng = np.random.default_rng(args.seed)
+            rows = rng.choice(len(known), size=min(args.recognise, len(known)), replace=False)
+            say(f"recognising {len(rows)} samples one at a time ...")
+            recognise = recognise_latency(client, known.samples[rows])
+    finally:
+        if service is not None:
+            service.stop()
+            if args.keep:
+                say(f"kept {root}")
+            else:
+                (args.out / "serve.log").write_bytes(service.log_path.read_bytes())
+        if not args.keep:
+            shutil.rmtree(root, ignore_errors=True)
+    report = {
+        "machine": machine(),
+        "load_average": {"start": load_start, "end": os.getloadavg()},
+        "objects": args.objects,
+        "novel": args.novel,
+        "free_novel": len(free),
+        "novel_vectors_taken": taken,
+        "seed": args.seed,
+        "model": str(model),
+        "api_processes": processes,
+        "promotion_threshold": threshold,
+        "startup_s": startup,
+        "summary": summary(repeats, recognise),
+        "repeats": repeats,
+    }
+    (args.out / "scale_service.json").write_text(json.dumps(report, indent=2))
+    print(table(report))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,71 @@
+"""bench/scale_service.py end to end at a tiny size: a real ``serve`` on a fitted bundle,
+every enrolment's job succeeded, the promoted class known, every figure positive, the
+bundle reused with ``--model`` (and refused for other objects), and clear refusals of bad
+arguments. The times themselves
+mean nothing at this size."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def run(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "bench.scale_service", *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+@pytest.mark.slow
+def test_a_tiny_service_measures_every_enrolment_and_reuses_its_bundle(tmp_path):
+    done = run("--objects", "60", "--novel", "6", "--repeats", "2", "--recognise", "10",
+               "--out", str(tmp_path))  # fmt: skip
+    assert done.returncode == 0, done.stderr[-4000:]
+    report = json.loads((tmp_path / "scale_service.json").read_text())
+    assert report["objects"] == 60 and report["free_novel"] >= 2
+    assert report["api_processes"] >= 1 and report["startup_s"] > 0
+    assert report["machine"]["commit"] and len(report["load_average"]["start"]) == 3
+    assert len(report["repeats"]) == 2
+    for r in report["repeats"]:
+        assert r["promoted_kind"] == "known" and r["promotion_reason"] == "promotion"
+        assert r["grown_samples_added"] == report["promotion_threshold"]  # grown, not refitted
+        for fig in ("register", "one_shot", "promote"):
+            assert 0 < r[f"{fig}_live_s"] <= r[f"{fig}_everywhere_s"]
+            assert r[f"{fig}_post_ms"] > 0
+    s = report["summary"]
+    for name, figure in s.items():
+        assert 0 < figure["median"] <= figure["worst"], name
+    assert s["recognise_1_ms"]["median"] <= s["recognise_1_ms"]["p90"]
+    assert "| register |" in done.stdout and "| promote |" in done.stdout
+    bundle = tmp_path / "best-60-6-0.bundle"
+    assert bundle.is_file() and (tmp_path / "serve.log").is_file()
+
+    again = run("--objects", "60", "--novel", "6", "--repeats", "1", "--recognise", "2",
+                "--model", str(bundle), "--out", str(tmp_path / "again"))  # fmt: skip
+    assert again.returncode == 0, again.stderr[-4000:]
+    assert "fitting" not in again.stderr
+    assert json.loads((tmp_path / "again" / "scale_service.json").read_text())["model"] == str(
+        bundle
+    )
+    other = run("--objects", "50", "--novel", "6", "--model", str(bundle), "--out", str(tmp_path))
+    assert other.returncode == 1 and "its known classes differ" in other.stderr, other.stderr
+
+
+def test_bad_arguments_exit_2_with_a_message(tmp_path):
+    for args, words in (
+        (("--objects", "1"), "--objects must be at least 2"),
+        (("--repeats", "3", "--novel", "2"), "--novel at least --repeats"),
+        (("--model", str(tmp_path / "absent.bundle")), "no such file"),
+    ):
+        done = run(*args, "--out", str(tmp_path), timeout=60)
+        assert done.returncode == 2 and words in done.stderr, (args, done.stderr)
