@@ -42,7 +42,15 @@ _COUNTS = "leaf_count"
 class FlatForest:
     """Class-probability trees (one output) flattened into arrays; see the module docstring."""
 
-    def __init__(self, arrays: dict[str, np.ndarray], n_classes: int, n_features: int) -> None:
+    def __init__(
+        self,
+        arrays: dict[str, np.ndarray],
+        n_classes: int,
+        n_features: int,
+        check: bool = True,
+    ) -> None:
+        """``check``: validate the arrays (a stored forest's); False only for arrays this
+        module has just built (a promotion's grown forest: the check reads every node)."""
         missing = [k for k in _KEYS if k not in arrays]
         if missing:
             raise ValueError(f"forest state lacks {missing}")
@@ -63,7 +71,8 @@ class FlatForest:
         self.n_classes = int(n_classes)
         self.n_features = int(n_features)
         self._nodes: np.ndarray | None = None  # the walk's packed node records, built on first use
-        self._check()
+        if check:
+            self._check()
 
     def _check(self) -> None:
         n = len(self.feature)
@@ -302,7 +311,7 @@ class FlatForest:
             "leaf_value": shares,
             _COUNTS: leaf_count.astype(np.int32),
         }
-        return FlatForest(arrays, n_classes, self.n_features)
+        return FlatForest(arrays, n_classes, self.n_features, check=False)
 
     # --------------------------------------------------------------- inference
     def _inputs(self, x: np.ndarray) -> np.ndarray:

@@ -48,6 +48,9 @@ def test_grown_forest_keeps_what_it_knew_and_learns_the_new_class():
     p = grown.predict_proba(x)
     np.testing.assert_allclose(p.sum(axis=1), 1.0)
     assert grown.leaf_count.sum() >= forest.leaf_count.sum() + (~old).sum() * forest.n_trees
+    # built without the check a stored forest gets, and it would pass it
+    again = FlatForest.from_state(grown.get_state(), OBJECTS, x.shape[1])
+    np.testing.assert_array_equal(again.predict_proba(x), p)
     # a forest stored before leaf counts were kept loads with one sample per leaf
     state = {k: v for k, v in forest.get_state().items() if k != "leaf_count"}
     assert (FlatForest.from_state(state, OBJECTS - 1, x.shape[1]).leaf_count == 1).all()
