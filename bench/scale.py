@@ -266,6 +266,17 @@ def machine() -> dict:
     }
 
 
+def parse_sizes(p: argparse.ArgumentParser, text: str) -> list[int]:
+    """``--sizes``: distinct integers, at least 2 each, smallest first (else ``p.error``)."""
+    try:
+        sizes = sorted({int(s) for s in text.split(",") if s.strip()})
+    except ValueError:
+        p.error(f"--sizes must be integers separated by commas, got {text!r}")
+    if not sizes or sizes[0] < 2:
+        p.error("every size must be at least 2 objects")
+    return sizes
+
+
 def parse(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--sizes", default="60,300,1000,3000,10000,30000")
@@ -281,12 +292,7 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--out", default="results/scale")
     p.add_argument("--one", type=int, help=argparse.SUPPRESS)  # a child's own size
     args = p.parse_args(argv)
-    try:
-        args.sizes = sorted({int(s) for s in args.sizes.split(",") if s.strip()})
-    except ValueError:
-        p.error(f"--sizes must be integers separated by commas, got {args.sizes!r}")
-    if not args.sizes or args.sizes[0] < 2:
-        p.error("every size must be at least 2 known objects")
+    args.sizes = parse_sizes(p, args.sizes)
     if args.max is not None:
         if args.max < args.sizes[0]:
             p.error(f"--max {args.max} is below the smallest size {args.sizes[0]}")

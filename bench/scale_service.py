@@ -45,7 +45,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import re
 import shutil
 import signal
@@ -57,6 +56,8 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
+
+from bench.scale import machine as scale_machine
 
 TRIALS = 10
 EVERYWHERE = 8  # fresh connections in a row that must see a version
@@ -324,20 +325,11 @@ def table(report: dict) -> str:
 
 
 def machine() -> dict:
-    commit = subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True
-    ).stdout.strip()
+    """``bench.scale.machine()``, its commit marked when tracked files have changes."""
     dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
                            capture_output=True, text=True).stdout.strip()  # fmt: skip
-    pages = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    return {
-        "platform": platform.platform(),
-        "processor": platform.processor() or platform.machine(),
-        "cpus": os.cpu_count(),
-        "memory_gb": round(pages / 1e9, 1),
-        "python": platform.python_version(),
-        "commit": commit + ("+changes" if dirty else ""),
-    }
+    out = scale_machine()
+    return {**out, "commit": out["commit"] + ("+changes" if dirty else "")}
 
 
 # ----------------------------------------------------------------------------- main

@@ -42,6 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.scale import parse_sizes
+
 BLOCK = 1024
 SCALER_ROWS = 50_000  # the scaler's medians and quartiles from at most this many trials
 
@@ -190,12 +192,7 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     args = p.parse_args(argv)
     from app.data.simulator import SEPARATIONS
 
-    try:
-        args.sizes = sorted({int(s) for s in args.sizes.split(",") if s.strip()})
-    except ValueError:
-        p.error(f"--sizes must be integers separated by commas, got {args.sizes!r}")
-    if not args.sizes or args.sizes[0] < 2:
-        p.error("every size must be at least 2 objects")
+    args.sizes = parse_sizes(p, args.sizes)
     args.separations = [s.strip() for s in args.separations.split(",") if s.strip()]
     bad = [s for s in args.separations if s != "none" and s not in SEPARATIONS]
     if bad or not args.separations:

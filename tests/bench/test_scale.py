@@ -55,7 +55,7 @@ def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
 
 def test_bad_arguments_exit_2_with_a_message(tmp_path):
     for args, words in (
-        (("--sizes", "1,10"), "at least 2 known objects"),
+        (("--sizes", "1,10"), "at least 2 objects"),
         (("--sizes", "ten"), "--sizes must be integers"),
         (("--sizes", "60,300", "--max", "10"), "below the smallest size"),
         (("--trials", "3"), "--trials at least 4"),

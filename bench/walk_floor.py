@@ -1,0 +1,98 @@
+"""The floor under one sample's latency at scale: ``best``'s forest walk alone, against the
+whole answer at 60 objects.
+
+    .venv/bin/python -m bench.walk_floor [--sizes 60,3000] [--repeats 300] [--rounds 3]
+                                         [--out DIR]
+
+For each size N, ``best`` (``by_procedure`` off: a complete sample is answered by the whole
+model either way) is fitted on ``simulate_dataset(N, 10 trials)``; then, on the same
+samples, alternately for ``--rounds`` rounds, the median wall time of one sample's:
+
+- ``answer_us``: ``recognize_batch`` (what ``bench.scale`` reports as recognise 1);
+- ``walk_us``: the known-class forest's ``predict_proba`` on the scaled sample (the walk of
+  every tree, the leaves' distributions summed): what any answer from this forest costs.
+
+It prints a table with each figure divided by ``answer_us`` at the smallest size (the goal
+is 3x at 30,000 objects) and writes ``walk_floor.json`` with the machine and the commit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bench.scale import machine, parse_sizes
+
+
+def _median_us(fn, xs: np.ndarray) -> float:
+    fn(xs[:1])
+    times = []
+    for i in range(len(xs)):
+        t = time.perf_counter()
+        fn(xs[i : i + 1])
+        times.append(time.perf_counter() - t)
+    return float(np.median(times)) * 1e6
+
+
+def measure(n: int, repeats: int, rounds: int) -> dict:
+    from app.data.simulator import simulate_dataset
+    from app.framework.scaling import flatten
+    from app.methods.best import BestRecognizer
+
+    ds = simulate_dataset(n, 10, seed=0)
+    model = BestRecognizer(n_jobs=-1, by_procedure=False).fit(ds)
+    cues = model.known_.cues_model
+    f = cues.forest
+    rows = np.linspace(0, len(ds) - 1, repeats).astype(int)
+    samples = ds.samples[rows]
+    z = cues.scaled(flatten(samples)).astype(np.float32)
+    figures: dict[str, list[float]] = {"answer_us": [], "walk_us": []}
+    for _ in range(rounds):
+        figures["answer_us"].append(_median_us(lambda x: model.recognize_batch(x, 1), samples))
+        figures["walk_us"].append(_median_us(f.predict_proba, z))
+    return {
+        "objects": n,
+        "forest_nodes": len(f.feature),
+        **{k: float(np.median(v)) for k, v in figures.items()},
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--sizes", default="60,3000")
+    p.add_argument("--repeats", type=int, default=300)
+    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--out", type=Path, default=None)
+    args = p.parse_args(argv)
+    sizes = parse_sizes(p, args.sizes)
+    if args.repeats < 1 or args.rounds < 1:
+        p.error("--repeats and --rounds must be 1 at least")
+    records = []
+    for n in sizes:
+        print(f"walk_floor: {n} objects ...", file=sys.stderr, flush=True)
+        records.append(measure(n, args.repeats, args.rounds))
+    base = records[0]["answer_us"]
+    at = sizes[0]
+    print(f"| objects | nodes | answer | walk alone | answer ÷ at {at} | walk ÷ answer at {at} |")
+    print("| --- | --- | --- | --- | --- | --- |")
+    for r in records:
+        print(
+            f"| {r['objects']:,} | {r['forest_nodes']:,} | {r['answer_us']:.0f} µs | "
+            f"{r['walk_us']:.0f} µs | "
+            f"{r['answer_us'] / base:.1f}x | {r['walk_us'] / base:.1f}x |"
+        )
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "walk_floor.json").write_text(
+            json.dumps({"machine": machine(), "sizes": records}, indent=1)
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,38 @@
+"""bench/walk_floor.py at tiny sizes: a record per size with positive times, the JSON, and a
+clear refusal of bad sizes. The figures mean nothing at this size."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "bench.walk_floor", *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+def test_tiny_sizes_give_a_record_each_and_a_table(tmp_path):
+    done = run("--sizes", "12,6", "--repeats", "5", "--rounds", "1", "--out", str(tmp_path))
+    assert done.returncode == 0, done.stderr
+    records = json.loads((tmp_path / "walk_floor.json").read_text())["sizes"]
+    assert [r["objects"] for r in records] == [6, 12]  # smallest first: the base
+    for r in records:
+        assert r["forest_nodes"] > 0 and 0 < r["walk_us"] and 0 < r["answer_us"]
+    assert "| 12 |" in done.stdout and "answer ÷ at 6" in done.stdout
+
+
+def test_bad_sizes_are_refused():
+    done = run("--sizes", "60,lots")
+    assert done.returncode == 2 and "--sizes must be integers" in done.stderr
+    done = run("--sizes", "1")
+    assert done.returncode == 2 and "2 objects" in done.stderr
