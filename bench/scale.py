@@ -218,17 +218,28 @@ def exponents(records: list[dict]) -> dict[str, float | None]:
     return out
 
 
+def markdown_rows(records: list[dict], cols: tuple[str, ...], digits: str) -> list[str]:
+    """A Markdown table's header, rule and one row per record of ``cols``: floats in the
+    format ``digits`` (e.g. ".3g"), a missing or None value as "–"."""
+    lines = ["| " + " | ".join(cols) + " |", "|" + " --- |" * len(cols)]
+    for r in records:
+        cells = [
+            "–"
+            if r.get(c) is None
+            else format(r[c], digits)
+            if isinstance(r[c], float)
+            else str(r[c])
+            for c in cols
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
 def table(records: list[dict], slopes: dict) -> str:
     cols = ("objects", *COSTS, "by_procedure_s", "throughput_per_s", "known_acc", "nn1_acc")
     cols += ("zsl_acc",)
     cols += ("vectors_distinct", "novel_vectors_taken")
-    lines = ["| " + " | ".join(cols) + " |", "|" + " --- |" * len(cols)]
-    for r in records:
-        cells = [
-            "–" if r.get(c) is None else f"{r[c]:.3g}" if isinstance(r[c], float) else str(r[c])
-            for c in cols
-        ]
-        lines.append("| " + " | ".join(cells) + " |")
+    lines = markdown_rows(records, cols, ".3g")
     fitted = [f"{slopes[c]:.2f}" if slopes.get(c) is not None else "–" for c in COSTS]
     lines.append("| exponent | " + " | ".join(fitted) + " |" + " |" * (len(cols) - len(COSTS) - 1))
     return "\n".join(lines)

@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.scale import parse_sizes
+from bench.scale import markdown_rows, parse_sizes
 
 BLOCK = 1024
 SCALER_ROWS = 50_000  # the scaler's medians and quartiles from at most this many trials
@@ -137,14 +137,7 @@ def _loo_nn1(z: np.ndarray, labels: np.ndarray) -> float:
 def table(records: list[dict]) -> str:
     cols = ("data", "separation", "objects", "sep_median", "sep_q10", "sep_q25", "sep_q75")
     cols += ("nn1", "nn1_scaled")
-    lines = ["| " + " | ".join(cols) + " |", "|" + " --- |" * len(cols)]
-    for r in records:
-        cells = [
-            "–" if r.get(c) is None else f"{r[c]:.3f}" if isinstance(r[c], float) else str(r[c])
-            for c in cols
-        ]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+    return "\n".join(markdown_rows(records, cols, ".3f"))
 
 
 def plot(records: list[dict], path: Path) -> None:
