@@ -3,7 +3,8 @@
 
     .venv/bin/python -m bench.scale_service [--objects 10000] [--novel 200] [--repeats 5]
                                             [--seed 0] [--model FILE] [--recognise 200]
-                                            [--processes N] [--out results/scale-service/]
+                                            [--processes N] [--in-process-only]
+                                            [--out results/scale-service/]
 
 ``simulate_dataset(objects + novel, 10 trials, seed)``: the first ``--objects`` objects are
 known, the rest novel (as ``bench.scale`` draws them). ``best`` (its defaults, ``n_jobs`` =
@@ -32,9 +33,12 @@ a 409; ``free_novel`` and ``novel_vectors_taken`` say how many there were):
   over the API processes by the kernel) answer ``/healthz`` with that version or newer;
 - ``post_ms``: each enrolment POST's own latency (to its 202).
 
-Besides: ``startup_s`` (the service's first start: storing the dataset and the bundle, to
-``/readyz``), ``recognise_1_ms`` (``POST /v1/recognize`` of one known object's sample, an
-.npy body over one kept-alive connection, ``--recognise`` different samples). Each figure
+First, in process on the loaded bundle (``in_process``: the method's own share, freed before
+the service starts; ``--in-process-only`` stops there): the same objects' registration,
+first sample and promotion as calls of the model. Besides: ``startup_s`` (the service's
+first start: storing the dataset and the bundle, to ``/readyz``), ``recognise_1_ms``
+(``POST /v1/recognize`` of one known object's sample, an .npy body over one kept-alive
+connection, ``--recognise`` different samples). Each figure
 is given as its median and worst over the repeats. The JSON (``scale_service.json`` in
 ``--out``) has every repeat's figures, the machine, the commit and the load averages at
 start and end; a Markdown table goes to stdout, progress to stderr.
@@ -270,6 +274,40 @@ def one_object(client, url: str, name: str, vector, samples, threshold: int) -> 
     }
 
 
+def in_process(model_path: Path, ds, objects: list[int], threshold: int) -> dict:
+    """The method's own share of the enrolments, without the service: the bundle loaded,
+    then for each novel object ``objects`` (indices into ``ds``) the times of
+    ``add_novel_classes`` (``register_s``), ``add_one_shot`` of its first sample
+    (``one_shot_s``; the very first also as ``first_one_shot_s``: it packs the forests for
+    the walk, once per model) and ``with_known_samples`` of ``threshold`` samples on the
+    base model (``promote_s``: a promotion learnt into the known part)."""
+    from app.framework import bundle
+
+    t = time.perf_counter()
+    base = bundle.load(model_path)
+    out: dict = {"load_s": time.perf_counter() - t, "repeats": []}
+    for k in objects:
+        name, vector = ds.class_names[k], ds.class_attributes[k]
+        samples = ds.samples[ds.labels == k]
+        t = time.perf_counter()
+        novel = base.add_novel_classes([name], vector[None])
+        register = time.perf_counter() - t
+        t = time.perf_counter()
+        novel.add_one_shot(name, samples[:1])
+        shot = time.perf_counter() - t
+        out.setdefault("first_one_shot_s", shot)
+        t = time.perf_counter()
+        base.with_known_samples({name: samples[:threshold]}, {name: vector})
+        promote = time.perf_counter() - t
+        out["repeats"].append({"register_s": register, "one_shot_s": shot, "promote_s": promote})
+        say(f"  in process {name}: registered {register * 1e3:.1f} ms, one-shot "
+            f"{shot * 1e3:.1f} ms, promoted {promote:.2f} s")  # fmt: skip
+    for fig in ("register_s", "one_shot_s", "promote_s"):
+        values = [r[fig] for r in out["repeats"][1:] or out["repeats"]]  # past the first
+        out[fig] = {"median": float(np.median(values)), "worst": max(values)}
+    return out
+
+
 def recognise_latency(client, samples: np.ndarray) -> list[float]:
     """Seconds per ``POST /v1/recognize`` of one sample, each sample once."""
     client.recognize(samples[0][None])  # the connection, opened once
@@ -324,6 +362,21 @@ def table(report: dict) -> str:
     return "\n".join(lines)
 
 
+def in_process_table(figures: dict) -> str:
+    """The in-process figures (``in_process``) as Markdown: medians and worst past the first
+    object, and the first one-shot apart."""
+    lines = ["| in process | median / worst |", "| --- | --- |"]
+    for fig, unit, scale in (("register_s", "ms", 1e3), ("one_shot_s", "ms", 1e3),
+                             ("promote_s", "s", 1)):  # fmt: skip
+        f = figures[fig]
+        lines.append(
+            f"| {fig[:-2]} | {f['median'] * scale:.3g} / {f['worst'] * scale:.3g} {unit} |"
+        )
+    lines.append(f"| first one-shot after the load | {figures['first_one_shot_s']:.3g} s |")
+    lines.append(f"| load the bundle | {figures['load_s']:.3g} s |")
+    return "\n".join(lines)
+
+
 def machine() -> dict:
     """``bench.scale.machine()``, its commit marked when tracked files have changes."""
     dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
@@ -346,6 +399,11 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     )
     p.add_argument("--out", type=Path, default=Path("results/scale-service"))
     p.add_argument("--keep", action="store_true", help="keep the service's store and log")
+    p.add_argument(
+        "--in-process-only",
+        action="store_true",
+        help="measure the method's share in process and start no service",
+    )
     args = p.parse_args(argv)
     if args.objects < 2:
         p.error("--objects must be at least 2")
@@ -383,6 +441,25 @@ def main(argv: list[str] | None = None) -> int:
     else:
         model = args.model.resolve()
         check_model(model, known)
+    threshold = Settings.model_fields["promotion_threshold"].default
+    say(f"in process: {args.repeats} novel objects on the loaded bundle ...")
+    method = in_process(model, ds, free[: args.repeats], threshold)  # freed before serve starts
+    report = {
+        "machine": machine(),
+        "objects": args.objects,
+        "novel": args.novel,
+        "free_novel": len(free),
+        "novel_vectors_taken": taken,
+        "seed": args.seed,
+        "model": str(model),
+        "promotion_threshold": threshold,
+        "in_process": method,
+    }
+    if args.in_process_only:
+        report["load_average"] = {"start": load_start, "end": os.getloadavg()}
+        (args.out / "scale_service.json").write_text(json.dumps(report, indent=2))
+        print(in_process_table(method))
+        return 0
     root = Path(tempfile.mkdtemp(prefix="scale-service-"))
     service = None
     try:
@@ -395,7 +472,6 @@ def main(argv: list[str] | None = None) -> int:
         startup = time.perf_counter() - t
         processes = service.processes()
         say(f"ready in {startup:.0f} s on {service.url} with {processes} API processes")
-        threshold = Settings.model_fields["promotion_threshold"].default
         repeats = []
         with TactileClient(service.url, timeout=60) as client:
             for r, k in enumerate(free[: args.repeats]):
@@ -426,23 +502,16 @@ def main(argv: list[str] | None = None) -> int:
                 (args.out / "serve.log").write_bytes(service.log_path.read_bytes())
         if not args.keep:
             shutil.rmtree(root, ignore_errors=True)
-    report = {
-        "machine": machine(),
-        "load_average": {"start": load_start, "end": os.getloadavg()},
-        "objects": args.objects,
-        "novel": args.novel,
-        "free_novel": len(free),
-        "novel_vectors_taken": taken,
-        "seed": args.seed,
-        "model": str(model),
-        "api_processes": processes,
-        "promotion_threshold": threshold,
-        "startup_s": startup,
-        "summary": summary(repeats, recognise),
-        "repeats": repeats,
-    }
+    report.update(
+        load_average={"start": load_start, "end": os.getloadavg()},
+        api_processes=processes,
+        startup_s=startup,
+        summary=summary(repeats, recognise),
+        repeats=repeats,
+    )
     (args.out / "scale_service.json").write_text(json.dumps(report, indent=2))
     print(table(report))
+    print(in_process_table(method))
     return 0
 
 

@@ -46,6 +46,7 @@ def test_a_tiny_service_measures_every_enrolment_and_reuses_its_bundle(tmp_path)
     for name, figure in s.items():
         assert 0 < figure["median"] <= figure["worst"], name
     assert s["recognise_1_ms"]["median"] <= s["recognise_1_ms"]["p90"]
+    assert_in_process(report["in_process"], 2)
     assert "| register |" in done.stdout and "| promote |" in done.stdout
     bundle = tmp_path / "best-60-6-0.bundle"
     assert bundle.is_file() and (tmp_path / "serve.log").is_file()
@@ -59,6 +60,24 @@ def test_a_tiny_service_measures_every_enrolment_and_reuses_its_bundle(tmp_path)
     )
     other = run("--objects", "50", "--novel", "6", "--model", str(bundle), "--out", str(tmp_path))
     assert other.returncode == 1 and "its known classes differ" in other.stderr, other.stderr
+
+
+def assert_in_process(figures: dict, repeats: int) -> None:
+    assert figures["load_s"] > 0 and figures["first_one_shot_s"] > 0
+    assert len(figures["repeats"]) == repeats
+    for fig in ("register_s", "one_shot_s", "promote_s"):
+        assert 0 < figures[fig]["median"] <= figures[fig]["worst"], fig
+        assert all(r[fig] > 0 for r in figures["repeats"]), fig
+
+
+def test_in_process_only_measures_the_method_and_starts_no_service(tmp_path):
+    done = run("--objects", "30", "--novel", "6", "--repeats", "2", "--in-process-only",
+               "--out", str(tmp_path))  # fmt: skip
+    assert done.returncode == 0, done.stderr[-4000:]
+    report = json.loads((tmp_path / "scale_service.json").read_text())
+    assert_in_process(report["in_process"], 2)
+    assert "startup_s" not in report and "starting tactile-zsl serve" not in done.stderr
+    assert "| promote |" in done.stdout and "first one-shot" in done.stdout
 
 
 def test_bad_arguments_exit_2_with_a_message(tmp_path):
