@@ -21,7 +21,8 @@ The child fits ``best`` (its defaults, ``n_jobs`` = the cores) on the rest and m
 - ``enrol_ms``: ``add_novel_classes`` of one class by attribute vector (median of up to 5:
   as many as novel vectors are free), and ``one_shot_ms``: ``add_one_shot`` of one sample
   to a zero-shot class (the same count), after one untimed one-shot (a model's first packs
-  its forests for the walk, a cost once per model: 3 to 5 s at 10,000 objects);
+  its forests for the walk, a cost once per model: 4.35 s at 10,000 objects,
+  ``bench.scale_service --in-process-only``);
 - ``promote_s``: ``with_known_samples`` of one novel object's samples, the promotion the
   service makes without a refit (median of 3), beside ``fit_s``, the refit it replaces;
 - ``recognise_1_us``: ``recognize_batch`` of one sample (median of 300 different samples),
