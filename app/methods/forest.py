@@ -213,8 +213,10 @@ class FlatForest:
         scikit-learn's ``ExtraTreeClassifier`` (``max_features`` as grown, ``grow_leaf``)
         until its leaves are pure; a leaf that stays one class only counts the new samples.
         Only the seen samples of the classes those leaves hold are taken through the trees
-        (a leaf's distribution names every class that reached it), so the cost does not grow
-        with the number of seen samples beyond picking them out.
+        (a leaf's distribution names every class that reached it), and only the leaves
+        reached are recomputed: the rest of the forest (its nodes, their packed records for
+        the walk, and every other leaf's distribution) is copied as it is, so the cost
+        beyond copying does not grow with the catalogue.
         The splits above those leaves were chosen without the new samples, so the result
         differs from a forest grown on everything (bounded in tests/methods/test_grow_known.py).
         """
@@ -226,23 +228,11 @@ class FlatForest:
         x = self._inputs(x)
         new_leaf = self.apply(x)  # (N, trees) leaf nodes
         leaves = self.leaf_of_node[np.unique(new_leaf)]
-        starts, ends = self.leaf_ptr[leaves], self.leaf_ptr[leaves + 1]
-        entries = np.repeat(ends - np.cumsum(ends - starts), ends - starts) + np.arange(
-            int((ends - starts).sum())
-        )
-        near_rows = np.flatnonzero(np.isin(seen_y, self.leaf_class[entries]))
+        near_rows = np.flatnonzero(np.isin(seen_y, self.leaf_class[self._entries(leaves)]))
         seen_x, seen_y = self._inputs(np.asarray(seen_x[near_rows])), seen_y[near_rows]
         seen_leaf = self.apply(seen_x)
-        feature, threshold = self.feature.copy(), self.threshold.copy()
-        left, right, leaf_of_node = self.left.copy(), self.right.copy(), self.leaf_of_node.copy()
-        n_nodes, n_leaves = len(feature), len(self.leaf_count)
-        # leaf entries to add, as (leaf, class, samples); old ones as value x count
-        old_rows = np.repeat(np.arange(n_leaves), np.diff(self.leaf_ptr))
-        rows = [old_rows]
-        cols = [self.leaf_class.astype(np.int64)]
-        mass = [self.leaf_value * self.leaf_count[old_rows]]
-        counts = [self.leaf_count.astype(np.int64)]
-        extra = {k: [] for k in ("feature", "threshold", "left", "right", "leaf_of_node")}
+        counted = {}  # leaf -> (classes, samples) of the new samples counted into it
+        grafts = []  # (node, fitted subtree) of the leaves grown further
         rng = np.random.default_rng(seed)
         for t in range(self.n_trees):
             reached = _members(new_leaf[:, t])
@@ -252,7 +242,6 @@ class FlatForest:
             for node, members in reached.items():
                 here = seen_at.get(node, np.zeros(0, np.int64))
                 labels = np.concatenate([seen_y[here], y[members]])
-                leaf = int(self.leaf_of_node[node])
                 sub = None
                 if len(np.unique(labels)) > 1:
                     local = grow_leaf(
@@ -261,57 +250,23 @@ class FlatForest:
                         max_features,
                         int(rng.integers(2**31)),
                     )
-                    sub = local.tree_ if local.tree_.node_count > 1 else None
+                    sub = local if local.tree_.node_count > 1 else None
                 if sub is None:  # one class, or no split separates them: count them in
-                    found, k = np.unique(y[members], return_counts=True)
-                    rows.append(np.full(len(found), leaf))
-                    cols.append(found)
-                    mass.append(k.astype(np.float64))
-                    counts[0][leaf] += len(members)
-                    continue
-                # graft: the leaf becomes the subtree's root, its other nodes go at the end
-                base = n_nodes - 1  # subtree node i > 0 -> global base + i
-                is_leaf = sub.children_left < 0
-                glob = np.r_[node, base + np.arange(1, sub.node_count)]
-                leaf_ids = np.full(sub.node_count, -1, np.int64)
-                leaf_ids[is_leaf] = n_leaves + np.arange(int(is_leaf.sum()))
-                feat = np.where(is_leaf, -1, sub.feature)
-                lft = np.where(is_leaf, -1, glob[np.maximum(sub.children_left, 0)])
-                rgt = np.where(is_leaf, -1, glob[np.maximum(sub.children_right, 0)])
-                feature[node], threshold[node] = feat[0], sub.threshold[0]
-                left[node], right[node], leaf_of_node[node] = lft[0], rgt[0], -1
-                extra["feature"].append(feat[1:])
-                extra["threshold"].append(sub.threshold[1:])
-                extra["left"].append(lft[1:])
-                extra["right"].append(rgt[1:])
-                extra["leaf_of_node"].append(leaf_ids[1:])
-                value = sub.value[is_leaf, 0, :]
-                lr, lc = np.nonzero(value)
-                share = value[lr, lc] / value[lr].sum(axis=1)
-                n_here = sub.n_node_samples[is_leaf]
-                rows.append(n_leaves + lr)
-                cols.append(local.classes_[lc])
-                mass.append(share * n_here[lr])
-                counts.append(n_here.astype(np.int64))
-                n_nodes += sub.node_count - 1
-                n_leaves += int(is_leaf.sum())
-        rows_all, cols_all, shares = _leaf_distributions(
-            np.concatenate(rows), np.concatenate(cols), n_classes, np.concatenate(mass)
-        )
-        leaf_count = np.concatenate(counts)
-        arrays = {
-            "feature": np.concatenate([feature, *extra["feature"]]),
-            "threshold": np.concatenate([threshold, *extra["threshold"]]),
-            "left": np.concatenate([left, *extra["left"]]),
-            "right": np.concatenate([right, *extra["right"]]),
-            "roots": self.roots,
-            "leaf_of_node": np.concatenate([leaf_of_node, *extra["leaf_of_node"]]),
-            "leaf_ptr": np.r_[0, np.cumsum(np.bincount(rows_all, minlength=len(leaf_count)))],
-            "leaf_class": cols_all.astype(np.int32),
-            "leaf_value": shares,
-            _COUNTS: leaf_count.astype(np.int32),
-        }
-        return FlatForest(arrays, n_classes, self.n_features, check=False)
+                    counted[int(self.leaf_of_node[node])] = np.unique(
+                        y[members], return_counts=True
+                    )
+                else:
+                    grafts.append((node, sub))
+        out = _Grown(self)
+        for node, sub in grafts:
+            out.graft(node, sub)
+        return out.done(counted, n_classes)
+
+    def _entries(self, leaves: np.ndarray) -> np.ndarray:
+        """Indices into ``leaf_class`` / ``leaf_value`` of the entries of ``leaves``."""
+        starts, ends = self.leaf_ptr[leaves], self.leaf_ptr[leaves + 1]
+        sizes = ends - starts
+        return np.repeat(ends - np.cumsum(sizes), sizes) + np.arange(int(sizes.sum()))
 
     # --------------------------------------------------------------- inference
     def _inputs(self, x: np.ndarray) -> np.ndarray:
@@ -362,21 +317,13 @@ class FlatForest:
         )
 
     def _prepare_walk(self) -> None:
-        # For a float32 x, x <= t (float64) exactly when x <= the largest float32 <= t, so
-        # the walk compares in float32 (half the memory traffic) with the same outcome.
-        t32 = self.threshold.astype(np.float32)
-        above = t32.astype(np.float64) > self.threshold
-        t32[above] = np.nextafter(t32[above], np.float32(-np.inf))
-        # One 16-byte record per node, so a step touches one cache line: split feature,
-        # threshold (float32 bits), left and right child; a leaf (feature -1) keeps its leaf
-        # index where the left child would be.
-        leaf = self.feature < 0
-        nodes = np.empty((len(self.feature), 4), np.int32)
-        nodes[:, 0] = self.feature
-        nodes[:, 1] = t32.view(np.int32)
-        nodes[:, 2] = np.where(leaf, self.leaf_of_node, self.left)
-        nodes[:, 3] = self.right
-        self._nodes = nodes
+        self._nodes = _packed(
+            {
+                k: getattr(self, k)
+                for k in ("feature", "threshold", "left", "right", "leaf_of_node")
+            },
+            slice(None),
+        )
 
     # ------------------------------------------------------------ persistence
     def get_state(self) -> dict[str, np.ndarray]:
@@ -437,6 +384,137 @@ class _ForestArrays:
         out = {k: np.concatenate(v) for k, v in self.parts.items()}
         out["leaf_ptr"] = np.r_[0, np.cumsum(np.concatenate(self.counts))].astype(np.int64)
         return out
+
+
+class _Grown:
+    """The arrays of a forest whose reached leaves ``with_samples`` grew: the old nodes and
+    leaf entries are copied once, grafted subtrees appended, and only the leaves whose
+    distribution changed are recomputed and spliced in."""
+
+    _NODE_KEYS = ("feature", "threshold", "left", "right", "leaf_of_node")
+
+    def __init__(self, forest: FlatForest) -> None:
+        self.forest = forest
+        self.n_nodes, self.n_leaves = len(forest.feature), len(forest.leaf_count)
+        self.roots: list[tuple[int, int, float, int, int]] = []  # grafted leaf node -> its split
+        self.extra: dict[str, list[np.ndarray]] = {k: [] for k in self._NODE_KEYS}
+        # the new leaves' entries (leaf, class, samples) and sample counts
+        self.rows: list[np.ndarray] = []
+        self.cols: list[np.ndarray] = []
+        self.mass: list[np.ndarray] = []
+        self.counts: list[np.ndarray] = []
+
+    def graft(self, node: int, local: Any) -> None:
+        """The leaf ``node`` becomes the root of fitted tree ``local``; its other nodes go at
+        the end."""
+        sub = local.tree_
+        base = self.n_nodes - 1  # subtree node i > 0 -> global base + i
+        is_leaf = sub.children_left < 0
+        glob = np.r_[node, base + np.arange(1, sub.node_count)]
+        leaf_ids = np.full(sub.node_count, -1, np.int64)
+        leaf_ids[is_leaf] = self.n_leaves + np.arange(int(is_leaf.sum()))
+        feat = np.where(is_leaf, -1, sub.feature)
+        lft = np.where(is_leaf, -1, glob[np.maximum(sub.children_left, 0)])
+        rgt = np.where(is_leaf, -1, glob[np.maximum(sub.children_right, 0)])
+        self.roots.append((node, int(feat[0]), float(sub.threshold[0]), int(lft[0]), int(rgt[0])))
+        for key, part in zip(
+            self._NODE_KEYS, (feat, sub.threshold, lft, rgt, leaf_ids), strict=True
+        ):
+            self.extra[key].append(part[1:])
+        value = sub.value[is_leaf, 0, :]
+        lr, lc = np.nonzero(value)
+        share = value[lr, lc] / value[lr].sum(axis=1)
+        n_here = sub.n_node_samples[is_leaf]
+        self.rows.append(self.n_leaves + lr)
+        self.cols.append(local.classes_[lc])
+        self.mass.append(share * n_here[lr])
+        self.counts.append(n_here.astype(np.int64))
+        self.n_nodes += sub.node_count - 1
+        self.n_leaves += int(is_leaf.sum())
+
+    def done(self, counted: dict[int, tuple[np.ndarray, np.ndarray]], n_classes: int) -> FlatForest:
+        """The grown forest, the new samples ``counted`` into the leaves that stayed one class
+        (leaf -> (classes, samples))."""
+        f = self.forest
+        n_old_nodes, n_old = len(f.feature), len(f.leaf_count)
+        nodes = {
+            k: np.concatenate([getattr(f, k), *self.extra[k]]).astype(getattr(f, k).dtype)
+            for k in self._NODE_KEYS
+        }
+        at = np.asarray([r[0] for r in self.roots], np.int64)
+        for i, key in enumerate(("feature", "threshold", "left", "right"), start=1):
+            nodes[key][at] = [r[i] for r in self.roots]
+        nodes["leaf_of_node"][at] = -1
+        # the counted leaves' entries anew (old ones as value x samples, then the new
+        # samples) and the new leaves'; every other leaf's are copied unchanged
+        changed = np.asarray(sorted(counted), np.int64)
+        old = f._entries(changed)
+        old_rows = np.repeat(changed, np.diff(f.leaf_ptr)[changed])
+        lr, lc, lv = _leaf_distributions(
+            np.concatenate(
+                [old_rows, *(np.full(len(counted[c][0]), c) for c in changed), *self.rows]
+            ),
+            np.concatenate([f.leaf_class[old], *(counted[c][0] for c in changed), *self.cols]),
+            n_classes,
+            np.concatenate(
+                [
+                    f.leaf_value[old] * f.leaf_count[old_rows],
+                    *(counted[c][1].astype(np.float64) for c in changed),
+                    *self.mass,
+                ]
+            ),
+        )
+        ends = np.searchsorted(lr, np.r_[changed, n_old], side="right")
+        starts = np.searchsorted(lr, np.r_[changed, n_old], side="left")
+        classes, values, old_at = [], [], 0
+        for c, a, b in zip(changed, starts[:-1], ends[:-1], strict=True):
+            classes += [f.leaf_class[old_at : f.leaf_ptr[c]], lc[a:b]]
+            values += [f.leaf_value[old_at : f.leaf_ptr[c]], lv[a:b]]
+            old_at = f.leaf_ptr[c + 1]
+        classes += [f.leaf_class[old_at:], lc[starts[-1] :]]
+        values += [f.leaf_value[old_at:], lv[starts[-1] :]]
+        sizes = np.r_[np.diff(f.leaf_ptr), np.zeros(self.n_leaves - n_old, np.int64)]
+        redone = np.r_[changed, np.arange(n_old, self.n_leaves)]
+        sizes[redone] = np.bincount(lr, minlength=self.n_leaves)[redone]
+        leaf_count = np.concatenate([f.leaf_count.astype(np.int64), *self.counts])
+        leaf_count[changed] += np.asarray([counted[c][1].sum() for c in changed], np.int64)
+        out = FlatForest(
+            {
+                **nodes,
+                "roots": f.roots,
+                "leaf_ptr": np.r_[0, np.cumsum(sizes)],
+                "leaf_class": np.concatenate(classes).astype(np.int32),
+                "leaf_value": np.concatenate(values),
+                _COUNTS: leaf_count.astype(np.int32),
+            },
+            n_classes,
+            f.n_features,
+            check=False,
+        )
+        if f._nodes is not None:  # the walk's records: the old ones, the changed and new ones
+            packed = np.concatenate([f._nodes, _packed(nodes, slice(n_old_nodes, None))])
+            packed[at] = _packed(nodes, at)
+            out._nodes = packed
+        return out
+
+
+def _packed(nodes: dict[str, np.ndarray], at: Any) -> np.ndarray:
+    """The walk's node records of ``nodes[...][at]``: one 16-byte record per node, so a step
+    touches one cache line (split feature, float32 threshold bits, left and right child; a
+    leaf, feature -1, keeps its leaf index where the left child would be). For a float32 x,
+    x <= t (float64) exactly when x <= the largest float32 <= t, so the walk compares in
+    float32 (half the memory traffic) with the same outcome."""
+    feature, threshold = nodes["feature"][at], nodes["threshold"][at]
+    t32 = threshold.astype(np.float32)
+    above = t32.astype(np.float64) > threshold
+    t32[above] = np.nextafter(t32[above], np.float32(-np.inf))
+    leaf = feature < 0
+    out = np.empty((len(feature), 4), np.int32)
+    out[:, 0] = feature
+    out[:, 1] = t32.view(np.int32)
+    out[:, 2] = np.where(leaf, nodes["leaf_of_node"][at], nodes["left"][at])
+    out[:, 3] = nodes["right"][at]
+    return out
 
 
 def _members(nodes: np.ndarray) -> dict[int, np.ndarray]:

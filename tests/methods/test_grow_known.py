@@ -56,6 +56,32 @@ def test_grown_forest_keeps_what_it_knew_and_learns_the_new_class():
     assert (FlatForest.from_state(state, OBJECTS - 1, x.shape[1]).leaf_count == 1).all()
 
 
+def test_grown_leaves_hold_what_reaches_them_and_the_rest_is_copied():
+    x, y, old, forest = _one_new_class()
+    forest.predict_proba(x[:1])  # the walk's packed records, which growing extends
+    grown = forest.with_samples(x[~old], y[~old], OBJECTS, x[old], y[old], "sqrt", 0)
+    # every leaf a training sample (seen or new) reaches: its distribution and count are
+    # those samples' (a forest grown with codes counts its leaves exactly)
+    reached = grown.leaf_of_node[grown.apply(x)]  # (N, trees) leaf ids
+    for t in range(grown.n_trees):
+        for leaf in np.unique(reached[:, t]):
+            labels = y[reached[:, t] == leaf]
+            classes, n = np.unique(labels, return_counts=True)
+            entries = slice(*grown.leaf_ptr[leaf : leaf + 2])
+            np.testing.assert_array_equal(grown.leaf_class[entries], classes)
+            np.testing.assert_allclose(grown.leaf_value[entries], n / n.sum(), rtol=1e-12)
+            assert grown.leaf_count[leaf] == len(labels)
+    # the leaves no new sample reached keep their entries bit for bit
+    touched = np.unique(forest.leaf_of_node[forest.apply(x[~old])])
+    kept = np.setdiff1d(np.arange(len(forest.leaf_count)), touched)
+    np.testing.assert_array_equal(
+        grown.leaf_value[grown._entries(kept)], forest.leaf_value[forest._entries(kept)]
+    )
+    # the extended walk records are those packed from scratch
+    fresh = FlatForest.from_state(grown.get_state(), OBJECTS, x.shape[1])
+    np.testing.assert_array_equal(grown.walk_arrays()[0], fresh.walk_arrays()[0])
+
+
 def test_growing_reads_only_the_seen_samples_of_the_classes_it_reaches():
     x, y, old, forest = _one_new_class()
 
