@@ -34,6 +34,7 @@ _KEYS = (
     "leaf_class",
     "leaf_value",
 )
+_NODE_KEYS = ("feature", "threshold", "left", "right", "leaf_of_node")
 #: optional state: training samples per leaf (weights of ``with_samples``); bundles made
 #: before it lack it, and each leaf then counts as one sample
 _COUNTS = "leaf_count"
@@ -48,9 +49,14 @@ class FlatForest:
         n_classes: int,
         n_features: int,
         check: bool = True,
+        packed: np.ndarray | None = None,
     ) -> None:
         """``check``: validate the arrays (a stored forest's); False only for arrays this
-        module has just built (a promotion's grown forest: the check reads every node)."""
+        module has just built (a promotion's grown forest: the check reads every node).
+        ``packed``: the walk's node records of these arrays where the caller has them (a
+        promotion extends its forest's); otherwise they are packed here, so that loading a
+        model, not the first answer or enrolment after it, pays for that (seconds at
+        10,000 objects)."""
         missing = [k for k in _KEYS if k not in arrays]
         if missing:
             raise ValueError(f"forest state lacks {missing}")
@@ -70,9 +76,13 @@ class FlatForest:
         )
         self.n_classes = int(n_classes)
         self.n_features = int(n_features)
-        self._nodes: np.ndarray | None = None  # the walk's packed node records, built on first use
         if check:
             self._check()
+        self._nodes = (
+            _packed({k: getattr(self, k) for k in _NODE_KEYS}, slice(None))
+            if packed is None
+            else packed
+        )
 
     def _check(self) -> None:
         n = len(self.feature)
@@ -273,8 +283,6 @@ class FlatForest:
         x = np.ascontiguousarray(x, np.float32)  # scikit-learn compares float32 inputs
         if x.ndim != 2 or x.shape[1] != self.n_features:
             raise ValueError(f"expected inputs of shape (N, {self.n_features}), got {x.shape}")
-        if self._nodes is None:
-            self._prepare_walk()
         return x
 
     def apply(self, x: np.ndarray) -> np.ndarray:
@@ -286,10 +294,8 @@ class FlatForest:
 
     def walk_arrays(self) -> tuple[np.ndarray, ...]:
         """What the compiled walk takes, for a caller that walks the trees itself: the packed
-        node records (feature, float32 threshold bits, left, right; built on first use),
+        node records (feature, float32 threshold bits, left, right),
         ``roots``, ``leaf_ptr``, ``leaf_class``, ``leaf_value``. Read, never written."""
-        if self._nodes is None:
-            self._prepare_walk()
         return self._nodes, self.roots, self.leaf_ptr, self.leaf_class, self.leaf_value
 
     def predict_proba(self, x: np.ndarray) -> np.ndarray:
@@ -314,15 +320,6 @@ class FlatForest:
             self.leaf_value,
             none if leaves is None else leaves,
             none.astype(np.float64) if proba is None else proba,
-        )
-
-    def _prepare_walk(self) -> None:
-        self._nodes = _packed(
-            {
-                k: getattr(self, k)
-                for k in ("feature", "threshold", "left", "right", "leaf_of_node")
-            },
-            slice(None),
         )
 
     # ------------------------------------------------------------ persistence
@@ -391,13 +388,11 @@ class _Grown:
     leaf entries are copied once, grafted subtrees appended, and only the leaves whose
     distribution changed are recomputed and spliced in."""
 
-    _NODE_KEYS = ("feature", "threshold", "left", "right", "leaf_of_node")
-
     def __init__(self, forest: FlatForest) -> None:
         self.forest = forest
         self.n_nodes, self.n_leaves = len(forest.feature), len(forest.leaf_count)
         self.roots: list[tuple[int, int, float, int, int]] = []  # grafted leaf node -> its split
-        self.extra: dict[str, list[np.ndarray]] = {k: [] for k in self._NODE_KEYS}
+        self.extra: dict[str, list[np.ndarray]] = {k: [] for k in _NODE_KEYS}
         # the new leaves' entries (leaf, class, samples) and sample counts
         self.rows: list[np.ndarray] = []
         self.cols: list[np.ndarray] = []
@@ -417,9 +412,7 @@ class _Grown:
         lft = np.where(is_leaf, -1, glob[np.maximum(sub.children_left, 0)])
         rgt = np.where(is_leaf, -1, glob[np.maximum(sub.children_right, 0)])
         self.roots.append((node, int(feat[0]), float(sub.threshold[0]), int(lft[0]), int(rgt[0])))
-        for key, part in zip(
-            self._NODE_KEYS, (feat, sub.threshold, lft, rgt, leaf_ids), strict=True
-        ):
+        for key, part in zip(_NODE_KEYS, (feat, sub.threshold, lft, rgt, leaf_ids), strict=True):
             self.extra[key].append(part[1:])
         value = sub.value[is_leaf, 0, :]
         lr, lc = np.nonzero(value)
@@ -439,7 +432,7 @@ class _Grown:
         n_old_nodes, n_old = len(f.feature), len(f.leaf_count)
         nodes = {
             k: np.concatenate([getattr(f, k), *self.extra[k]]).astype(getattr(f, k).dtype)
-            for k in self._NODE_KEYS
+            for k in _NODE_KEYS
         }
         at = np.asarray([r[0] for r in self.roots], np.int64)
         for i, key in enumerate(("feature", "threshold", "left", "right"), start=1):
@@ -478,7 +471,10 @@ class _Grown:
         sizes[redone] = np.bincount(lr, minlength=self.n_leaves)[redone]
         leaf_count = np.concatenate([f.leaf_count.astype(np.int64), *self.counts])
         leaf_count[changed] += np.asarray([counted[c][1].sum() for c in changed], np.int64)
-        out = FlatForest(
+        # the walk's records: the old ones, those of the grafted leaves rewritten, the new ones
+        packed = np.concatenate([f._nodes, _packed(nodes, slice(n_old_nodes, None))])
+        packed[at] = _packed(nodes, at)
+        return FlatForest(
             {
                 **nodes,
                 "roots": f.roots,
@@ -490,12 +486,8 @@ class _Grown:
             n_classes,
             f.n_features,
             check=False,
+            packed=packed,
         )
-        if f._nodes is not None:  # the walk's records: the old ones, the changed and new ones
-            packed = np.concatenate([f._nodes, _packed(nodes, slice(n_old_nodes, None))])
-            packed[at] = _packed(nodes, at)
-            out._nodes = packed
-        return out
 
 
 def _packed(nodes: dict[str, np.ndarray], at: Any) -> np.ndarray:

@@ -58,7 +58,6 @@ def test_grown_forest_keeps_what_it_knew_and_learns_the_new_class():
 
 def test_grown_leaves_hold_what_reaches_them_and_the_rest_is_copied():
     x, y, old, forest = _one_new_class()
-    forest.predict_proba(x[:1])  # the walk's packed records, which growing extends
     grown = forest.with_samples(x[~old], y[~old], OBJECTS, x[old], y[old], "sqrt", 0)
     # every leaf a training sample (seen or new) reaches: its distribution and count are
     # those samples' (a forest grown with codes counts its leaves exactly)
