@@ -430,8 +430,10 @@ class _Grown:
         (leaf -> (classes, samples))."""
         f = self.forest
         n_old_nodes, n_old = len(f.feature), len(f.leaf_count)
-        nodes = {
-            k: np.concatenate([getattr(f, k), *self.extra[k]]).astype(getattr(f, k).dtype)
+        nodes = {  # one copy of the forest's arrays, the new nodes cast to their types first
+            k: np.concatenate(
+                [getattr(f, k), *(e.astype(getattr(f, k).dtype) for e in self.extra[k])]
+            )
             for k in _NODE_KEYS
         }
         at = np.asarray([r[0] for r in self.roots], np.int64)
@@ -442,7 +444,8 @@ class _Grown:
         # samples) and the new leaves'; every other leaf's are copied unchanged
         changed = np.asarray(sorted(counted), np.int64)
         old = f._entries(changed)
-        old_rows = np.repeat(changed, np.diff(f.leaf_ptr)[changed])
+        old_sizes = np.diff(f.leaf_ptr)
+        old_rows = np.repeat(changed, old_sizes[changed])
         lr, lc, lv = _leaf_distributions(
             np.concatenate(
                 [old_rows, *(np.full(len(counted[c][0]), c) for c in changed), *self.rows]
@@ -457,6 +460,7 @@ class _Grown:
                 ]
             ),
         )
+        lc = lc.astype(np.int32)  # the stored type, so that splicing copies once
         ends = np.searchsorted(lr, np.r_[changed, n_old], side="right")
         starts = np.searchsorted(lr, np.r_[changed, n_old], side="left")
         classes, values, old_at = [], [], 0
@@ -466,7 +470,7 @@ class _Grown:
             old_at = f.leaf_ptr[c + 1]
         classes += [f.leaf_class[old_at:], lc[starts[-1] :]]
         values += [f.leaf_value[old_at:], lv[starts[-1] :]]
-        sizes = np.r_[np.diff(f.leaf_ptr), np.zeros(self.n_leaves - n_old, np.int64)]
+        sizes = np.r_[old_sizes, np.zeros(self.n_leaves - n_old, np.int64)]
         redone = np.r_[changed, np.arange(n_old, self.n_leaves)]
         sizes[redone] = np.bincount(lr, minlength=self.n_leaves)[redone]
         leaf_count = np.concatenate([f.leaf_count.astype(np.int64), *self.counts])
@@ -479,7 +483,7 @@ class _Grown:
                 **nodes,
                 "roots": f.roots,
                 "leaf_ptr": np.r_[0, np.cumsum(sizes)],
-                "leaf_class": np.concatenate(classes).astype(np.int32),
+                "leaf_class": np.concatenate(classes),
                 "leaf_value": np.concatenate(values),
                 _COUNTS: leaf_count.astype(np.int32),
             },
