@@ -35,6 +35,9 @@ _KEYS = (
     "leaf_value",
 )
 _NODE_KEYS = ("feature", "threshold", "left", "right", "leaf_of_node")
+#: optional state: leaf nodes a promotion replaced, and the nodes appended in their place
+#: (``with_samples``); a forest never grown so has none
+_FROM, _TO = "redirect_from", "redirect_to"
 #: optional state: training samples per leaf (weights of ``with_samples``); bundles made
 #: before it lack it, and each leaf then counts as one sample
 _COUNTS = "leaf_count"
@@ -74,15 +77,17 @@ class FlatForest:
         self.leaf_count = (
             np.ones(n_leaves, np.int32) if counts is None else np.asarray(counts, np.int32)
         )
+        none = np.zeros(0, np.int32)
+        self.redirect_from = np.asarray(arrays.get(_FROM, none), np.int32)
+        self.redirect_to = np.asarray(arrays.get(_TO, none), np.int32)
         self.n_classes = int(n_classes)
         self.n_features = int(n_features)
         if check:
             self._check()
-        self._nodes = (
-            _packed({k: getattr(self, k) for k in _NODE_KEYS}, slice(None))
-            if packed is None
-            else packed
-        )
+        if packed is None:
+            packed = _packed({k: getattr(self, k) for k in _NODE_KEYS}, slice(None))
+            packed[self.redirect_from, 3] = self.redirect_to
+        self._nodes = packed
 
     def _check(self) -> None:
         n = len(self.feature)
@@ -102,6 +107,18 @@ class FlatForest:
             parents = np.flatnonzero(internal)
             if (self.left[parents] <= parents).any() or (self.right[parents] <= parents).any():
                 raise ValueError("forest children must come after their parent node")
+        moved, to = self.redirect_from, self.redirect_to
+        if len(moved) != len(to) or (
+            len(moved)
+            and (
+                moved.min() < 0
+                or to.max() >= n
+                or (to <= moved).any()  # replacements come after: no cycles
+                or internal[moved].any()
+                or len(np.unique(moved)) != len(moved)
+            )
+        ):
+            raise ValueError("forest redirected leaves are inconsistent")
         leaves = self.leaf_of_node[~internal]
         if leaves.min() < 0 or leaves.max() + 1 >= len(self.leaf_ptr):
             raise ValueError("forest leaves are out of range")
@@ -223,10 +240,10 @@ class FlatForest:
         scikit-learn's ``ExtraTreeClassifier`` (``max_features`` as grown, ``grow_leaf``)
         until its leaves are pure; a leaf that stays one class only counts the new samples.
         Only the seen samples of the classes those leaves hold are taken through the trees
-        (a leaf's distribution names every class that reached it), and only the leaves
-        reached are recomputed: the rest of the forest (its nodes, their packed records for
-        the walk, and every other leaf's distribution) is copied as it is, so the cost
-        beyond copying does not grow with the catalogue.
+        (a leaf's distribution names every class that reached it). The forest's arrays are
+        copied as they are and only appended to (``_Grown``): a reached leaf node is
+        redirected to its replacement at the end, so the cost beyond copying does not grow
+        with the catalogue, and a store writes only the blocks that were appended.
         The splits above those leaves were chosen without the new samples, so the result
         differs from a forest grown on everything (bounded in tests/methods/test_grow_known.py).
         """
@@ -241,8 +258,7 @@ class FlatForest:
         near_rows = np.flatnonzero(np.isin(seen_y, self.leaf_class[self._entries(leaves)]))
         seen_x, seen_y = self._inputs(np.asarray(seen_x[near_rows])), seen_y[near_rows]
         seen_leaf = self.apply(seen_x)
-        counted = {}  # leaf -> (classes, samples) of the new samples counted into it
-        grafts = []  # (node, fitted subtree) of the leaves grown further
+        out = _Grown(self)
         rng = np.random.default_rng(seed)
         for t in range(self.n_trees):
             reached = _members(new_leaf[:, t])
@@ -262,15 +278,10 @@ class FlatForest:
                     )
                     sub = local if local.tree_.node_count > 1 else None
                 if sub is None:  # one class, or no split separates them: count them in
-                    counted[int(self.leaf_of_node[node])] = np.unique(
-                        y[members], return_counts=True
-                    )
+                    out.count_in(node, *np.unique(y[members], return_counts=True))
                 else:
-                    grafts.append((node, sub))
-        out = _Grown(self)
-        for node, sub in grafts:
-            out.graft(node, sub)
-        return out.done(counted, n_classes)
+                    out.graft(node, sub)
+        return out.done(n_classes)
 
     def _entries(self, leaves: np.ndarray) -> np.ndarray:
         """Indices into ``leaf_class`` / ``leaf_value`` of the entries of ``leaves``."""
@@ -324,7 +335,10 @@ class FlatForest:
 
     # ------------------------------------------------------------ persistence
     def get_state(self) -> dict[str, np.ndarray]:
-        return {**{k: getattr(self, k) for k in _KEYS}, _COUNTS: self.leaf_count}
+        out = {**{k: getattr(self, k) for k in _KEYS}, _COUNTS: self.leaf_count}
+        if len(self.redirect_from):
+            out.update({_FROM: self.redirect_from, _TO: self.redirect_to})
+        return out
 
     @classmethod
     def from_state(
@@ -384,15 +398,18 @@ class _ForestArrays:
 
 
 class _Grown:
-    """The arrays of a forest whose reached leaves ``with_samples`` grew: the old nodes and
-    leaf entries are copied once, grafted subtrees appended, and only the leaves whose
-    distribution changed are recomputed and spliced in."""
+    """The arrays of a forest whose reached leaves ``with_samples`` grew, append-only: the
+    forest's own arrays are copied unchanged (a store keeps their blocks as they were, and
+    only the new ones are written), and each reached leaf node is redirected to what
+    replaces it, appended at the end: the root of the subtree grown on it, or a leaf node
+    whose distribution has the new samples counted in. A walk that reaches a redirected
+    leaf goes on from its replacement (``redirect_from`` / ``redirect_to``)."""
 
     def __init__(self, forest: FlatForest) -> None:
         self.forest = forest
         self.n_nodes, self.n_leaves = len(forest.feature), len(forest.leaf_count)
-        self.roots: list[tuple[int, int, float, int, int]] = []  # grafted leaf node -> its split
-        self.extra: dict[str, list[np.ndarray]] = {k: [] for k in _NODE_KEYS}
+        self.nodes: dict[str, list[np.ndarray]] = {k: [] for k in _NODE_KEYS}
+        self.moved: list[tuple[int, int]] = []  # (reached leaf node, the node replacing it)
         # the new leaves' entries (leaf, class, samples) and sample counts
         self.rows: list[np.ndarray] = []
         self.cols: list[np.ndarray] = []
@@ -400,104 +417,92 @@ class _Grown:
         self.counts: list[np.ndarray] = []
 
     def graft(self, node: int, local: Any) -> None:
-        """The leaf ``node`` becomes the root of fitted tree ``local``; its other nodes go at
-        the end."""
+        """Leaf ``node`` replaced by fitted tree ``local``."""
         sub = local.tree_
-        base = self.n_nodes - 1  # subtree node i > 0 -> global base + i
         is_leaf = sub.children_left < 0
-        glob = np.r_[node, base + np.arange(1, sub.node_count)]
+        glob = self.n_nodes + np.arange(sub.node_count)
         leaf_ids = np.full(sub.node_count, -1, np.int64)
         leaf_ids[is_leaf] = self.n_leaves + np.arange(int(is_leaf.sum()))
-        feat = np.where(is_leaf, -1, sub.feature)
-        lft = np.where(is_leaf, -1, glob[np.maximum(sub.children_left, 0)])
-        rgt = np.where(is_leaf, -1, glob[np.maximum(sub.children_right, 0)])
-        self.roots.append((node, int(feat[0]), float(sub.threshold[0]), int(lft[0]), int(rgt[0])))
-        for key, part in zip(_NODE_KEYS, (feat, sub.threshold, lft, rgt, leaf_ids), strict=True):
-            self.extra[key].append(part[1:])
         value = sub.value[is_leaf, 0, :]
         lr, lc = np.nonzero(value)
         share = value[lr, lc] / value[lr].sum(axis=1)
         n_here = sub.n_node_samples[is_leaf]
-        self.rows.append(self.n_leaves + lr)
-        self.cols.append(local.classes_[lc])
-        self.mass.append(share * n_here[lr])
-        self.counts.append(n_here.astype(np.int64))
-        self.n_nodes += sub.node_count - 1
-        self.n_leaves += int(is_leaf.sum())
+        self._append(
+            node,
+            (
+                np.where(is_leaf, -1, sub.feature),
+                sub.threshold,
+                np.where(is_leaf, -1, glob[np.maximum(sub.children_left, 0)]),
+                np.where(is_leaf, -1, glob[np.maximum(sub.children_right, 0)]),
+                leaf_ids,
+            ),
+            self.n_leaves + lr,
+            local.classes_[lc],
+            share * n_here[lr],
+            n_here,
+        )
 
-    def done(self, counted: dict[int, tuple[np.ndarray, np.ndarray]], n_classes: int) -> FlatForest:
-        """The grown forest, the new samples ``counted`` into the leaves that stayed one class
-        (leaf -> (classes, samples))."""
+    def count_in(self, node: int, classes: np.ndarray, samples: np.ndarray) -> None:
+        """Leaf ``node`` replaced by a leaf that has also counted ``samples`` of ``classes``:
+        its entries again, the old ones as value x samples, then the new samples."""
+        f = self.forest
+        leaf = int(f.leaf_of_node[node])
+        old = slice(f.leaf_ptr[leaf], f.leaf_ptr[leaf + 1])
+        cols = np.concatenate([f.leaf_class[old], classes])
+        self._append(
+            node,
+            ([-1], [f.threshold[node]], [-1], [-1], [self.n_leaves]),
+            np.full(len(cols), self.n_leaves),
+            cols,
+            np.concatenate([f.leaf_value[old] * f.leaf_count[leaf], samples.astype(np.float64)]),
+            [int(f.leaf_count[leaf]) + int(samples.sum())],
+        )
+
+    def _append(self, node, nodes, rows, cols, mass, counts) -> None:
+        self.moved.append((node, self.n_nodes))
+        for key, part in zip(_NODE_KEYS, nodes, strict=True):
+            self.nodes[key].append(np.asarray(part).astype(getattr(self.forest, key).dtype))
+        self.rows.append(rows)
+        self.cols.append(cols)
+        self.mass.append(mass)
+        self.counts.append(np.asarray(counts, np.int64))
+        self.n_nodes += len(nodes[0])
+        self.n_leaves += len(counts)
+
+    def done(self, n_classes: int) -> FlatForest:
         f = self.forest
         n_old_nodes, n_old = len(f.feature), len(f.leaf_count)
-        nodes = {  # one copy of the forest's arrays, the new nodes cast to their types first
-            k: np.concatenate(
-                [getattr(f, k), *(e.astype(getattr(f, k).dtype) for e in self.extra[k])]
-            )
-            for k in _NODE_KEYS
-        }
-        at = np.asarray([r[0] for r in self.roots], np.int64)
-        for i, key in enumerate(("feature", "threshold", "left", "right"), start=1):
-            nodes[key][at] = [r[i] for r in self.roots]
-        nodes["leaf_of_node"][at] = -1
-        # the counted leaves' entries anew (old ones as value x samples, then the new
-        # samples) and the new leaves'; every other leaf's are copied unchanged
-        changed = np.asarray(sorted(counted), np.int64)
-        old = f._entries(changed)
-        old_sizes = np.diff(f.leaf_ptr)
-        old_rows = np.repeat(changed, old_sizes[changed])
+        nodes = {k: np.concatenate([getattr(f, k), *self.nodes[k]]) for k in _NODE_KEYS}
         lr, lc, lv = _leaf_distributions(
-            np.concatenate(
-                [old_rows, *(np.full(len(counted[c][0]), c) for c in changed), *self.rows]
-            ),
-            np.concatenate([f.leaf_class[old], *(counted[c][0] for c in changed), *self.cols]),
+            np.concatenate([np.zeros(0, np.int64), *self.rows]),
+            np.concatenate([np.zeros(0, np.int64), *self.cols]),
             n_classes,
-            np.concatenate(
-                [
-                    f.leaf_value[old] * f.leaf_count[old_rows],
-                    *(counted[c][1].astype(np.float64) for c in changed),
-                    *self.mass,
-                ]
-            ),
+            np.concatenate([np.zeros(0), *self.mass]),
         )
-        lc = lc.astype(np.int32)  # the stored type, so that splicing copies once
-        ends = np.searchsorted(lr, np.r_[changed, n_old], side="right")
-        starts = np.searchsorted(lr, np.r_[changed, n_old], side="left")
-        classes, values, old_at = [], [], 0
-        for c, a, b in zip(changed, starts[:-1], ends[:-1], strict=True):
-            classes += [f.leaf_class[old_at : f.leaf_ptr[c]], lc[a:b]]
-            values += [f.leaf_value[old_at : f.leaf_ptr[c]], lv[a:b]]
-            old_at = f.leaf_ptr[c + 1]
-        classes += [f.leaf_class[old_at:], lc[starts[-1] :]]
-        values += [f.leaf_value[old_at:], lv[starts[-1] :]]
-        sizes = np.r_[old_sizes, np.zeros(self.n_leaves - n_old, np.int64)]
-        redone = np.r_[changed, np.arange(n_old, self.n_leaves)]
-        sizes[redone] = np.bincount(lr, minlength=self.n_leaves)[redone]
-        leaf_count = np.concatenate([f.leaf_count.astype(np.int64), *self.counts])
-        leaf_count[changed] += np.asarray([counted[c][1].sum() for c in changed], np.int64)
-        # the walk's records: the old ones, those of the grafted leaves rewritten, the new ones
+        sizes = np.bincount(lr - n_old, minlength=self.n_leaves - n_old)
+        moved = np.asarray(self.moved, np.int32).reshape(-1, 2)
+        arrays = {
+            **nodes,
+            "roots": f.roots,
+            "leaf_ptr": np.r_[f.leaf_ptr, f.leaf_ptr[-1] + np.cumsum(sizes)],
+            "leaf_class": np.concatenate([f.leaf_class, lc.astype(np.int32)]),
+            "leaf_value": np.concatenate([f.leaf_value, lv]),
+            _COUNTS: np.concatenate([f.leaf_count, *self.counts]).astype(np.int32),
+            _FROM: np.concatenate([f.redirect_from, moved[:, 0]]),
+            _TO: np.concatenate([f.redirect_to, moved[:, 1]]),
+        }
+        # the walk's records: the old ones, the new nodes', and the reached leaves redirected
         packed = np.concatenate([f._nodes, _packed(nodes, slice(n_old_nodes, None))])
-        packed[at] = _packed(nodes, at)
-        return FlatForest(
-            {
-                **nodes,
-                "roots": f.roots,
-                "leaf_ptr": np.r_[0, np.cumsum(sizes)],
-                "leaf_class": np.concatenate(classes),
-                "leaf_value": np.concatenate(values),
-                _COUNTS: leaf_count.astype(np.int32),
-            },
-            n_classes,
-            f.n_features,
-            check=False,
-            packed=packed,
-        )
+        packed[moved[:, 0], 3] = moved[:, 1]
+        return FlatForest(arrays, n_classes, f.n_features, check=False, packed=packed)
 
 
 def _packed(nodes: dict[str, np.ndarray], at: Any) -> np.ndarray:
     """The walk's node records of ``nodes[...][at]``: one 16-byte record per node, so a step
     touches one cache line (split feature, float32 threshold bits, left and right child; a
-    leaf, feature -1, keeps its leaf index where the left child would be). For a float32 x,
+    leaf, feature -1, keeps its leaf index where the left child would be, and where the
+    right child would be -1 or, once a promotion replaced it, its replacement: the caller
+    sets that from ``redirect_from`` / ``redirect_to``). For a float32 x,
     x <= t (float64) exactly when x <= the largest float32 <= t, so the walk compares in
     float32 (half the memory traffic) with the same outcome."""
     feature, threshold = nodes["feature"][at], nodes["threshold"][at]
@@ -563,6 +568,9 @@ def _descend(x, rows, nodes, thresholds, at, n):
             f = nodes[node, 0]
             if f >= 0:
                 at[k] = nodes[node, 2 + (x[rows[k], f] > thresholds[node, 1])]
+                descending = True
+            elif nodes[node, 3] >= 0:  # a leaf a promotion replaced: on from its replacement
+                at[k] = nodes[node, 3]
                 descending = True
 
 

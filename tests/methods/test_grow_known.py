@@ -70,12 +70,17 @@ def test_grown_leaves_hold_what_reaches_them_and_the_rest_is_copied():
             np.testing.assert_array_equal(grown.leaf_class[entries], classes)
             np.testing.assert_allclose(grown.leaf_value[entries], n / n.sum(), rtol=1e-12)
             assert grown.leaf_count[leaf] == len(labels)
-    # the leaves no new sample reached keep their entries bit for bit
-    touched = np.unique(forest.leaf_of_node[forest.apply(x[~old])])
-    kept = np.setdiff1d(np.arange(len(forest.leaf_count)), touched)
-    np.testing.assert_array_equal(
-        grown.leaf_value[grown._entries(kept)], forest.leaf_value[forest._entries(kept)]
-    )
+    # a promotion only appends: the forest's own arrays start the grown one's, unchanged
+    # (a store then writes only the new blocks), and reached leaves are redirected
+    before, after = forest.get_state(), grown.get_state()
+    for key in set(before) - {"roots"}:
+        np.testing.assert_array_equal(after[key][: len(before[key])], before[key], err_msg=key)
+    assert (after["redirect_to"] >= len(before["feature"])).all()
+    assert set(after["redirect_from"]) == set(np.unique(forest.apply(x[~old])))
+    # a stored forest whose redirects could loop, or that redirects a split node, is refused
+    for to in (after["redirect_from"], np.zeros_like(after["redirect_to"])):
+        with pytest.raises(ValueError, match="redirected leaves"):
+            FlatForest.from_state({**after, "redirect_to": to}, OBJECTS, x.shape[1])
     # the extended walk records are those packed from scratch
     fresh = FlatForest.from_state(grown.get_state(), OBJECTS, x.shape[1])
     np.testing.assert_array_equal(grown.walk_arrays()[0], fresh.walk_arrays()[0])
