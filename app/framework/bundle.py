@@ -18,7 +18,9 @@ arrays go into parts of their own, named by the SHA-256 of their bytes and
 listed in the manifest's ``parts``, and the rest is a small head bundle. An
 enrollment changes the class registry, not the forest or the encoder, so
 successive versions share those parts, and a process that already holds them
-loads a new version by reading the head alone.
+loads a new version by reading the head alone. An array of more than
+``BLOCK_BYTES`` is listed as the parts of its consecutive row blocks, so that a
+version that appended rows to it shares all but its last blocks.
 """
 
 from __future__ import annotations
@@ -57,6 +59,10 @@ _WORTH_IT = 0.8
 _NPY_MAGIC = b"\x93NUMPY"
 # arrays of this size or more become parts of their own in a split bundle
 PART_MIN_BYTES = 16 * 1024
+# larger arrays are stored in row blocks of about this size, each a part: a promotion only
+# appends rows to the large arrays (``FlatForest.with_samples``, the reference samples), so
+# a new version writes their last and new blocks, not the gigabytes before them
+BLOCK_BYTES = 8 * 1024 * 1024
 
 
 def to_bytes(model: TactileRecognizer) -> bytes:
@@ -84,46 +90,70 @@ class PartEncoder:
     takes ~38 ms from scratch and ~6 ms through the encoder, bench/model_swap.py), and
     read-only arrays that are the very objects of its previous split are not even read.
     ``freeze``: make the arrays it splits read-only (the worker's: a version, once stored,
-    never changes, and the models enrolment derives from it share its arrays)."""
+    never changes, and the models enrolment derives from it share its arrays). After a
+    split, ``views`` maps each part's SHA-256 to the array or row block of the model it
+    came from, and ``joined`` each array stored in row blocks by their SHA-256s
+    (``PartCache.adopt``)."""
 
     def __init__(self, min_bytes: int = PART_MIN_BYTES, freeze: bool = False) -> None:
         self.min_bytes = min_bytes
         self.freeze = freeze
         self._previous: dict[bytes, tuple[str, bytes]] = {}  # digest of .npy bytes -> part
         # read-only arrays of the previous split by id (each held, so that its id is not
-        # taken by another array meanwhile) -> their part
-        self._frozen: dict[int, tuple[np.ndarray, str, bytes]] = {}
+        # taken by another array meanwhile) -> the digests of their blocks
+        self._frozen: dict[int, tuple[np.ndarray, list[bytes]]] = {}
+        self.views: dict[str, np.ndarray] = {}
+        self.joined: dict[tuple[str, ...], np.ndarray] = {}
 
     def split(self, model: TactileRecognizer) -> tuple[bytes, dict[str, bytes]]:
         manifest, arrays = _contents(model)
         parts: dict[str, bytes] = {}
-        refs: dict[str, str] = {}
+        refs: dict[str, str | list[str]] = {}
         encoded: dict[bytes, tuple[str, bytes]] = {}
-        frozen: dict[int, tuple[np.ndarray, str, bytes]] = {}
+        frozen: dict[int, tuple[np.ndarray, list[bytes]]] = {}  # id -> (array, block digests)
+        views: dict[str, np.ndarray] = {}
+        joined: dict[tuple[str, ...], np.ndarray] = {}
         for name in [n for n, a in arrays.items() if np.asanyarray(a).nbytes >= self.min_bytes]:
             array = np.asanyarray(arrays.pop(name))
             held = self._frozen.get(id(array))
-            if held is not None and held[0] is array:
-                # the very array of the previous version, which nothing can have changed: the
-                # shared parts of a large model (300 MB at 10,000 objects) are neither
-                # copied to .npy bytes nor hashed again for every enrolment
-                sha, blob = held[1], held[2]
-            else:
-                data = _npy(array)
-                key = hashlib.sha256(data).digest()
-                if key not in encoded:
-                    encoded[key] = self._previous.get(key) or _encode_npy(data)
-                sha, blob = encoded[key]
             if self.freeze:
                 freeze(array)
+            if held is not None and held[0] is array:
+                # the very array of the previous version, which nothing can have changed: the
+                # shared parts of a large model (2 GB at 10,000 objects) are neither copied
+                # to .npy bytes nor hashed again for every enrolment
+                keys = held[1]
+                encoded.update({k: self._previous[k] for k in keys})
+            else:
+                keys = []
+                for block in row_blocks(array):
+                    data = _npy(block)
+                    keys.append(hashlib.sha256(data).digest())
+                    if keys[-1] not in encoded:
+                        encoded[keys[-1]] = self._previous.get(keys[-1]) or _encode_npy(data)
             if unchangeable(array):
-                frozen[id(array)] = (array, sha, blob)
-            parts[sha] = blob
-            refs[name] = sha
+                frozen[id(array)] = (array, keys)
+            for key, block in zip(keys, row_blocks(array), strict=True):
+                sha, blob = encoded[key]
+                parts[sha], views[sha] = blob, block
+            shas = [encoded[k][0] for k in keys]
+            refs[name] = shas[0] if len(shas) == 1 else shas
+            if len(shas) > 1:
+                joined[tuple(shas)] = array
         self._previous = encoded  # only the latest model's parts are kept
         self._frozen = frozen
+        self.views, self.joined = views, joined
         manifest["parts"] = refs
         return _zip(manifest, arrays), parts
+
+
+def row_blocks(array: np.ndarray) -> list[np.ndarray]:
+    """``array`` as consecutive row blocks of about ``BLOCK_BYTES`` (views; itself when it
+    is no larger), as a split bundle stores it."""
+    if array.ndim == 0 or array.nbytes <= BLOCK_BYTES:
+        return [array]
+    rows = max(1, BLOCK_BYTES * len(array) // array.nbytes)
+    return [array[i : i + rows] for i in range(0, len(array), rows)]
 
 
 def unchangeable(array: Any) -> bool:
@@ -153,13 +183,21 @@ def _encode_npy(data: bytes) -> tuple[str, bytes]:
     return hashlib.sha256(blob).hexdigest(), blob
 
 
-def part_refs(data: bytes) -> dict[str, str]:
-    """``{array name: part SHA-256}`` of a split bundle's head; empty for a whole bundle."""
+def part_refs(data: bytes) -> dict[str, str | list[str]]:
+    """``{array name: part SHA-256, or its row blocks' list}`` of a split bundle's head;
+    empty for a whole bundle."""
     try:
         with zipfile.ZipFile(io.BytesIO(data)) as zf:
             return dict(json.loads(zf.read(_MANIFEST)).get("parts") or {})
     except (zipfile.BadZipFile, KeyError, json.JSONDecodeError, OSError, EOFError) as exc:
         raise BundleError(f"not a readable model bundle: {exc}") from None
+
+
+def part_shas(data: bytes) -> set[str]:
+    """Every part SHA-256 a split bundle's head refers to; empty for a whole bundle."""
+    return {
+        sha for ref in part_refs(data).values() for sha in ([ref] if isinstance(ref, str) else ref)
+    }
 
 
 def decode_part(blob: bytes) -> np.ndarray:
@@ -255,11 +293,16 @@ def _compressible(data: bytes) -> bool:
     return len(zlib.compress(probe, 1)) < _WORTH_IT * len(probe)
 
 
-def from_bytes(data: bytes, part: Callable[[str], np.ndarray] | None = None) -> TactileRecognizer:
+def from_bytes(
+    data: bytes,
+    part: Callable[[str], np.ndarray] | None = None,
+    join: Callable[[list[str]], np.ndarray] | None = None,
+) -> TactileRecognizer:
     """Rebuild a recognizer from bundle bytes; BundleError says what is wrong.
 
     A split bundle's head needs ``part``, which returns the array of a part given its
-    SHA-256 (raising BundleError when it cannot).
+    SHA-256 (raising BundleError when it cannot). An array stored in row blocks is
+    ``join(list of SHA-256)``: by default their arrays from ``part``, concatenated.
     """
     manifest, npz_bytes = _unzip(data)
     try:
@@ -270,7 +313,7 @@ def from_bytes(data: bytes, part: Callable[[str], np.ndarray] | None = None) -> 
                 f"this bundle keeps {len(refs)} arrays in parts of a model store; "
                 "load it through the store"
             )
-        arrays.update({name: part(sha) for name, sha in refs.items()})
+        arrays.update(_parts(refs, part, join))
         cls = method_class(manifest["method"])
         model = cls()
         model.input_shape = tuple(int(s) for s in manifest["input_shape"])
@@ -343,8 +386,22 @@ def join(data: bytes, part: Callable[[str], np.ndarray]) -> bytes:
             f"bundle is incomplete or inconsistent: {type(exc).__name__}: {exc}"
         ) from None
     refs = manifest.pop("parts", None) or {}
-    arrays.update({name: part(sha) for name, sha in refs.items()})
+    arrays.update(_parts(refs, part))
     return _zip(manifest, arrays)
+
+
+def _parts(
+    refs: dict[str, Any],
+    part: Callable[[str], np.ndarray],
+    join: Callable[[list[str]], np.ndarray] | None = None,
+) -> dict[str, np.ndarray]:
+    """The arrays a head's ``parts`` names: a part's SHA-256, or the list of its row blocks'."""
+    if join is None:
+
+        def join(shas: list[str]) -> np.ndarray:
+            return np.concatenate([part(sha) for sha in shas])
+
+    return {name: part(ref) if isinstance(ref, str) else join(ref) for name, ref in refs.items()}
 
 
 def _unzip(data: bytes) -> tuple[dict[str, Any], bytes]:

@@ -160,7 +160,7 @@ class ModelHolder(Poller):
         row = repo.get_version(s, version)
         try:
             head = repo.bundle_data(s, row.bundle_sha256) if row is not None else None
-            return set(bundle.part_refs(head).values()) if head is not None else set()
+            return bundle.part_shas(head) if head is not None else set()
         except BundleError:
             return set()
 

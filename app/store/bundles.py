@@ -36,6 +36,10 @@ class PartCache:
 
     def __init__(self) -> None:
         self._arrays: dict[str, np.ndarray] = {}
+        # arrays stored in row blocks, by their blocks' SHA-256s: the same array object for
+        # every version that lists the same blocks, as a part is (the models built from it
+        # share what they derive from it, ``ForestCues.from_state``)
+        self._joined: dict[tuple[str, ...], np.ndarray] = {}
 
     def get(self, session: Session, sha256: str) -> np.ndarray:
         array = self._arrays.get(sha256)
@@ -45,8 +49,33 @@ class PartCache:
             self._arrays[sha256] = array
         return array
 
+    def joined(self, session: Session, shas: list[str]) -> np.ndarray:
+        """The array stored as the row blocks ``shas``, read-only; the blocks are held
+        afterwards as views of it, so that the process holds its rows once."""
+        array = self._joined.get(tuple(shas))
+        if array is not None:
+            return array
+        blocks = [self.get(session, sha) for sha in shas]
+        array = np.concatenate(blocks)
+        bundle.freeze(array)
+        at = 0
+        for sha, block in zip(shas, blocks, strict=True):
+            self._arrays[sha] = array[at : at + len(block)]
+            at += len(block)
+        self._joined[tuple(shas)] = array
+        return array
+
     def keep_only(self, shas: set[str]) -> None:
         self._arrays = {sha: a for sha, a in self._arrays.items() if sha in shas}
+        self._joined = {k: a for k, a in self._joined.items() if shas.issuperset(k)}
+
+    def adopt(self, encoder: bundle.PartEncoder) -> None:
+        """Hold exactly the parts of the version this process has just split with
+        ``encoder``, as the arrays (or row blocks) of its model: the parts it shares with
+        the version before are not read again, and that version's arrays are not kept
+        alive by views of them."""
+        self._arrays = dict(encoder.views)
+        self._joined = dict(encoder.joined)
 
     def __len__(self) -> int:
         return len(self._arrays)
@@ -109,6 +138,10 @@ def load_model(session: Session, sha256: str, cache: PartCache | None = None) ->
         used.add(sha)
         return cache.get(session, sha)
 
-    model = bundle.from_bytes(data, part=part)
+    def join(shas: list[str]) -> np.ndarray:
+        used.update(shas)
+        return cache.joined(session, shas)
+
+    model = bundle.from_bytes(data, part=part, join=join)
     cache.keep_only(used)
     return model

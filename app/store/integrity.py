@@ -80,7 +80,7 @@ def _check(engine: Engine, problems: list[str]) -> None:
             if head_sha in damaged:
                 users[head_sha].append(f"the model of version {version}")
             try:
-                refs = set(bundle.part_refs(bytes(data)).values())
+                refs = bundle.part_shas(bytes(data))
             except Exception as exc:  # a damaged head may not even parse
                 problems.append(f"version {version}: its bundle cannot be read ({exc})")
                 continue

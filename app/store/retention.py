@@ -78,7 +78,7 @@ def prune(
     refs = {} if part_refs is None else part_refs
     for head in heads - refs.keys():
         # a damaged head raises: its parts are unknown, so none may go (the caller rolls back)
-        refs[head] = set(bundle.part_refs(repo.bundle_data(session, head)).values())
+        refs[head] = bundle.part_shas(repo.bundle_data(session, head))
     for head in refs.keys() - heads:
         del refs[head]
     used = heads.union(*(refs[h] for h in heads))

@@ -123,7 +123,7 @@ def test_a_damaged_part_of_every_version(settings, app, client, worker, dataset,
     version_two(client, worker, dataset)
     with worker.sessions() as s:
         heads = [repo.get_version(s, v).bundle_sha256 for v in (1, 2)]
-        refs = [set(bundle.part_refs(repo.bundle_data(s, h)).values()) for h in heads]
+        refs = [set(bundle.part_shas(repo.bundle_data(s, h))) for h in heads]
     shared = sorted(refs[0] & refs[1])
     assert shared, "the two versions share no bundle part"
     flip_byte(worker.sessions, shared[0])

@@ -225,9 +225,7 @@ def test_cli_check_names_the_problem_and_fails(store, settings, monkeypatch, cap
     assert "passes every check" in capsys.readouterr().out
     with sessions.begin() as s:
         head = repo.bundle_data(s, repo.active_version(s).bundle_sha256)
-        s.execute(
-            delete(Bundle).where(Bundle.sha256 == next(iter(bundle.part_refs(head).values())))
-        )
+        s.execute(delete(Bundle).where(Bundle.sha256 == next(iter(bundle.part_shas(head)))))
     assert cli(["store", "check"]) == 1
     assert (
         "problem: version 1 refers to bundle parts that are not stored" in capsys.readouterr().out

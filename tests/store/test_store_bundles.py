@@ -9,6 +9,7 @@ from sqlalchemy import delete, func, select, update
 
 from app.framework import bundle
 from app.framework.errors import BundleError
+from app.framework.registry import make_method
 from app.store import bundles, repo
 from app.store.models import Bundle
 from app.testing.service import unused_vectors
@@ -102,9 +103,45 @@ def test_the_reliability_check_finds_a_version_whose_parts_are_gone(store, setti
     assert check_store(settings.sqlalchemy_url) == []
     with sessions.begin() as s:
         head = repo.bundle_data(s, repo.active_version(s).bundle_sha256)
-        s.execute(
-            delete(Bundle).where(Bundle.sha256 == next(iter(bundle.part_refs(head).values())))
-        )
+        s.execute(delete(Bundle).where(Bundle.sha256 == next(iter(bundle.part_shas(head)))))
     assert check_store(settings.sqlalchemy_url) == [
         "version 1 refers to bundle parts that are not stored"
     ]
+
+
+def test_a_promotion_writes_only_the_blocks_it_appended(store, base_model, monkeypatch):
+    """Large arrays are stored in row blocks. A promotion only appends rows to the forests
+    and the reference samples, so its version shares all their earlier blocks with the
+    version before; a process holding that version reads only the new blocks, and holds
+    each array once (its blocks are views of it)."""
+    monkeypatch.setattr(bundle, "BLOCK_BYTES", 2048)  # blocks of this small model's arrays
+    _, sessions = store
+    dataset = base_model[1]
+    model = make_method("best", n_estimators=10, seed=0).fit(dataset)
+    vector = np.asarray(unused_vectors(dataset, 1)[0], np.float32)
+    samples = dataset.samples[dataset.labels == 0][:4] * 1.1
+    grown = model.with_known_samples({"mug": samples}, {"mug": vector})
+    encoder = bundle.PartEncoder(min_bytes=1024)
+    first, second = encoder.split(model), encoder.split(grown)
+    before, after = bundle.part_refs(first[0]), bundle.part_refs(second[0])
+    appended = [n for n in after if n.endswith(("forest/threshold", "reference"))]
+    assert appended and all(isinstance(after[n], list) for n in appended)
+    for name in appended:
+        assert after[name][: len(before[name]) - 1] == before[name][:-1], name
+    new_bytes = sum(len(b) for sha, b in second[1].items() if sha not in first[1])
+    assert new_bytes < 0.2 * sum(len(b) for b in second[1].values())
+
+    with sessions.begin() as s:
+        v1, v2 = bundles.store_model(s, first), bundles.store_model(s, second)
+    cache = bundles.PartCache()
+    with sessions() as s:
+        bundles.load_model(s, v1, cache)
+    with sessions.begin() as s:  # v1's parts damaged: v2 must not read them again
+        s.execute(update(Bundle).where(Bundle.sha256.in_(first[1])).values(data=b"damaged"))
+    with sessions() as s:
+        loaded = bundles.load_model(s, v2, cache)
+        x = dataset.samples[:8]
+        np.testing.assert_array_equal(loaded.known_proba(x), grown.known_proba(x))
+        blocks = after["known/reference"]
+        reference = loaded.known_.cues_model.distances.reference
+        assert all(np.shares_memory(cache.get(s, sha), reference) for sha in blocks)

@@ -18,7 +18,7 @@ from tests.store.conftest import SMALL_PARTS
 
 def used_bundles(s) -> set[str]:
     heads = set(s.scalars(select(ModelVersion.bundle_sha256)))
-    return heads.union(*(bundle.part_refs(repo.bundle_data(s, h)).values() for h in heads))
+    return heads.union(*(bundle.part_shas(repo.bundle_data(s, h)) for h in heads))
 
 
 def test_old_versions_go_with_the_bundle_rows_only_they_used(six_versions):
