@@ -407,14 +407,14 @@ class ReferenceDistances:
 
     def with_points(self, q: np.ndarray) -> ReferenceDistances:
         """These distances with the reference samples ``q`` (N, D) added: same basis and
-        centre, and the index (if any) a copy with their points added."""
+        centre, and the index (if any) with their points added (``with_points``)."""
         out = ReferenceDistances(
             np.concatenate([self.reference, np.asarray(q, np.float32)]),
             self.basis,
             center=self.center,
         )
-        if self.index is not None:
-            out._index(self.index.with_points(self.coordinates(q)))
+        if self.index is not None:  # over the new reference's points, as a load computes them
+            out._index(self.index.with_points)
         return out
 
     def _index(self, index: ApproximateNeighbours | np.ndarray | Callable) -> None:
@@ -422,7 +422,7 @@ class ReferenceDistances:
         the reference's coordinates."""
         points = self._ref if self._ref_res is None else np.c_[self._ref, self._ref_res]
         if isinstance(index, np.ndarray):
-            index = ApproximateNeighbours.from_bytes(index, *points.shape)
+            index = ApproximateNeighbours.from_bytes(index, points)
         elif callable(index) and not isinstance(index, ApproximateNeighbours):
             index = index(points)
         self.index, self._points = index, points

@@ -169,7 +169,9 @@ def test_an_index_learns_the_promoted_samples():
         {ds.class_names[c]: x}, {ds.class_names[c]: ds.class_attributes[c]}
     )
     cues = grown.known_.cues_model
-    assert cues.distances.index.index.ntotal == len(cues.reference)
+    index = cues.distances.index  # the same graph, the promoted samples its exact tail
+    assert index.index is base.known_.cues_model.distances.index.index
+    assert index.index.ntotal + len(index.tail) == len(cues.reference) and len(index.tail) == len(x)
     z = cues.scaled(x.reshape(len(x), -1)) * cues.weights
     near = cues.distances.nearest(z, cues.reference_labels, np.full(len(x), c))
     np.testing.assert_allclose(near[:, 1:], 0.0, atol=1e-3)  # each finds itself, in its class

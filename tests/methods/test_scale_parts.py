@@ -104,6 +104,37 @@ def test_index_finds_the_exact_neighbours_on_small_data(sim, components):
     )
 
 
+def test_points_learnt_after_the_graph_are_searched_exactly_beside_it(sim, monkeypatch):
+    """A promotion's points join the index's tail, not its graph (whose stored bytes then
+    stay the same part): searched exactly and merged, they are found as exact search finds
+    them, and the answers survive a bundle round trip; past its bound the tail goes into a
+    copy of the graph."""
+    from app.methods import neighbours
+
+    ds, z, test = sim
+    ref, q = z[~test], z[test]
+    base = ReferenceDistances.fit(ref[:-40], 16, approximate_above=10)
+    grown = base.with_points(ref[-40:])
+    assert grown.index.index is base.index.index and len(grown.index.tail) == 40
+    assert grown.index.to_bytes() is base.index.to_bytes()
+    d2, ids = grown.index.search(grown.coordinates(ref[-40:]), 3)
+    np.testing.assert_array_equal(ids[:, 0], len(ref) - 40 + np.arange(40))  # each itself
+    np.testing.assert_allclose(d2[:, 0], 0.0, atol=1e-3)
+    assert (np.diff(d2, axis=1) >= 0).all()
+    labels = ds.labels[~test]
+    top = np.random.default_rng(1).integers(0, 40, len(q))
+    exact = ReferenceDistances(ref, base.basis, center=base.center).nearest(q, labels, top)
+    near = grown.nearest(q, labels, top)
+    assert np.mean(np.isclose(near[:, 1], exact[:, 1], rtol=1e-3)) >= 0.97
+    stored = ReferenceDistances(grown.reference, grown.basis, grown.index.to_bytes(), grown.center)
+    np.testing.assert_array_equal(stored.nearest(q, labels, top), near)
+    monkeypatch.setattr(neighbours, "TAIL_POINTS", 10)
+    monkeypatch.setattr(neighbours, "TAIL_SHARE", 0.0)
+    taken = base.with_points(ref[-40:])
+    assert taken.index.index is not base.index.index and len(taken.index.tail) == 0
+    assert taken.index.index.ntotal == len(ref) and base.index.index.ntotal == len(ref) - 40
+
+
 def test_novelty_split_holds_out_whole_trials_per_class():
     ds = simulate_dataset(30, 5, seed=1)
     fit, known, val = novelty_validation_split(ds, 0.1, 1, seed=4)
