@@ -19,7 +19,7 @@ listed in the manifest's ``parts``, and the rest is a small head bundle. An
 enrollment changes the class registry, not the forest or the encoder, so
 successive versions share those parts, and a process that already holds them
 loads a new version by reading the head alone. An array of more than
-``BLOCK_BYTES`` is listed as the parts of its consecutive row blocks, so that a
+``BLOCK_BYTES`` (2 MiB) is listed as the parts of its consecutive row blocks, so that a
 version that appended rows to it shares all but its last blocks.
 """
 
@@ -62,7 +62,7 @@ PART_MIN_BYTES = 16 * 1024
 # larger arrays are stored in row blocks of about this size, each a part: a promotion only
 # appends rows to the large arrays (``FlatForest.with_samples``, the reference samples), so
 # a new version writes their last and new blocks, not the gigabytes before them
-BLOCK_BYTES = 8 * 1024 * 1024
+BLOCK_BYTES = 2 * 1024 * 1024
 
 
 def to_bytes(model: TactileRecognizer) -> bytes:
@@ -102,6 +102,9 @@ class PartEncoder:
         # read-only arrays of the previous split by id (each held, so that its id is not
         # taken by another array meanwhile) -> the digests of their blocks
         self._frozen: dict[int, tuple[np.ndarray, list[bytes]]] = {}
+        # the same, by array name: a new array that begins with the rows of the previous
+        # version's (a promotion appends) is compared with it block by block, not hashed
+        self._named: dict[str, tuple[np.ndarray, list[bytes]]] = {}
         self.views: dict[str, np.ndarray] = {}
         self.joined: dict[tuple[str, ...], np.ndarray] = {}
 
@@ -111,6 +114,7 @@ class PartEncoder:
         refs: dict[str, str | list[str]] = {}
         encoded: dict[bytes, tuple[str, bytes]] = {}
         frozen: dict[int, tuple[np.ndarray, list[bytes]]] = {}  # id -> (array, block digests)
+        named: dict[str, tuple[np.ndarray, list[bytes]]] = {}
         views: dict[str, np.ndarray] = {}
         joined: dict[tuple[str, ...], np.ndarray] = {}
         for name in [n for n, a in arrays.items() if np.asanyarray(a).nbytes >= self.min_bytes]:
@@ -125,14 +129,20 @@ class PartEncoder:
                 keys = held[1]
                 encoded.update({k: self._previous[k] for k in keys})
             else:
+                before, known = self._named.get(name, (None, []))
+                old = row_blocks(before) if before is not None else []
                 keys = []
-                for block in row_blocks(array):
+                for i, block in enumerate(row_blocks(array)):
+                    if i < len(old) and _same_bytes(block, old[i]):
+                        keys.append(known[i])  # a block of the previous version: its part
+                        encoded[known[i]] = self._previous[known[i]]
+                        continue
                     data = _npy(block)
                     keys.append(hashlib.sha256(data).digest())
                     if keys[-1] not in encoded:
                         encoded[keys[-1]] = self._previous.get(keys[-1]) or _encode_npy(data)
             if unchangeable(array):
-                frozen[id(array)] = (array, keys)
+                frozen[id(array)] = named[name] = (array, keys)
             for key, block in zip(keys, row_blocks(array), strict=True):
                 sha, blob = encoded[key]
                 parts[sha], views[sha] = blob, block
@@ -141,10 +151,20 @@ class PartEncoder:
             if len(shas) > 1:
                 joined[tuple(shas)] = array
         self._previous = encoded  # only the latest model's parts are kept
-        self._frozen = frozen
+        self._frozen, self._named = frozen, named
         self.views, self.joined = views, joined
         manifest["parts"] = refs
         return _zip(manifest, arrays), parts
+
+
+def _same_bytes(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two arrays are the same bytes of the same shape and type (memory compared, as
+    a hash would tell, at a fraction of its cost)."""
+    if a.shape != b.shape or a.dtype != b.dtype:
+        return False
+    if not (a.flags.c_contiguous and b.flags.c_contiguous):
+        return False  # told apart by their hashes instead
+    return bool(np.array_equal(a.reshape(-1).view(np.uint8), b.reshape(-1).view(np.uint8)))
 
 
 def row_blocks(array: np.ndarray) -> list[np.ndarray]:
