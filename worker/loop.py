@@ -10,10 +10,12 @@ bad enrollment does not sink the others.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import threading
 from collections.abc import Callable
+from contextlib import AbstractContextManager
 from datetime import UTC, datetime, timedelta
 
 import numpy as np
@@ -49,11 +51,15 @@ class Worker:
         sessions: sessionmaker[Session],
         on_activate: Callable[[int, TactileRecognizer], None] | None = None,
         parts: bundles.PartCache | None = None,
+        handover: Callable[[], AbstractContextManager[None]] = contextlib.nullcontext,
     ) -> None:
         self.settings = settings
         self.sessions = sessions
         self.id = leases.new_holder_id()
         self.on_activate = on_activate
+        # held from the commit of a version to ``on_activate``: the embedded worker's model
+        # holder then waits for it instead of loading that version from the store
+        self._handover = handover
         self._cache: tuple[int, TactileRecognizer] | None = None  # last model built or loaded
         # parts of the versions loaded, by SHA-256: a version built elsewhere is loaded by
         # reading only the parts not held (an enrollment changes none of the large ones).
@@ -201,22 +207,23 @@ class Worker:
             new = build(plan, model, self.settings, known)
             split = self._encoder.split(new)  # serialised before the transaction opens
         ok = [j for j in job_ids if j not in plan.rejected]
-        with self.sessions.begin() as s:
-            for job_id, reason in plan.rejected.items():
-                repo.finish_jobs(s, [job_id], JobStatus.FAILED, error=reason)
-            if not plan.changes_model:  # already in the active model (e.g. a re-run)
-                repo.finish_jobs(s, ok, JobStatus.SUCCEEDED, version=base.version)
-                return
-            version = self._commit(s, base.version if base else None, new, split, plan, ok)
-        self._cache = (version, new)
-        # the cache holds the new version's parts as its model's own arrays: those it shares
-        # with the version before are those very arrays for an enrollment (99.2 of 99.4 MB
-        # for the default method at 1,000 objects), and a promotion's appended arrays hold
-        # the blocks they share, so the old ones can go
-        self._parts.adopt(self._encoder)
-        log.info("model version %d is active", version)
-        if self.on_activate:
-            self.on_activate(version, new)
+        with self._handover():
+            with self.sessions.begin() as s:
+                for job_id, reason in plan.rejected.items():
+                    repo.finish_jobs(s, [job_id], JobStatus.FAILED, error=reason)
+                if not plan.changes_model:  # already in the active model (e.g. a re-run)
+                    repo.finish_jobs(s, ok, JobStatus.SUCCEEDED, version=base.version)
+                    return
+                version = self._commit(s, base.version if base else None, new, split, plan, ok)
+            self._cache = (version, new)
+            # the cache holds the new version's parts as its model's own arrays: those it
+            # shares with the version before are those very arrays for an enrollment (99.2 of
+            # 99.4 MB for the default method at 1,000 objects), and a promotion's appended
+            # arrays hold the blocks they share, so the old ones can go
+            self._parts.adopt(self._encoder)
+            log.info("model version %d is active", version)
+            if self.on_activate:
+                self.on_activate(version, new)
 
     def _commit(
         self,

@@ -86,7 +86,13 @@ def create_app(
             from worker import Worker, start_in_thread
 
             # the worker hands each model it builds to this process's holder: no reload
-            worker = Worker(settings, sessions, on_activate=holder.serve, parts=holder.parts)
+            worker = Worker(
+                settings,
+                sessions,
+                on_activate=holder.serve,
+                parts=holder.parts,
+                handover=holder.handing_over,
+            )
             embedded = start_in_thread(worker)
         try:
             yield

@@ -15,9 +15,11 @@ version is tried again every ``DAMAGED_RETRY_SECONDS``, at once when another one
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,6 +35,8 @@ from app.store import bundles, repo
 log = logging.getLogger(__name__)
 
 DAMAGED_RETRY_SECONDS = 60.0
+#: the longest a refresh waits for this process's worker to serve what it is committing
+HANDOVER_WAIT_SECONDS = 60.0
 
 
 @dataclass(frozen=True)
@@ -57,6 +61,9 @@ class ModelHolder(Poller):
         self._metrics = metrics
         self._current: LoadedModel | None = None
         self._load_lock = threading.Lock()  # one load at a time; readers never take it
+        # versions this process's embedded worker is committing, then serving (``handing_over``)
+        self._handing_over = 0
+        self._handed = threading.Condition()
         self._parts = bundles.PartCache()
         # (version, when it failed, why): the active version whose bundle cannot be loaded
         self._damaged: tuple[int, float, str] | None = None
@@ -71,10 +78,30 @@ class ModelHolder(Poller):
         """The decoded parts of the served model, which an embedded worker loads through."""
         return self._parts
 
+    @contextlib.contextmanager
+    def handing_over(self) -> Iterator[None]:
+        """While this process's embedded worker commits a version and then ``serve``s it:
+        ``refresh`` (the poller's, a job waiter's) waits for that, up to
+        ``HANDOVER_WAIT_SECONDS``, instead of loading the same version from the store
+        meanwhile (7 s and a second copy of the model at 10,000 objects)."""
+        with self._handed:
+            self._handing_over += 1
+        try:
+            yield
+        finally:
+            with self._handed:
+                self._handing_over -= 1
+                self._handed.notify_all()
+
     def refresh(self) -> bool:
         """Load the active version if it is not the one served; True when swapped. When
         its bundle is damaged, keep the served model, or, with none yet, load the newest
         intact version before it (BundleError when there is none)."""
+        with self._handed:
+            self._handed.wait_for(lambda: not self._handing_over, HANDOVER_WAIT_SECONDS)
+        return self._load_active()
+
+    def _load_active(self) -> bool:
         with self._load_lock:
             with self._sessions() as s:
                 version = repo.active_version_number(s)
@@ -151,7 +178,7 @@ class ModelHolder(Poller):
                 self._swap(version, recognizer, class_ids)
                 self._parts.keep_only(shared)
                 return True
-        return self.refresh()  # activated again meanwhile (a rollback)
+        return self._load_active()  # activated again meanwhile (a rollback)
 
     @staticmethod
     def _part_shas(s: Session, version: int) -> set[str]:

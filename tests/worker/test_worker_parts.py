@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import re
+import threading
 from collections.abc import Iterator
 
 from sqlalchemy import event
@@ -89,3 +90,39 @@ def test_an_embedded_worker_loads_the_served_version_without_reading_its_parts(s
     finally:
         engine.dispose()
     assert not set(read) & parts_of(sessions, holder.current.version)
+
+
+def test_a_refresh_waits_for_the_version_the_embedded_worker_hands_over(settings, client, dataset):
+    """Between the embedded worker's commit of a version and its serving it, the holder's
+    poller (or a job's waiter) waits for that instead of loading the same version from the
+    store meanwhile, which takes seconds and a second copy at 10,000 objects."""
+    engine = make_engine(settings.sqlalchemy_url)
+    sessions = make_sessionmaker(engine)
+    holder = ModelHolder(sessions)
+    seen: dict = {}
+
+    def serve_later(version, model):  # the poller wakes between the commit and the serve
+        seen["poll"] = threading.Thread(target=lambda: seen.setdefault("swapped", holder.refresh()))
+        seen["poll"].start()
+        seen["poll"].join(0.3)
+        seen["waited"] = seen["poll"].is_alive()
+        holder.serve(version, model)
+
+    worker = Worker(
+        settings,
+        sessions,
+        on_activate=serve_later,
+        parts=holder.parts,
+        handover=holder.handing_over,
+    )
+    try:
+        assert holder.refresh()
+        register(client, dataset, "mug", 0)
+        with bundle_reads(engine) as read:
+            assert worker.run_once() == 1
+            seen["poll"].join(10)
+        assert holder.current.version == 2
+    finally:
+        engine.dispose()
+    assert seen["waited"] and seen["swapped"] is False  # it found version 2 served
+    assert not set(read) & parts_of(sessions, 2) - parts_of(sessions, 1)
