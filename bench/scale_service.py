@@ -279,8 +279,9 @@ def in_process(model_path: Path, ds, objects: list[int], threshold: int) -> dict
     then for each novel object ``objects`` (indices into ``ds``) the times of
     ``add_novel_classes`` (``register_s``), ``add_one_shot`` of its first sample
     (``one_shot_s``; the very first also as ``first_one_shot_s``: whatever the load left to
-    the first use, which before 006d98e was packing every forest for the walk) and ``with_known_samples`` of ``threshold`` samples on the
-    base model (``promote_s``: a promotion learnt into the known part)."""
+    the first use, which before 006d98e was packing every forest for the walk) and
+    ``with_known_samples`` of ``threshold`` samples on the base model (``promote_s``: a
+    promotion learnt into the known part)."""
     from app.framework import bundle
 
     t = time.perf_counter()
