@@ -48,7 +48,11 @@ FORMAT_VERSION = 1
 # a build older than the featurizer refuses it clearly instead of serving it as a model of
 # samples; bundles without one stay version 1, which every build reads
 RAW_TRIALS_FORMAT_VERSION = 2
-READS = (FORMAT_VERSION, RAW_TRIALS_FORMAT_VERSION)
+# a bundle holding a forest that a promotion grew (its reached leaves redirected) or, split,
+# arrays stored in row blocks is written as version 3: a build older than them would serve
+# the forest without its grown leaves, or not find the blocks, instead of refusing it
+GROWN_FORMAT_VERSION = 3
+READS = (FORMAT_VERSION, RAW_TRIALS_FORMAT_VERSION, GROWN_FORMAT_VERSION)
 _MANIFEST = "manifest.json"
 _ARRAYS = "arrays.npz"
 _REG = "registry/"  # prefix of the registry's arrays inside arrays.npz
@@ -154,6 +158,8 @@ class PartEncoder:
         self._frozen, self._named = frozen, named
         self.views, self.joined = views, joined
         manifest["parts"] = refs
+        if any(isinstance(ref, list) for ref in refs.values()):
+            manifest["format_version"] = GROWN_FORMAT_VERSION
         return _zip(manifest, arrays), parts
 
 
@@ -256,6 +262,8 @@ def _contents(model: TactileRecognizer) -> tuple[dict[str, Any], dict[str, np.nd
         manifest["format_version"] = RAW_TRIALS_FORMAT_VERSION
         for name, value in featurizer_arrays.items():
             all_arrays[_FEATURIZER + name] = value
+    if any(name.endswith("redirect_from") for name in all_arrays):
+        manifest["format_version"] = GROWN_FORMAT_VERSION
     all_arrays[_REG + "known_attributes"] = reg.known_attributes
     all_arrays[_REG + "novel_attributes"] = reg.novel_attributes
     for i, (_name, samples) in enumerate(reg.novel_samples.items()):

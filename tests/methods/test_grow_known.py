@@ -1,16 +1,26 @@
 """Known classes learnt without a refit (``with_known_samples``, how ``best`` promotes a
 class) against a model fitted on everything: the bound the docs state is checked here."""
 
+import io
+import json
+import zipfile
+
 import numpy as np
 import pytest
 
+from app.framework import bundle
 from app.framework.bundle import from_bytes, to_bytes
-from app.framework.errors import FrameworkError, UnsupportedOperationError
+from app.framework.errors import BundleError, FrameworkError, UnsupportedOperationError
 from app.methods.best import BestRecognizer
 from app.methods.forest import FlatForest
 from bench.grow_known import TRAIN_TRIALS, compare, promote, split
 
 OBJECTS, PROMOTED = 40, 4
+
+
+def _format(data: bytes) -> int:
+    with zipfile.ZipFile(io.BytesIO(data)) as zf:
+        return json.loads(zf.read("manifest.json"))["format_version"]
 
 
 def _split(seed: int):
@@ -133,6 +143,14 @@ def test_a_grown_model_round_trips_and_keeps_its_novel_classes(fitted):
     assert grown.registry.known_names[-1] == ds.class_names[promoted]
     assert grown.shot_prototypes_.shape == (1, OBJECTS - PROMOTED + 1)
     again = from_bytes(to_bytes(grown))
+    # a grown forest's bundle is format 3: a build that reads only 1 and 2 refuses it
+    # instead of serving the forest without its grown leaves
+    assert _format(to_bytes(grown)) == bundle.GROWN_FORMAT_VERSION
+    assert _format(to_bytes(with_novel)) == bundle.FORMAT_VERSION
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(bundle, "READS", (bundle.FORMAT_VERSION, bundle.RAW_TRIALS_FORMAT_VERSION))
+        with pytest.raises(BundleError, match="format version 3"):
+            from_bytes(to_bytes(grown))
     x = ds.samples[~train]
     a, b = grown.recognize_batch(x), again.recognize_batch(x)
     np.testing.assert_array_equal(a.top_index, b.top_index)
