@@ -78,8 +78,13 @@ class ApproximateNeighbours:
         d2 = np.where(ids < 0, np.inf, np.maximum(d2.astype(np.float64), 0.0))
         if not len(self.tail):
             return d2, ids
-        diff = q[:, None, :].astype(np.float64) - self.tail[None, :, :]
-        tail_d2 = np.einsum("ntd,ntd->nt", diff, diff)
+        # |q - t|^2 from products: (N, T) memory, where the differences took N x T x d (a
+        # GB for a batch of 1,024 against a full tail)
+        q64, t64 = q.astype(np.float64), self.tail.astype(np.float64)
+        tail_d2 = np.maximum(
+            (q64**2).sum(axis=1)[:, None] + (t64**2).sum(axis=1)[None, :] - 2.0 * q64 @ t64.T,
+            0.0,
+        )
         tail_ids = np.broadcast_to(self.index.ntotal + np.arange(len(self.tail)), tail_d2.shape)
         d2, ids = np.concatenate([d2, tail_d2], axis=1), np.concatenate([ids, tail_ids], axis=1)
         order = np.argsort(d2, axis=1, kind="stable")[:, :k]
