@@ -103,11 +103,9 @@ class PartEncoder:
         self.min_bytes = min_bytes
         self.freeze = freeze
         self._previous: dict[bytes, tuple[str, bytes]] = {}  # digest of .npy bytes -> part
-        # read-only arrays of the previous split by id (each held, so that its id is not
-        # taken by another array meanwhile) -> the digests of their blocks
-        self._frozen: dict[int, tuple[np.ndarray, list[bytes]]] = {}
-        # the same, by array name: a new array that begins with the rows of the previous
-        # version's (a promotion appends) is compared with it block by block, not hashed
+        # read-only arrays of the previous split by name (each held) -> their blocks' digests:
+        # the very same array is neither read nor hashed again, and a new one that begins
+        # with its rows (a promotion appends) is compared with it block by block
         self._named: dict[str, tuple[np.ndarray, list[bytes]]] = {}
         self.views: dict[str, np.ndarray] = {}
         self.joined: dict[tuple[str, ...], np.ndarray] = {}
@@ -117,26 +115,25 @@ class PartEncoder:
         parts: dict[str, bytes] = {}
         refs: dict[str, str | list[str]] = {}
         encoded: dict[bytes, tuple[str, bytes]] = {}
-        frozen: dict[int, tuple[np.ndarray, list[bytes]]] = {}  # id -> (array, block digests)
         named: dict[str, tuple[np.ndarray, list[bytes]]] = {}
         views: dict[str, np.ndarray] = {}
         joined: dict[tuple[str, ...], np.ndarray] = {}
         for name in [n for n, a in arrays.items() if np.asanyarray(a).nbytes >= self.min_bytes]:
             array = np.asanyarray(arrays.pop(name))
-            held = self._frozen.get(id(array))
             if self.freeze:
                 freeze(array)
-            if held is not None and held[0] is array:
+            before, known = self._named.get(name, (None, []))
+            blocks = row_blocks(array)
+            if before is array:
                 # the very array of the previous version, which nothing can have changed: the
                 # shared parts of a large model (2 GB at 10,000 objects) are neither copied
                 # to .npy bytes nor hashed again for every enrolment
-                keys = held[1]
+                keys = known
                 encoded.update({k: self._previous[k] for k in keys})
             else:
-                before, known = self._named.get(name, (None, []))
                 old = row_blocks(before) if before is not None else []
                 keys = []
-                for i, block in enumerate(row_blocks(array)):
+                for i, block in enumerate(blocks):
                     if i < len(old) and _same_bytes(block, old[i]):
                         keys.append(known[i])  # a block of the previous version: its part
                         encoded[known[i]] = self._previous[known[i]]
@@ -146,8 +143,8 @@ class PartEncoder:
                     if keys[-1] not in encoded:
                         encoded[keys[-1]] = self._previous.get(keys[-1]) or _encode_npy(data)
             if unchangeable(array):
-                frozen[id(array)] = named[name] = (array, keys)
-            for key, block in zip(keys, row_blocks(array), strict=True):
+                named[name] = (array, keys)
+            for key, block in zip(keys, blocks, strict=True):
                 sha, blob = encoded[key]
                 parts[sha], views[sha] = blob, block
             shas = [encoded[k][0] for k in keys]
@@ -155,7 +152,7 @@ class PartEncoder:
             if len(shas) > 1:
                 joined[tuple(shas)] = array
         self._previous = encoded  # only the latest model's parts are kept
-        self._frozen, self._named = frozen, named
+        self._named = named
         self.views, self.joined = views, joined
         manifest["parts"] = refs
         if any(isinstance(ref, list) for ref in refs.values()):
