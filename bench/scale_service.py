@@ -281,12 +281,19 @@ def in_process(model_path: Path, ds, objects: list[int], threshold: int) -> dict
     (``one_shot_s``; the very first also as ``first_one_shot_s``: whatever the load left to
     the first use, which before 006d98e was packing every forest for the walk) and
     ``with_known_samples`` of ``threshold`` samples on the base model (``promote_s``: a
-    promotion learnt into the known part)."""
+    promotion learnt into the known part). Each promoted model is then split as the worker
+    stores it, after the base (``bundle.PartEncoder``): ``promote_encode_s`` and the bytes
+    of the parts the base does not have, ``promote_new_mb`` (``encode_base_s``: the base's
+    own first split)."""
     from app.framework import bundle
 
     t = time.perf_counter()
     base = bundle.load(model_path)
     out: dict = {"load_s": time.perf_counter() - t, "repeats": []}
+    encoder = bundle.PartEncoder(freeze=True)  # as the worker splits each version it stores
+    t = time.perf_counter()
+    _, base_parts = encoder.split(base)
+    out["encode_base_s"] = time.perf_counter() - t
     for k in objects:
         name, vector = ds.class_names[k], ds.class_attributes[k]
         samples = ds.samples[ds.labels == k]
@@ -298,12 +305,20 @@ def in_process(model_path: Path, ds, objects: list[int], threshold: int) -> dict
         shot = time.perf_counter() - t
         out.setdefault("first_one_shot_s", shot)
         t = time.perf_counter()
-        base.with_known_samples({name: samples[:threshold]}, {name: vector})
+        grown = base.with_known_samples({name: samples[:threshold]}, {name: vector})
         promote = time.perf_counter() - t
-        out["repeats"].append({"register_s": register, "one_shot_s": shot, "promote_s": promote})
+        encoder.split(base)  # the base again (its very arrays: nothing read), then the grown
+        t = time.perf_counter()
+        _, parts = encoder.split(grown)
+        encode = time.perf_counter() - t
+        new_mb = sum(len(b) for sha, b in parts.items() if sha not in base_parts) / 1e6
+        del grown
+        out["repeats"].append({"register_s": register, "one_shot_s": shot, "promote_s": promote,
+                               "promote_encode_s": encode, "promote_new_mb": new_mb})  # fmt: skip
         say(f"  in process {name}: registered {register * 1e3:.1f} ms, one-shot "
-            f"{shot * 1e3:.1f} ms, promoted {promote:.2f} s")  # fmt: skip
-    for fig in ("register_s", "one_shot_s", "promote_s"):
+            f"{shot * 1e3:.1f} ms, promoted {promote:.2f} s, its version encoded in "
+            f"{encode:.2f} s with {new_mb:.1f} MB of new parts")  # fmt: skip
+    for fig in ("register_s", "one_shot_s", "promote_s", "promote_encode_s", "promote_new_mb"):
         values = [r[fig] for r in out["repeats"][1:] or out["repeats"]]  # past the first
         out[fig] = {"median": float(np.median(values)), "worst": max(values)}
     return out
@@ -368,13 +383,14 @@ def in_process_table(figures: dict) -> str:
     object, and the first one-shot apart."""
     lines = ["| in process | median / worst |", "| --- | --- |"]
     for fig, unit, scale in (("register_s", "ms", 1e3), ("one_shot_s", "ms", 1e3),
-                             ("promote_s", "s", 1)):  # fmt: skip
+                             ("promote_s", "s", 1), ("promote_encode_s", "s", 1),
+                             ("promote_new_mb", "MB", 1)):  # fmt: skip
         f = figures[fig]
-        lines.append(
-            f"| {fig[:-2]} | {f['median'] * scale:.3g} / {f['worst'] * scale:.3g} {unit} |"
-        )
+        label = fig.rsplit("_", 1)[0]
+        lines.append(f"| {label} | {f['median'] * scale:.3g} / {f['worst'] * scale:.3g} {unit} |")
     lines.append(f"| first one-shot after the load | {figures['first_one_shot_s']:.3g} s |")
     lines.append(f"| load the bundle | {figures['load_s']:.3g} s |")
+    lines.append(f"| encode the loaded bundle's parts | {figures['encode_base_s']:.3g} s |")
     return "\n".join(lines)
 
 
