@@ -259,11 +259,27 @@ def plot(records: list[dict], slopes: dict, path: Path) -> None:
             n, c = zip(*pts, strict=True)
             slope = slopes.get(cost)
             ax.loglog(n, c, "o-", label=f"{cost} (N^{slope:.2f})" if slope else cost)
-    ax.set_xlabel("known objects N")
-    ax.set_ylabel("cost (units in the name)")
-    ax.set_title("best on the simulator: cost against the number of known objects")
+    finish_plot(
+        fig,
+        path,
+        "known objects N",
+        "cost (units in the name)",
+        "best on the simulator: cost against the number of known objects",
+        legend_size=8,
+    )
+
+
+def finish_plot(fig, path, xlabel: str, ylabel: str, title: str, legend_size: int) -> None:
+    """Label the figure's one log-scale plot (grid on both scales, legend), write it to
+    ``path`` as a PNG and close it: the benches' plots against the number of objects."""
+    import matplotlib.pyplot as plt
+
+    ax = fig.axes[0]
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=legend_size)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.scale import markdown_rows, parse_sizes
+from bench.scale import finish_plot, markdown_rows, parse_sizes
 
 BLOCK = 1024
 SCALER_ROWS = 50_000  # the scaler's medians and quartiles from at most this many trials
@@ -163,14 +163,14 @@ def plot(records: list[dict], path: Path) -> None:
         ax.plot(n, [r["sep_median"] for r in sim], "o-", color=colour, label=label + ", median")
         ax.plot(n, [r["sep_q10"] for r in sim], "v:", color=colour, label=label + ", 10th pct")
     ax.set_xscale("log")
-    ax.set_xlabel("objects N")
-    ax.set_ylabel("nearest other object's mean / trial spread along that line")
-    ax.set_title("How far the nearest other object is (bench/separation.py)")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    finish_plot(
+        fig,
+        path,
+        "objects N",
+        "nearest other object's mean / trial spread along that line",
+        "How far the nearest other object is (bench/separation.py)",
+        legend_size=7,
+    )
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:

@@ -3,12 +3,11 @@ clear refusals of bad arguments. The figures themselves mean nothing at this siz
 
 from __future__ import annotations
 
+import functools
 import json
-import subprocess
-import sys
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.bench import run_bench
+
 FIELDS = (
     "objects", "fit_s", "fit_peak_gb", "bundle_mb", "enrol_ms", "one_shot_ms", "promote_s",
     "recognise_1_us", "batch_per_sample_us", "throughput_per_s", "known_acc", "nn1_acc",
@@ -17,14 +16,7 @@ FIELDS = (
 )  # fmt: skip
 
 
-def run(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "bench.scale", *args],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+run = functools.partial(run_bench, "bench.scale")
 
 
 def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):

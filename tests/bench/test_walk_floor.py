@@ -3,22 +3,12 @@ clear refusal of bad sizes. The figures mean nothing at this size."""
 
 from __future__ import annotations
 
+import functools
 import json
-import subprocess
-import sys
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.bench import run_bench
 
-
-def run(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "bench.walk_floor", *args],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+run = functools.partial(run_bench, "bench.walk_floor")
 
 
 def test_tiny_sizes_give_a_record_each_and_a_table(tmp_path):
