@@ -167,6 +167,8 @@ def _same_bytes(a: np.ndarray, b: np.ndarray) -> bool:
         return False
     if not (a.flags.c_contiguous and b.flags.c_contiguous):
         return False  # told apart by their hashes instead
+    if a.__array_interface__["data"][0] == b.__array_interface__["data"][0]:
+        return True  # the same memory (a promotion appended behind these rows)
     return bool(np.array_equal(a.reshape(-1).view(np.uint8), b.reshape(-1).view(np.uint8)))
 
 

@@ -18,10 +18,13 @@ together in numpy, and a single sample takes ~15 us instead of ~300 us
 
 from __future__ import annotations
 
+import threading
 from typing import Any
 
 import numpy as np
 from numba import njit
+
+from app.framework.growing import appended, with_room
 
 _KEYS = (
     "feature",
@@ -52,11 +55,11 @@ class FlatForest:
         n_classes: int,
         n_features: int,
         check: bool = True,
-        packed: np.ndarray | None = None,
+        records: _WalkRecords | None = None,
     ) -> None:
         """``check``: validate the arrays (a stored forest's); False only for arrays this
         module has just built (a promotion's grown forest: the check reads every node).
-        ``packed``: the walk's node records of these arrays where the caller has them (a
+        ``records``: the walk's node records of these arrays where the caller has them (a
         promotion extends its forest's); otherwise they are packed here, so that loading a
         model, not the first answer or enrolment after it, pays for that (seconds at
         10,000 objects)."""
@@ -84,10 +87,11 @@ class FlatForest:
         self.n_features = int(n_features)
         if check:
             self._check()
-        if packed is None:
-            packed = _packed({k: getattr(self, k) for k in _NODE_KEYS}, slice(None))
-            packed[self.redirect_from, 3] = self.redirect_to
-        self._nodes = packed
+        if records is None:
+            records = _WalkRecords({k: getattr(self, k) for k in _NODE_KEYS})
+            records.redirect(self.redirect_from, self.redirect_to)
+        self._records = records
+        self._nodes = records.first(len(self.feature))
 
     def _check(self) -> None:
         n = len(self.feature)
@@ -392,8 +396,11 @@ class _ForestArrays:
         self.n_leaves += leaves
 
     def done(self) -> dict[str, np.ndarray]:
-        out = {k: np.concatenate(v) for k, v in self.parts.items()}
-        out["leaf_ptr"] = np.r_[0, np.cumsum(np.concatenate(self.counts))].astype(np.int64)
+        # with room behind them: a promotion appends to them without copying (``_Grown``)
+        out = {k: with_room(*v) for k, v in self.parts.items()}
+        out["leaf_ptr"] = with_room(
+            np.r_[0, np.cumsum(np.concatenate(self.counts))].astype(np.int64)
+        )
         return out
 
 
@@ -471,33 +478,84 @@ class _Grown:
 
     def done(self, n_classes: int) -> FlatForest:
         f = self.forest
-        n_old_nodes, n_old = len(f.feature), len(f.leaf_count)
-        nodes = {k: np.concatenate([getattr(f, k), *self.nodes[k]]) for k in _NODE_KEYS}
+        n_old_nodes = len(f.feature)
+        nodes = {k: appended(getattr(f, k), *self.nodes[k]) for k in _NODE_KEYS}
         lr, lc, lv = _leaf_distributions(
             np.concatenate([np.zeros(0, np.int64), *self.rows]),
             np.concatenate([np.zeros(0, np.int64), *self.cols]),
             n_classes,
             np.concatenate([np.zeros(0), *self.mass]),
         )
+        n_old = len(f.leaf_count)
         sizes = np.bincount(lr - n_old, minlength=self.n_leaves - n_old)
         moved = np.asarray(self.moved, np.int32).reshape(-1, 2)
         arrays = {
             **nodes,
             "roots": f.roots,
-            "leaf_ptr": np.r_[f.leaf_ptr, f.leaf_ptr[-1] + np.cumsum(sizes)],
-            "leaf_class": np.concatenate([f.leaf_class, lc.astype(np.int32)]),
-            "leaf_value": np.concatenate([f.leaf_value, lv]),
-            _COUNTS: np.concatenate([f.leaf_count, *self.counts]).astype(np.int32),
-            _FROM: np.concatenate([f.redirect_from, moved[:, 0]]),
-            _TO: np.concatenate([f.redirect_to, moved[:, 1]]),
+            "leaf_ptr": appended(f.leaf_ptr, f.leaf_ptr[-1] + np.cumsum(sizes)),
+            "leaf_class": appended(f.leaf_class, lc),
+            "leaf_value": appended(f.leaf_value, lv),
+            _COUNTS: appended(f.leaf_count, *self.counts),
+            _FROM: appended(f.redirect_from, moved[:, 0]),
+            _TO: appended(f.redirect_to, moved[:, 1]),
         }
-        # the walk's records: the old ones, the new nodes', and the reached leaves redirected
-        packed = np.concatenate([f._nodes, _packed(nodes, slice(n_old_nodes, None))])
-        packed[moved[:, 0], 3] = moved[:, 1]
-        return FlatForest(arrays, n_classes, f.n_features, check=False, packed=packed)
+        records = f._records.grown(n_old_nodes, nodes, moved)
+        return FlatForest(arrays, n_classes, f.n_features, check=False, records=records)
 
 
-def _packed(nodes: dict[str, np.ndarray], at: Any) -> np.ndarray:
+class _WalkRecords:
+    """The walk's node records (``_packed``) of a forest and of the forests promotions grew
+    from it, in one buffer with spare rows. A promotion writes its new nodes' records into
+    the spare rows and points each leaf it replaced at the replacement, in place (the
+    records are the forests' own, derived from their arrays and never stored). A forest
+    walks the first rows, as many as it has nodes, and follows a replaced leaf only to a
+    node among them, so it sees no later promotion's redirects: the forest before a
+    promotion answers as it did while and after the promotion is built."""
+
+    def __init__(self, nodes: dict[str, np.ndarray], first: np.ndarray | None = None) -> None:
+        """The records of node arrays ``nodes``, after the records ``first`` if given."""
+        n_first = 0 if first is None else len(first)
+        n = n_first + len(nodes["feature"])
+        self._buffer = np.empty((n + n // 4 + 1, 4), np.int32)
+        if first is not None:
+            self._buffer[:n_first] = first
+        _packed(nodes, slice(None), out=self._buffer[n_first:n])
+        self._filled = n
+        self._lock = threading.Lock()
+
+    def first(self, n: int) -> np.ndarray:
+        """The records of a forest of ``n`` nodes, read-only."""
+        view = self._buffer[:n]
+        view.flags.writeable = False
+        return view
+
+    def redirect(self, leaf_nodes: np.ndarray, to: np.ndarray) -> None:
+        self._buffer[leaf_nodes, 3] = to  # 4-byte stores: a walk reads the old or the new
+
+    def grown(self, n_old: int, nodes: dict[str, np.ndarray], moved: np.ndarray):
+        """The records of the first ``n_old`` nodes, then those of ``nodes[...][n_old:]``,
+        with leaf node ``moved[:, 0]`` redirected to node ``moved[:, 1]``: these records
+        when no forest has grown from those first nodes yet and the spare rows suffice,
+        else a copy."""
+        new = {k: v[n_old:] for k, v in nodes.items()}
+        n = n_old + len(new["feature"])
+        with self._lock:
+            in_place = self._filled == n_old and n <= len(self._buffer)
+            if in_place:
+                self._filled = n  # a second promotion of the same forest copies
+        if in_place:
+            out = self
+            _packed(new, slice(None), out=self._buffer[n_old:n])
+        else:
+            out = _WalkRecords(new, first=self._buffer[:n_old])
+            # drop redirects to nodes past n_old: a sibling promotion's, which these are not
+            right = out._buffer[:n_old, 3]
+            right[right >= n_old] = -1
+        out.redirect(moved[:, 0], moved[:, 1])
+        return out
+
+
+def _packed(nodes: dict[str, np.ndarray], at: Any, out: np.ndarray | None = None) -> np.ndarray:
     """The walk's node records of ``nodes[...][at]``: one 16-byte record per node, so a step
     touches one cache line (split feature, float32 threshold bits, left and right child; a
     leaf, feature -1, keeps its leaf index where the left child would be, and where the
@@ -510,7 +568,7 @@ def _packed(nodes: dict[str, np.ndarray], at: Any) -> np.ndarray:
     above = t32.astype(np.float64) > threshold
     t32[above] = np.nextafter(t32[above], np.float32(-np.inf))
     leaf = feature < 0
-    out = np.empty((len(feature), 4), np.int32)
+    out = np.empty((len(feature), 4), np.int32) if out is None else out
     out[:, 0] = feature
     out[:, 1] = t32.view(np.int32)
     out[:, 2] = np.where(leaf, nodes["leaf_of_node"][at], nodes["left"][at])
@@ -569,7 +627,9 @@ def _descend(x, rows, nodes, thresholds, at, n):
             if f >= 0:
                 at[k] = nodes[node, 2 + (x[rows[k], f] > thresholds[node, 1])]
                 descending = True
-            elif nodes[node, 3] >= 0:  # a leaf a promotion replaced: on from its replacement
+            elif 0 <= nodes[node, 3] < nodes.shape[0]:
+                # a leaf a promotion of this forest replaced: on from its replacement (a
+                # later promotion's, past this forest's nodes, is not this forest's)
                 at[k] = nodes[node, 3]
                 descending = True
 

@@ -26,6 +26,7 @@ and docs/RESULTS.md).
 
 from __future__ import annotations
 
+import copy
 import weakref
 from collections.abc import Callable
 
@@ -33,6 +34,7 @@ import numpy as np
 from numba import njit
 
 from app.data.dataset import TactileDataset
+from app.framework.growing import appended, with_room
 from app.framework.scaling import RobustInputScaler, flatten
 from app.methods.forest import FlatForest
 from app.methods.neighbours import ApproximateNeighbours
@@ -44,6 +46,7 @@ KNN = 3
 #: ``nearest_from_products``: ``best``'s small-batch scorer computes the same cues)
 DISTANCE_EPS = 1e-6
 _ROWS = 8192  # rows a blocked pass over the samples takes at a time
+_PROJECTED_ROWS = 4096  # reference rows projected together (``ReferenceDistances``)
 
 
 def fisher_weights(z: np.ndarray, y: np.ndarray, n_classes: int) -> np.ndarray:
@@ -381,8 +384,7 @@ class ReferenceDistances:
         )
         if self.center.shape != (self.reference.shape[1],):
             raise ValueError("novelty reference centre does not match the inputs")
-        self._ref, self._ref_res = self._split(self.reference)
-        self._ref_sq = (self._ref**2).sum(axis=1)
+        self._ref, self._ref_res, self._ref_sq = self._projected(0)
         self.index: ApproximateNeighbours | None = None
         self._points: np.ndarray | None = None  # the reference's coordinates, with an index
         if index is not None:
@@ -396,7 +398,7 @@ class ReferenceDistances:
         """``components`` principal directions of the reference (0, or at least its rank:
         exact); an approximate index when it holds more than ``approximate_above`` samples
         (0: never)."""
-        reference = np.asarray(reference, np.float32)
+        reference = with_room(np.asarray(reference, np.float32))  # a promotion appends to it
         basis = None
         if 0 < components < min(reference.shape):
             basis = _principal_directions(reference, components)
@@ -407,20 +409,50 @@ class ReferenceDistances:
 
     def with_points(self, q: np.ndarray) -> ReferenceDistances:
         """These distances with the reference samples ``q`` (N, D) added: same basis and
-        centre, and the index (if any) with their points added (``with_points``)."""
-        out = ReferenceDistances(
-            np.concatenate([self.reference, np.asarray(q, np.float32)]),
-            self.basis,
-            center=self.center,
-        )
+        centre, and the index (if any) with their points added (``with_points``). The
+        reference and what is derived from it grow by appending (``growing.appended``):
+        only the new samples are projected, to the bits a load of the result computes."""
+        n_old = len(self.reference)
+        out = copy.copy(self)
+        out.reference = appended(self.reference, np.asarray(q, np.float32))
+        ref, res, sq = out._projected(n_old)
+        out._ref, out._ref_sq = appended(self._ref, ref), appended(self._ref_sq, sq)
+        out._ref_res = None if res is None else appended(self._ref_res, res)
+        out._groups = None
         if self.index is not None:  # over the new reference's points, as a load computes them
-            out._index(self.index.with_points)
+            out._index(self.index.with_points, appended(self._points, _points(ref, res)))
         return out
 
-    def _index(self, index: ApproximateNeighbours | np.ndarray | Callable) -> None:
+    def _projected(self, start: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """(``_split``'s coordinates and residual norms, squared norms of the coordinates) of
+        the reference from row ``start`` on. Computed in blocks of ``_PROJECTED_ROWS`` rows
+        from row 0, each padded to that many: a row's bits then do not depend on how many
+        rows were projected with it (a matrix product's kernel can depend on its shape), so
+        rows projected when a promotion appended them match those a load projects."""
+        n, size = len(self.reference), _PROJECTED_ROWS
+        width = self.reference.shape[1] if self.basis is None else self.basis.shape[1]
+        ps, ress = [np.zeros((0, width), np.float32)], [np.zeros(0, np.float32)]
+        for lo in range(start - start % size, n, size):
+            rows = self.reference[lo : lo + size]
+            if len(rows) < size:
+                rows = np.r_[rows, np.zeros((size - len(rows), rows.shape[1]), np.float32)]
+            p, res = self._split(rows)
+            keep = slice(max(start - lo, 0), min(n - lo, size))
+            ps.append(p[keep])
+            ress.append(res[keep] if res is not None else ress[0])
+        p = with_room(*ps)  # a promotion appends to them (``with_points``)
+        res = None if self.basis is None else with_room(*ress)
+        return p, res, with_room((p**2).sum(axis=1))
+
+    def _index(
+        self,
+        index: ApproximateNeighbours | np.ndarray | Callable,
+        points: np.ndarray | None = None,
+    ) -> None:
         """Search through ``index``: an index, its bytes, or a function that builds one from
-        the reference's coordinates."""
-        points = self._ref if self._ref_res is None else np.c_[self._ref, self._ref_res]
+        the reference's coordinates (``points``, where the caller has them)."""
+        if points is None:
+            points = _points(self._ref, self._ref_res)
         if isinstance(index, np.ndarray):
             index = ApproximateNeighbours.from_bytes(index, points)
         elif callable(index) and not isinstance(index, ApproximateNeighbours):
@@ -491,6 +523,12 @@ class ReferenceDistances:
         if res is not None:
             d2 += (res[:, None] - self._ref_res[None, :]) ** 2
         return np.maximum(d2, 0.0, out=d2)
+
+
+def _points(ref: np.ndarray, res: np.ndarray | None) -> np.ndarray:
+    """The points whose Euclidean distances are ``ReferenceDistances``' distances, with
+    room behind them (``with_points`` appends to them)."""
+    return with_room(ref if res is None else np.c_[ref, res])
 
 
 @njit(cache=True, nogil=True)

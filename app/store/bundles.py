@@ -15,6 +15,7 @@ from sqlalchemy.orm import Session
 
 from app.framework import bundle
 from app.framework.errors import BundleError
+from app.framework.growing import with_room
 from app.framework.recognizer import TactileRecognizer
 from app.store import repo
 
@@ -56,8 +57,9 @@ class PartCache:
         if array is not None:
             return array
         blocks = [self.get(session, sha) for sha in shas]
-        array = np.concatenate(blocks)
-        bundle.freeze(array)
+        # with room behind its rows: a promotion appends rows to such arrays (a forest's, the
+        # novelty reference), and the room spares it a copy of the whole array
+        array = with_room(*blocks)
         at = 0
         for sha, block in zip(shas, blocks, strict=True):
             self._arrays[sha] = array[at : at + len(block)]

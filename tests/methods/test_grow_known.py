@@ -96,6 +96,45 @@ def test_grown_leaves_hold_what_reaches_them_and_the_rest_is_copied():
     np.testing.assert_array_equal(grown.walk_arrays()[0], fresh.walk_arrays()[0])
 
 
+def test_promotions_append_in_place_and_earlier_forests_answer_as_before():
+    x, y, old, forest = _one_new_class()
+    first, second = np.flatnonzero(~old)[:5], np.flatnonzero(~old)[5:]
+    p0 = forest.predict_proba(x)
+    grown = forest.with_samples(x[first], y[first], OBJECTS, x[old], y[old], "sqrt", 0)
+    p1 = grown.predict_proba(x)
+    # written behind the forest's rows (a fitted forest has room): no row was copied
+    for key in ("feature", "threshold", "leaf_class", "leaf_value"):
+        assert np.shares_memory(getattr(grown, key), getattr(forest, key)), key
+    assert np.shares_memory(grown.walk_arrays()[0], forest.walk_arrays()[0])
+    seen_x, seen_y = np.concatenate([x[old], x[first]]), np.concatenate([y[old], y[first]])
+    twice = grown.with_samples(x[second], y[second], OBJECTS, seen_x, seen_y, "sqrt", 1)
+    assert np.shares_memory(twice.leaf_class, forest.leaf_class)
+    # the forests before answer as they did: a later promotion's redirects are not theirs
+    np.testing.assert_array_equal(forest.predict_proba(x), p0)
+    np.testing.assert_array_equal(grown.predict_proba(x), p1)
+    # a second promotion of the same forest copies, and answers as one of a forest that
+    # never had room (loaded from its state) does
+    sibling = forest.with_samples(x[second], y[second], OBJECTS, x[old], y[old], "sqrt", 1)
+    assert not np.shares_memory(sibling.leaf_class, forest.leaf_class)
+    loaded = FlatForest.from_state(forest.get_state(), OBJECTS - 1, x.shape[1])
+    alone = loaded.with_samples(x[second], y[second], OBJECTS, x[old], y[old], "sqrt", 1)
+    np.testing.assert_array_equal(sibling.predict_proba(x), alone.predict_proba(x))
+    np.testing.assert_array_equal(sibling.walk_arrays()[0], alone.walk_arrays()[0])
+    for forest_, p in ((forest, p0), (grown, p1)):
+        np.testing.assert_array_equal(forest_.predict_proba(x), p)
+    # and every forest's records are those packed from its stored state, but for the
+    # redirects of later promotions, past its nodes, which its walk does not follow
+    for forest_ in (grown, twice, sibling):
+        fresh = FlatForest.from_state(forest_.get_state(), OBJECTS, x.shape[1])
+        records = forest_.walk_arrays()[0].copy()
+        later = records[:, 3] >= len(records)
+        assert later.any() == (forest_ is grown)
+        records[later, 3] = -1
+        np.testing.assert_array_equal(records, fresh.walk_arrays()[0])
+        np.testing.assert_array_equal(forest_.apply(x), fresh.apply(x))
+        np.testing.assert_array_equal(forest_.predict_proba(x), fresh.predict_proba(x))
+
+
 def test_growing_reads_only_the_seen_samples_of_the_classes_it_reaches():
     x, y, old, forest = _one_new_class()
 

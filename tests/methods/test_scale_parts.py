@@ -135,6 +135,32 @@ def test_points_learnt_after_the_graph_are_searched_exactly_beside_it(sim, monke
     assert taken.index.index.ntotal == len(ref) and base.index.index.ntotal == len(ref) - 40
 
 
+@pytest.mark.parametrize("components", [0, 16])
+def test_a_reference_grows_in_place_to_the_bits_a_load_computes(sim, monkeypatch, components):
+    """Samples a promotion adds are appended behind the reference and its projections (the
+    earlier ones are not copied, nor projected again), and the result is bit for bit what
+    a load of the same reference computes, across projection blocks."""
+    from app.methods import known
+
+    monkeypatch.setattr(known, "_PROJECTED_ROWS", 50)
+    ds, z, test = sim
+    ref, q, labels = z[~test], z[test], ds.labels[~test]
+    top = np.random.default_rng(2).integers(0, 40, len(q))
+    base = ReferenceDistances.fit(ref[:-30], components, approximate_above=10)
+    top_before = top % (labels[:-30].max() + 1)  # classes the base's reference holds
+    before = base.nearest(q, labels[:-30], top_before)
+    once = base.with_points(ref[-30:-10])
+    twice = once.with_points(ref[-10:])
+    for key in ("reference", "_ref", "_ref_sq", "_points"):
+        assert np.shares_memory(getattr(twice, key), getattr(base, key)), key
+    stored = ReferenceDistances(twice.reference, twice.basis, twice.index.to_bytes(), twice.center)
+    for key in ("reference", "_ref", "_ref_res", "_ref_sq", "_points"):
+        np.testing.assert_array_equal(getattr(twice, key), getattr(stored, key), err_msg=key)
+    np.testing.assert_array_equal(twice.nearest(q, labels, top), stored.nearest(q, labels, top))
+    np.testing.assert_array_equal(base.nearest(q, labels[:-30], top_before), before)
+    assert len(once.reference) == len(ref) - 10
+
+
 def test_novelty_split_holds_out_whole_trials_per_class():
     ds = simulate_dataset(30, 5, seed=1)
     fit, known, val = novelty_validation_split(ds, 0.1, 1, seed=4)

@@ -1,0 +1,81 @@
+"""Arrays that grow by appending rows, without copying the rows they had.
+
+A promotion learns a few new samples into a model of thousands of objects: its forests
+and novelty reference gain rows at their ends, and the model before it keeps answering
+meanwhile. Concatenating copies every row each time (gigabytes at 10,000 objects, most of
+a promotion's time). Here an array lives in a buffer with spare rows behind it
+(``with_room``), and ``appended`` writes the new rows into that spare room when the array
+ends where the buffer's written rows end, so both the old array and the new one are
+read-only views of the same memory. Spare room that is never written costs address space
+only: the kernel backs a large allocation's pages when they are first written.
+
+The arrays handed out are read-only, and so is the buffer (``bundle.unchangeable`` holds
+for them, so models derived from them share them instead of copying): rows once handed
+out are never written again. ``appended`` makes the buffer writable for as long as it
+writes rows past every view handed out; a check of ``unchangeable`` in that moment, in
+another thread, finds the views changeable, which costs a copy or a cache miss, never a
+wrong answer.
+"""
+
+from __future__ import annotations
+
+import threading
+import weakref
+
+import numpy as np
+
+#: spare rows given to a buffer, as a share of the rows it holds when made
+SPARE = 0.25
+
+# buffer (by id, dropped when the buffer is freed) -> rows written
+_rooms: dict[int, int] = {}
+_lock = threading.Lock()
+
+
+def with_room(*parts: np.ndarray, spare: float = SPARE) -> np.ndarray:
+    """``np.concatenate(parts)`` (arrays of the same row shape and type), read-only, with
+    room for ``spare`` x its rows more behind it, for ``appended``."""
+    first = np.asarray(parts[0])
+    n = sum(len(p) for p in parts)
+    buffer = np.empty((n + int(spare * n) + 1, *first.shape[1:]), first.dtype)
+    at = 0
+    for part in parts:
+        buffer[at : at + len(part)] = part
+        at += len(part)
+    buffer.flags.writeable = False
+    with _lock:
+        _rooms[id(buffer)] = n
+    weakref.finalize(buffer, _rooms.pop, id(buffer), None)
+    return buffer[:n]
+
+
+def appended(rows: np.ndarray, *parts: np.ndarray, spare: float = SPARE) -> np.ndarray:
+    """``np.concatenate([rows, *parts])``, read-only: written into the room behind ``rows``
+    when it is a ``with_room`` or ``appended`` array that nothing has been appended to yet
+    and the room is large enough, else into a new buffer with room (a copy)."""
+    rows = np.asarray(rows)
+    parts = tuple(np.asarray(p, rows.dtype).reshape(-1, *rows.shape[1:]) for p in parts)
+    n_new = sum(len(p) for p in parts)
+    buffer = rows.base
+    with _lock:
+        fits = (
+            isinstance(buffer, np.ndarray)
+            and _rooms.get(id(buffer)) == len(rows)
+            and len(rows) + n_new <= len(buffer)
+            and rows.__array_interface__["data"][0] == buffer.__array_interface__["data"][0]
+            and rows.strides == buffer.strides
+            and rows.dtype == buffer.dtype
+        )
+        if fits:
+            at = len(rows)
+            buffer.flags.writeable = True  # it owns its memory; the views stay read-only
+            try:
+                for part in parts:
+                    buffer[at : at + len(part)] = part
+                    at += len(part)
+            finally:
+                buffer.flags.writeable = False
+            _rooms[id(buffer)] = at  # a second append to ``rows`` copies
+    if not fits:
+        return with_room(rows, *parts, spare=spare)
+    return buffer[:at]
