@@ -243,7 +243,11 @@ class Worker:
 
     def _load(self, s: Session, version: int, sha256: str) -> TactileRecognizer:
         if self._cache is None or self._cache[0] != version:
-            self._cache = (version, bundles.load_model(s, sha256, self._parts))
+            model = bundles.load_model(s, sha256, self._parts)
+            # its parts are stored: the next version names those it shares instead of
+            # encoding them again
+            self._encoder.prime(model, repo.bundle_data(s, sha256))
+            self._cache = (version, model)
         return self._cache[1]
 
 

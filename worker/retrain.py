@@ -160,6 +160,8 @@ def make_plan(
             live_classes.discard(cls.id)
 
     reg = model.registry
+    # sets: a class is looked up in them once per stored class (10,000s)
+    known_names, all_names = set(reg.known_names), set(reg.all_names)
     in_base = set(base.sample_ids)
     in_model = []
     full = False  # the model must be fitted again
@@ -174,7 +176,7 @@ def make_plan(
             cls.origin == Origin.DATASET or len(rows) >= keep_known
         ):
             # a promoted class the base lacks as known, or with samples it has not seen
-            if cls.name not in reg.known_names:
+            if cls.name not in known_names:
                 plan.grow[cls.name], plan.grow_keys[cls.name] = rows, cls.attribute_key
             elif missing:
                 plan.grow[cls.name] = missing
@@ -187,7 +189,7 @@ def make_plan(
             plan.grow[cls.name], plan.grow_keys[cls.name] = rows, cls.attribute_key
         else:
             plan.novel.append(cls)
-            if cls.name not in reg.all_names:
+            if cls.name not in all_names:
                 plan.new_classes.append(cls)
             if missing:
                 plan.new_samples[cls.name] = missing

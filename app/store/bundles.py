@@ -26,8 +26,7 @@ def store_model(session: Session, split: Split) -> str:
     """Store a split bundle (parts first, each once); returns the head's SHA-256, which a
     model version names as its bundle."""
     head, parts = split
-    for sha, blob in parts.items():
-        repo.store_bundle(session, blob, sha256=sha)
+    repo.store_bundles(session, parts)
     return repo.store_bundle(session, head)
 
 

@@ -161,3 +161,49 @@ def test_a_promotion_writes_only_the_blocks_it_appended(store, base_model, monke
         blocks = after["known/reference"]
         reference = loaded.known_.cues_model.distances.reference
         assert all(np.shares_memory(cache.get(s, sha), reference) for sha in blocks)
+
+
+def test_a_worker_that_loaded_a_version_stores_the_next_without_encoding_its_parts(
+    store, base_model, monkeypatch
+):
+    """A model loaded from the store primes the encoder (``PartEncoder.prime``): the next
+    version's split names the parts it shares with it instead of encoding them again (the
+    first version after a start encoded the whole model) and returns bytes only for arrays
+    the load made anew; its head lists what a split from scratch lists. A promotion of the
+    loaded model appends behind the arrays the store's blocks were joined into."""
+    monkeypatch.setattr(bundle, "BLOCK_BYTES", 2048)
+    _, sessions = store
+    dataset = base_model[1]
+    model = make_method("best", n_estimators=10, seed=0).fit(dataset)
+    first = bundle.split(model, min_bytes=1024)
+    with sessions.begin() as s:
+        head = bundles.store_model(s, first)
+    with sessions() as s:
+        loaded = bundles.load_model(s, head, bundles.PartCache())
+        encoder = bundle.PartEncoder(min_bytes=1024, freeze=True)
+        encoder.prime(loaded, repo.bundle_data(s, head))
+    # arrays the load made anew (a few kB: the procedure models' autoencoders, deep-copied);
+    # the forests and references are the store's read-only parts
+    _, arrays = bundle._contents(loaded)
+    made = {n for n, a in arrays.items() if not bundle.unchangeable(a)}
+    assert not any(n.endswith(("forest/threshold", "reference")) for n in made)
+    again = encoder.split(loaded)
+    refs = bundle.part_refs(again[0])
+    assert refs == bundle.part_refs(first[0])
+    named = {sha: n for n, r in refs.items() for sha in ([r] if isinstance(r, str) else r)}
+    assert {named[sha] for sha in again[1]} <= made
+
+    vector = np.asarray(unused_vectors(dataset, 1)[0], np.float32)
+    grown = loaded.with_known_samples({"mug": dataset.samples[:4] * 1.1}, {"mug": vector})
+    forest, before = grown.known_.cues_model.forest, loaded.known_.cues_model.forest
+    assert np.shares_memory(forest.threshold, before.threshold)  # appended, not copied
+    second = encoder.split(grown)
+    fresh = bundle.split(grown, min_bytes=1024)
+    assert bundle.part_refs(second[0]) == bundle.part_refs(fresh[0])
+    assert set(fresh[1]) - set(first[1]) <= set(second[1])  # what the store lacks
+    with sessions.begin() as s:
+        v2 = bundles.store_model(s, second)
+    with sessions() as s:
+        x = dataset.samples[:8]
+        stored = bundles.load_model(s, v2)
+        np.testing.assert_array_equal(stored.known_proba(x), grown.known_proba(x))

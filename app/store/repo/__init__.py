@@ -96,6 +96,7 @@ from app.store.repo.versions import (
     get_version,
     list_versions,
     store_bundle,
+    store_bundles,
     stored_model_figures,
 )
 
@@ -179,5 +180,6 @@ __all__ = [
     "get_version",
     "list_versions",
     "store_bundle",
+    "store_bundles",
     "stored_model_figures",
 ]

@@ -87,6 +87,8 @@ def stored_model_figures(session: Session) -> tuple[int, int]:
 # reader, which releases the GIL (0.1 s). The statement per slice this replaced cost the
 # square of the size on SQLite, which reads the whole value for each slice: 11 s.
 BUNDLE_READ_BYTES = 256 * 1024
+_KEYS_PER_QUERY = 500  # bundle keys looked up in one query (SQLite allows 32,766 variables)
+_ROWS_PER_FLUSH = 32  # bundle parts (up to 2 MiB each) inserted in one flush
 _SLICES_PER_FETCH = 2  # slices a server-side cursor hands over per round trip
 
 
@@ -156,6 +158,24 @@ def _read_blob(conn: Connection, sha256: str) -> tuple[int, bytes] | None:
             return size, blob.read()
     except sqlite3.Error:  # gone since the lookup, or not a blob: the value itself decides
         return _read_whole(conn, sha256)
+
+
+def store_bundles(session: Session, blobs: dict[str, bytes]) -> None:
+    """``store_bundle`` of each ``{SHA-256: data}``, asking for the stored keys in batches:
+    a version at 10,000 objects has ~1,000 parts, nearly all of them stored already, and a
+    query each took a quarter of a second of every enrolment."""
+    shas = list(blobs)
+    stored: set[str] = set()
+    for lo in range(0, len(shas), _KEYS_PER_QUERY):
+        batch = shas[lo : lo + _KEYS_PER_QUERY]
+        stored.update(session.scalars(select(Bundle.sha256).where(Bundle.sha256.in_(batch))))
+    new = [sha for sha in shas if sha not in stored]
+    for lo in range(0, len(new), _ROWS_PER_FLUSH):  # inserts of bounded size
+        session.add_all(
+            Bundle(sha256=sha, size=len(blobs[sha]), data=blobs[sha])
+            for sha in new[lo : lo + _ROWS_PER_FLUSH]
+        )
+        session.flush()
 
 
 def store_bundle(session: Session, data: bytes, sha256: str | None = None) -> str:
