@@ -19,8 +19,10 @@ wrong answer.
 
 from __future__ import annotations
 
+import itertools
 import threading
 import weakref
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -35,18 +37,24 @@ _lock = threading.Lock()
 def with_room(*parts: np.ndarray, spare: float = SPARE) -> np.ndarray:
     """``np.concatenate(parts)`` (arrays of the same row shape and type), read-only, with
     room for ``spare`` x its rows more behind it, for ``appended``."""
-    first = np.asarray(parts[0])
-    n = sum(len(p) for p in parts)
-    buffer = np.empty((n + int(spare * n) + 1, *first.shape[1:]), first.dtype)
+    return gathered(iter(parts), sum(len(p) for p in parts), spare)
+
+
+def gathered(parts: Iterator[np.ndarray], max_rows: int, spare: float = SPARE) -> np.ndarray:
+    """``with_room`` of parts made one at a time, each copied before the next is asked for
+    (so that it can be freed: a store's blocks, decoded one by one, are not all held beside
+    the array they make up); ``max_rows`` bounds their rows."""
+    first = np.asarray(next(parts))
+    buffer = np.empty((max_rows + int(spare * max_rows) + 1, *first.shape[1:]), first.dtype)
     at = 0
-    for part in parts:
+    for part in itertools.chain([first], parts):
         buffer[at : at + len(part)] = part
         at += len(part)
     buffer.flags.writeable = False
     with _lock:
-        _rooms[id(buffer)] = n
+        _rooms[id(buffer)] = at
     weakref.finalize(buffer, _rooms.pop, id(buffer), None)
-    return buffer[:n]
+    return buffer[:at]
 
 
 def appended(rows: np.ndarray, *parts: np.ndarray, spare: float = SPARE) -> np.ndarray:

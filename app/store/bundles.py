@@ -7,6 +7,7 @@ serves one version loads the next by reading its head and only the parts it lack
 
 from __future__ import annotations
 
+import itertools
 import threading
 from collections import OrderedDict
 
@@ -15,7 +16,7 @@ from sqlalchemy.orm import Session
 
 from app.framework import bundle
 from app.framework.errors import BundleError
-from app.framework.growing import with_room
+from app.framework.growing import appended, gathered
 from app.framework.recognizer import TactileRecognizer
 from app.store import repo
 
@@ -51,20 +52,48 @@ class PartCache:
 
     def joined(self, session: Session, shas: list[str]) -> np.ndarray:
         """The array stored as the row blocks ``shas``, read-only; the blocks are held
-        afterwards as views of it, so that the process holds its rows once."""
+        afterwards as views of it, so that the process holds its rows once. An array that
+        begins with the rows of one held already (a promotion appended to it) is that
+        array with the new rows appended behind it (``growing.appended``), so only they are
+        read and held anew; any other is read block by block into one with room."""
         array = self._joined.get(tuple(shas))
         if array is not None:
             return array
-        blocks = [self.get(session, sha) for sha in shas]
-        # with room behind its rows: a promotion appends rows to such arrays (a forest's, the
-        # novelty reference), and the room spares it a copy of the whole array
-        array = with_room(*blocks)
-        at = 0
-        for sha, block in zip(shas, blocks, strict=True):
-            self._arrays[sha] = array[at : at + len(block)]
-            at += len(block)
+        array = self._extended(session, shas)
+        if array is None:  # every block but the last has the rows of the first
+            first = self.get(session, shas[0])
+            rest = (self._block(session, sha) for sha in shas[1:])
+            array = gathered(itertools.chain([first], rest), len(first) * len(shas))
+        bundle.freeze(array)
+        rows = len(self._arrays[shas[0]])  # a block's rows (the last one's: the rest)
+        for i, sha in enumerate(shas):
+            self._arrays[sha] = array[i * rows : (i + 1) * rows]
         self._joined[tuple(shas)] = array
         return array
+
+    def _block(self, session: Session, sha256: str) -> np.ndarray:
+        """A block held, or read and decoded without being held."""
+        held = self._arrays.get(sha256)
+        return held if held is not None else read_part(session, sha256)
+
+    def _extended(self, session: Session, shas: list[str]) -> np.ndarray | None:
+        """A held array that ``shas`` extend, with their new rows appended; None if none.
+        The blocks of a promoted array are those of the array before it but for the last
+        one, whose rows the new last-but-more blocks begin with (checked)."""
+        for key, held in self._joined.items():
+            last = self._arrays.get(key[-1])
+            if last is None or len(key) > len(shas) or list(key[:-1]) != shas[: len(key) - 1]:
+                continue
+            start = len(held) - len(last)  # where the held array's last block begins
+            tail = np.concatenate([self._block(session, sha) for sha in shas[len(key) - 1 :]])
+            if tail.shape[1:] != held.shape[1:] or tail.dtype != held.dtype:
+                continue
+            if len(tail) < len(held) - start or not np.array_equal(
+                tail[: len(held) - start], held[start:]
+            ):
+                continue
+            return appended(held, tail[len(held) - start :])
+        return None
 
     def keep_only(self, shas: set[str]) -> None:
         self._arrays = {sha: a for sha, a in self._arrays.items() if sha in shas}

@@ -151,7 +151,7 @@ def test_a_promotion_writes_only_the_blocks_it_appended(store, base_model, monke
         v1, v2 = bundles.store_model(s, first), bundles.store_model(s, second)
     cache = bundles.PartCache()
     with sessions() as s:
-        bundles.load_model(s, v1, cache)
+        old = bundles.load_model(s, v1, cache)
     with sessions.begin() as s:  # v1's parts damaged: v2 must not read them again
         s.execute(update(Bundle).where(Bundle.sha256.in_(first[1])).values(data=b"damaged"))
     with sessions() as s:
@@ -161,6 +161,11 @@ def test_a_promotion_writes_only_the_blocks_it_appended(store, base_model, monke
         blocks = after["known/reference"]
         reference = loaded.known_.cues_model.distances.reference
         assert all(np.shares_memory(cache.get(s, sha), reference) for sha in blocks)
+        # the new rows were appended behind the arrays v1's blocks were joined into
+        for name in ("distances", "forest"):
+            a, b = (getattr(m.known_.cues_model, name) for m in (loaded, old))
+            a, b = (x.reference if name == "distances" else x.threshold for x in (a, b))
+            assert np.shares_memory(a, b) and len(a) > len(b), name
 
 
 def test_a_worker_that_loaded_a_version_stores_the_next_without_encoding_its_parts(
