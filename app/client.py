@@ -309,7 +309,7 @@ class TactileClient:
         """A job, after up to ``wait`` seconds (at most 20) for it to succeed or fail."""
         needed = wait + self.timeout  # the answer may take ``wait`` seconds to come
         read = self.http.timeout.read
-        extra = {"timeout": needed} if read is not None and read < needed else {}
+        extra = {"timeout": needed} if wait > 0 and read is not None and read < needed else {}
         return self._send("GET", f"/v1/jobs/{int(job_id)}", params={"wait": wait}, **extra).json()
 
     # ----------------------------------------------------------------- helpers
