@@ -311,7 +311,10 @@ class BestRecognizer(TactileRecognizer):
 
         # Sect. VI-B: probe models fitted without validation objects and held-out trials, pooled.
         bar = tqdm(
-            total=int(self.tuning_rounds) + 1, desc="best: probes, model", disable=not progress
+            total=int(self.tuning_rounds) + 1,
+            # a procedure model's dataset is named "<dataset>/<procedure>": its bar says so
+            desc=f"best on {dataset.name}: probes, model",
+            disable=not progress,
         )
         known_scores, val_scores, val_objects = [], [], 0
         for r in range(int(self.tuning_rounds)):
