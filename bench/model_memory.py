@@ -7,7 +7,8 @@ this fresh process as the model holder loads it (``bundles.load_model`` through 
 ``DIR`` is a service's data folder (``tactile-zsl serve --data-dir``; ``bench.scale_service
 --keep`` keeps one). Printed: resident memory after the load and after the recognition,
 the peak (Linux's ``VmRSS`` / ``VmHWM``), the bytes of the model's arrays (what its bundle
-holds, decoded) and of its forests' walk records (derived when a forest is loaded).
+holds, decoded), of its forests' node records among them, and of the leaf redirects its
+forests make when loaded.
 """
 
 from __future__ import annotations
@@ -69,12 +70,15 @@ def main(argv: list[str] | None = None) -> None:
     answered = memory_gb()
     _, arrays = bundle._contents(model)
     array_mb = sum(a.nbytes for a in arrays.values() if isinstance(a, np.ndarray)) / 1e6
-    records_mb = sum(f.walk_arrays()[0].nbytes for f in forests(model)) / 1e6
+    found = list(forests(model))
+    records_mb = sum(f.nodes.nbytes for f in found) / 1e6
+    redirects_mb = sum(f.walk_arrays()[1].nbytes for f in found) / 1e6
     print(f"model version {version.version} ({len(model.registry.known_names)} known classes)")
     rss, peak = answered["VmRSS"], answered["VmHWM"]
     print(f"load: {load_s:.1f} s; resident {loaded['VmRSS']:.2f} GB after it, {rss:.2f} GB")
     print(f"after one recognition, peak {peak:.2f} GB")
-    print(f"model arrays {array_mb:.3f} MB, forest walk records {records_mb:.3f} MB")
+    print(f"model arrays {array_mb:.3f} MB, of which forest node records {records_mb:.3f} MB")
+    print(f"forest leaf redirects (made at load) {redirects_mb:.3f} MB")
 
 
 if __name__ == "__main__":

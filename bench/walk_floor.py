@@ -57,7 +57,7 @@ def measure(n: int, repeats: int, rounds: int) -> dict:
         figures["walk_us"].append(_median_us(f.predict_proba, z))
     return {
         "objects": n,
-        "forest_nodes": len(f.feature),
+        "forest_nodes": f.n_nodes,
         **{k: float(np.median(v)) for k, v in figures.items()},
     }
 

@@ -52,7 +52,11 @@ RAW_TRIALS_FORMAT_VERSION = 2
 # arrays stored in row blocks is written as version 3: a build older than them would serve
 # the forest without its grown leaves, or not find the blocks, instead of refusing it
 GROWN_FORMAT_VERSION = 3
-READS = (FORMAT_VERSION, RAW_TRIALS_FORMAT_VERSION, GROWN_FORMAT_VERSION)
+# a bundle holding a forest as one record per node (``app.methods.forest``, 2026-11-26)
+# is written as version 4: a build older than the records would not find the forest's
+# node arrays
+RECORDS_FORMAT_VERSION = 4
+READS = (FORMAT_VERSION, RAW_TRIALS_FORMAT_VERSION, GROWN_FORMAT_VERSION, RECORDS_FORMAT_VERSION)
 _MANIFEST = "manifest.json"
 _ARRAYS = "arrays.npz"
 _REG = "registry/"  # prefix of the registry's arrays inside arrays.npz
@@ -181,7 +185,7 @@ class PartEncoder:
         self.views, self.joined = views, joined
         manifest["parts"] = refs
         if any(isinstance(ref, list) for ref in refs.values()):
-            manifest["format_version"] = GROWN_FORMAT_VERSION
+            manifest["format_version"] = max(manifest["format_version"], GROWN_FORMAT_VERSION)
         return _zip(manifest, arrays), parts
 
 
@@ -288,6 +292,8 @@ def _contents(model: TactileRecognizer) -> tuple[dict[str, Any], dict[str, np.nd
             all_arrays[_FEATURIZER + name] = value
     if any(name.endswith("redirect_from") for name in all_arrays):
         manifest["format_version"] = GROWN_FORMAT_VERSION
+    if any(name.endswith("forest/nodes") for name in all_arrays):
+        manifest["format_version"] = RECORDS_FORMAT_VERSION
     all_arrays[_REG + "known_attributes"] = reg.known_attributes
     all_arrays[_REG + "novel_attributes"] = reg.novel_attributes
     for i, (_name, samples) in enumerate(reg.novel_samples.items()):

@@ -379,7 +379,7 @@ class BestRecognizer(TactileRecognizer):
             "nd_known_kept": self.novelty_tuning.known_kept_at_threshold,
             "nd_val_novel": self.novelty_tuning.val_novel_at_threshold,
             "nd_val_auroc": self.novelty_tuning.auroc,
-            "forest_nodes": int(len(self.known_.cues_model.forest.feature)),
+            "forest_nodes": self.known_.cues_model.forest.n_nodes,
             "novelty_tuning_rounds": len(known_scores),
             "timings": timings,
             "params": self.get_params(),

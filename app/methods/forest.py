@@ -1,13 +1,15 @@
 """A fitted scikit-learn tree ensemble as plain int/float arrays, with its own inference.
 
 Model bundles hold only JSON and numeric arrays (no pickle), so a fitted
-``ExtraTreesClassifier`` is flattened into concatenated node arrays (split
-feature, threshold, children) and its leaves' class distributions in compressed
-sparse rows. Inference is a small compiled walk (numba) over those arrays, so
-predictions do not depend on scikit-learn's private estimator layout and are
-bit-identical after a bundle round-trip. Internal nodes' class counts are not kept
-(inference never reads them), which keeps a 300-tree forest on PHAC-2 at a few MB
-instead of hundreds.
+``ExtraTreesClassifier`` is flattened into one record per node, the trees one after
+another (``_packed``: split feature, float32 threshold, children; 16 bytes), and its
+leaves' class distributions in compressed sparse rows. Inference is a small compiled
+walk (numba) over those records, so predictions do not depend on scikit-learn's private
+estimator layout and are bit-identical after a bundle round-trip. The records are what
+is stored and what the walk reads: a process holds each node once (bundles made before
+2026-11-26 stored five arrays per node, 24 bytes, and the walk packed a copy of them at
+load). Internal nodes' class counts are not kept (inference never reads them), which
+keeps a 300-tree forest on PHAC-2 at a few MB instead of hundreds.
 
 The walk takes a block of samples through one tree at a time: the tree's nodes
 stay in cache, and the block's paths are independent chains of loads that the
@@ -26,17 +28,8 @@ from numba import njit
 
 from app.framework.growing import appended, with_room
 
-_KEYS = (
-    "feature",
-    "threshold",
-    "left",
-    "right",
-    "roots",
-    "leaf_of_node",
-    "leaf_ptr",
-    "leaf_class",
-    "leaf_value",
-)
+_KEYS = ("nodes", "roots", "leaf_ptr", "leaf_class", "leaf_value")
+#: the node arrays of bundles made before the records (``_packed`` makes records of them)
 _NODE_KEYS = ("feature", "threshold", "left", "right", "leaf_of_node")
 #: optional state: leaf nodes a promotion replaced, and the nodes appended in their place
 #: (``with_samples``); a forest never grown so has none
@@ -55,23 +48,23 @@ class FlatForest:
         n_classes: int,
         n_features: int,
         check: bool = True,
-        records: _WalkRecords | None = None,
+        redirects: _Redirects | None = None,
     ) -> None:
-        """``check``: validate the arrays (a stored forest's); False only for arrays this
-        module has just built (a promotion's grown forest: the check reads every node).
-        ``records``: the walk's node records of these arrays where the caller has them (a
-        promotion extends its forest's); otherwise they are packed here, so that loading a
-        model, not the first answer or enrolment after it, pays for that (seconds at
-        10,000 objects)."""
+        """``arrays``: the state (``get_state``); node arrays of a bundle made before the
+        records are packed into records here. ``check``: validate the arrays (a stored
+        forest's); False only for arrays this module has just built (a promotion's grown
+        forest: the check reads every node). ``redirects``: where the walk goes on from a
+        leaf a promotion replaced, where the caller has them (a promotion extends its
+        forest's); otherwise made here from ``redirect_from`` / ``redirect_to``."""
+        if "nodes" not in arrays and all(k in arrays for k in _NODE_KEYS):
+            arrays = {**arrays, "nodes": _packed(arrays)}
         missing = [k for k in _KEYS if k not in arrays]
         if missing:
             raise ValueError(f"forest state lacks {missing}")
-        self.feature = np.asarray(arrays["feature"], np.int32)
-        self.threshold = np.asarray(arrays["threshold"], np.float64)
-        self.left = np.asarray(arrays["left"], np.int32)
-        self.right = np.asarray(arrays["right"], np.int32)
+        self.nodes = np.asarray(arrays["nodes"], np.int32)
+        if self.nodes.ndim != 2 or self.nodes.shape[1] != 4:
+            raise ValueError(f"forest node records must be (nodes, 4), not {self.nodes.shape}")
         self.roots = np.asarray(arrays["roots"], np.int32)
-        self.leaf_of_node = np.asarray(arrays["leaf_of_node"], np.int32)
         self.leaf_ptr = np.asarray(arrays["leaf_ptr"], np.int64)
         self.leaf_class = np.asarray(arrays["leaf_class"], np.int32)
         self.leaf_value = np.asarray(arrays["leaf_value"], np.float64)
@@ -87,30 +80,37 @@ class FlatForest:
         self.n_features = int(n_features)
         if check:
             self._check()
-        if records is None:
-            records = _WalkRecords({k: getattr(self, k) for k in _NODE_KEYS})
-            records.redirect(self.redirect_from, self.redirect_to)
-        self._records = records
-        self._nodes = records.first(len(self.feature))
+        if redirects is None:
+            redirects = _Redirects(len(self.leaf_count))
+            redirects.point(self.nodes[self.redirect_from, 2], self.redirect_to)
+        self._redirects = redirects
+        self._next = redirects.first(len(self.leaf_count))
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.nodes)
+
+    def leaf_index(self, leaf_nodes: np.ndarray) -> np.ndarray:
+        """The leaf ordinals (rows of ``leaf_count``, of ``leaf_ptr``) of leaf nodes."""
+        return self.nodes[leaf_nodes, 2]
 
     def _check(self) -> None:
-        n = len(self.feature)
-        if not (
-            len(self.threshold) == len(self.left) == len(self.right) == len(self.leaf_of_node) == n
-        ):
-            raise ValueError("forest node arrays differ in length")
+        n = len(self.nodes)
+        feature, left, right = self.nodes[:, 0], self.nodes[:, 2], self.nodes[:, 3]
         if len(self.roots) == 0 or self.roots.min() < 0 or self.roots.max() >= n:
             raise ValueError("forest roots are out of range")
-        internal = self.feature >= 0
+        internal = feature >= 0
         if internal.any():
-            kids = np.concatenate([self.left[internal], self.right[internal]])
-            if kids.min() < 0 or kids.max() >= n or self.feature[internal].max() >= self.n_features:
+            kids = np.concatenate([left[internal], right[internal]])
+            if kids.min() < 0 or kids.max() >= n or feature[internal].max() >= self.n_features:
                 raise ValueError("forest children or split features are out of range")
             # children come after their parent (as scikit-learn numbers them): no cycles,
             # so every walk ends at a leaf
             parents = np.flatnonzero(internal)
-            if (self.left[parents] <= parents).any() or (self.right[parents] <= parents).any():
+            if (left[parents] <= parents).any() or (right[parents] <= parents).any():
                 raise ValueError("forest children must come after their parent node")
+        if (feature[~internal] != -1).any() or (right[~internal] != -1).any():
+            raise ValueError("forest leaf records must have feature and right child -1")
         moved, to = self.redirect_from, self.redirect_to
         if len(moved) != len(to) or (
             len(moved)
@@ -123,7 +123,7 @@ class FlatForest:
             )
         ):
             raise ValueError("forest redirected leaves are inconsistent")
-        leaves = self.leaf_of_node[~internal]
+        leaves = left[~internal]
         if leaves.min() < 0 or leaves.max() + 1 >= len(self.leaf_ptr):
             raise ValueError("forest leaves are out of range")
         if (
@@ -258,7 +258,7 @@ class FlatForest:
             raise ValueError(f"sample classes must lie in 0 … {n_classes - 1}")
         x = self._inputs(x)
         new_leaf = self.apply(x)  # (N, trees) leaf nodes
-        leaves = self.leaf_of_node[np.unique(new_leaf)]
+        leaves = self.leaf_index(np.unique(new_leaf))
         near_rows = np.flatnonzero(np.isin(seen_y, self.leaf_class[self._entries(leaves)]))
         seen_x, seen_y = self._inputs(np.asarray(seen_x[near_rows])), seen_y[near_rows]
         seen_leaf = self.apply(seen_x)
@@ -308,10 +308,10 @@ class FlatForest:
         return out
 
     def walk_arrays(self) -> tuple[np.ndarray, ...]:
-        """What the compiled walk takes, for a caller that walks the trees itself: the packed
-        node records (feature, float32 threshold bits, left, right),
+        """What the compiled walk takes, for a caller that walks the trees itself: the node
+        records (``_packed``), where a walk goes on from each leaf (``_Redirects``),
         ``roots``, ``leaf_ptr``, ``leaf_class``, ``leaf_value``. Read, never written."""
-        return self._nodes, self.roots, self.leaf_ptr, self.leaf_class, self.leaf_value
+        return self.nodes, self._next, self.roots, self.leaf_ptr, self.leaf_class, self.leaf_value
 
     def predict_proba(self, x: np.ndarray) -> np.ndarray:
         """(N, K) mean over trees of the reached leaf's class distribution."""
@@ -327,8 +327,9 @@ class FlatForest:
         none = np.zeros((0, 0), np.int32)
         _walk(
             x,
-            self._nodes,
-            self._nodes.view(np.float32),
+            self.nodes,
+            self.nodes.view(np.float32),
+            self._next,
             self.roots,
             self.leaf_ptr,
             self.leaf_class,
@@ -380,14 +381,8 @@ class _ForestArrays:
         is_leaf = tree.children_left < 0
         leaves = int(is_leaf.sum())
         p = self.parts
-        p["feature"].append(np.where(is_leaf, -1, tree.feature).astype(np.int32))
-        p["threshold"].append(tree.threshold.astype(np.float64))
-        p["left"].append(np.where(is_leaf, -1, tree.children_left + off).astype(np.int32))
-        p["right"].append(np.where(is_leaf, -1, tree.children_right + off).astype(np.int32))
+        p["nodes"].append(_tree_records(tree, off, self.n_leaves))
         p["roots"].append(np.asarray([off], np.int32))
-        ids = np.full(n, -1, np.int32)
-        ids[is_leaf] = self.n_leaves + np.arange(leaves, dtype=np.int32)
-        p["leaf_of_node"].append(ids)
         p["leaf_class"].append(np.asarray(cols, np.int32))
         p["leaf_value"].append(np.asarray(values, np.float64))
         p[_COUNTS].append(np.maximum(np.asarray(leaf_count), 1).astype(np.int32))
@@ -404,6 +399,23 @@ class _ForestArrays:
         return out
 
 
+def _tree_records(tree: Any, first_node: int, first_leaf: int) -> np.ndarray:
+    """The records (``_packed``) of a scikit-learn ``tree_`` whose nodes are numbered from
+    ``first_node`` and whose leaves from ``first_leaf``."""
+    is_leaf = tree.children_left < 0
+    leaf_ids = np.full(tree.node_count, -1, np.int64)
+    leaf_ids[is_leaf] = first_leaf + np.arange(int(is_leaf.sum()))
+    return _packed(
+        {
+            "feature": np.where(is_leaf, -1, tree.feature),
+            "threshold": tree.threshold,
+            "left": np.where(is_leaf, -1, tree.children_left + first_node),
+            "right": np.where(is_leaf, -1, tree.children_right + first_node),
+            "leaf_of_node": leaf_ids,
+        }
+    )
+
+
 class _Grown:
     """The arrays of a forest whose reached leaves ``with_samples`` grew, append-only: the
     forest's own arrays are copied unchanged (a store keeps their blocks as they were, and
@@ -414,8 +426,8 @@ class _Grown:
 
     def __init__(self, forest: FlatForest) -> None:
         self.forest = forest
-        self.n_nodes, self.n_leaves = len(forest.feature), len(forest.leaf_count)
-        self.nodes: dict[str, list[np.ndarray]] = {k: [] for k in _NODE_KEYS}
+        self.n_nodes, self.n_leaves = forest.n_nodes, len(forest.leaf_count)
+        self.nodes: list[np.ndarray] = []  # the new nodes' records
         self.moved: list[tuple[int, int]] = []  # (reached leaf node, the node replacing it)
         # the new leaves' entries (leaf, class, samples) and sample counts
         self.rows: list[np.ndarray] = []
@@ -427,22 +439,13 @@ class _Grown:
         """Leaf ``node`` replaced by fitted tree ``local``."""
         sub = local.tree_
         is_leaf = sub.children_left < 0
-        glob = self.n_nodes + np.arange(sub.node_count)
-        leaf_ids = np.full(sub.node_count, -1, np.int64)
-        leaf_ids[is_leaf] = self.n_leaves + np.arange(int(is_leaf.sum()))
         value = sub.value[is_leaf, 0, :]
         lr, lc = np.nonzero(value)
         share = value[lr, lc] / value[lr].sum(axis=1)
         n_here = sub.n_node_samples[is_leaf]
         self._append(
             node,
-            (
-                np.where(is_leaf, -1, sub.feature),
-                sub.threshold,
-                np.where(is_leaf, -1, glob[np.maximum(sub.children_left, 0)]),
-                np.where(is_leaf, -1, glob[np.maximum(sub.children_right, 0)]),
-                leaf_ids,
-            ),
+            _tree_records(sub, self.n_nodes, self.n_leaves),
             self.n_leaves + lr,
             local.classes_[lc],
             share * n_here[lr],
@@ -453,33 +456,30 @@ class _Grown:
         """Leaf ``node`` replaced by a leaf that has also counted ``samples`` of ``classes``:
         its entries again, the old ones as value x samples, then the new samples."""
         f = self.forest
-        leaf = int(f.leaf_of_node[node])
+        leaf = int(f.nodes[node, 2])
         old = slice(f.leaf_ptr[leaf], f.leaf_ptr[leaf + 1])
         cols = np.concatenate([f.leaf_class[old], classes])
         self._append(
             node,
-            ([-1], [f.threshold[node]], [-1], [-1], [self.n_leaves]),
+            np.asarray([[-1, f.nodes[node, 1], self.n_leaves, -1]], np.int32),
             np.full(len(cols), self.n_leaves),
             cols,
             np.concatenate([f.leaf_value[old] * f.leaf_count[leaf], samples.astype(np.float64)]),
             [int(f.leaf_count[leaf]) + int(samples.sum())],
         )
 
-    def _append(self, node, nodes, rows, cols, mass, counts) -> None:
+    def _append(self, node, records, rows, cols, mass, counts) -> None:
         self.moved.append((node, self.n_nodes))
-        for key, part in zip(_NODE_KEYS, nodes, strict=True):
-            self.nodes[key].append(np.asarray(part).astype(getattr(self.forest, key).dtype))
+        self.nodes.append(records)
         self.rows.append(rows)
         self.cols.append(cols)
         self.mass.append(mass)
         self.counts.append(np.asarray(counts, np.int64))
-        self.n_nodes += len(nodes[0])
+        self.n_nodes += len(records)
         self.n_leaves += len(counts)
 
     def done(self, n_classes: int) -> FlatForest:
         f = self.forest
-        n_old_nodes = len(f.feature)
-        nodes = {k: appended(getattr(f, k), *self.nodes[k]) for k in _NODE_KEYS}
         lr, lc, lv = _leaf_distributions(
             np.concatenate([np.zeros(0, np.int64), *self.rows]),
             np.concatenate([np.zeros(0, np.int64), *self.cols]),
@@ -490,7 +490,7 @@ class _Grown:
         sizes = np.bincount(lr - n_old, minlength=self.n_leaves - n_old)
         moved = np.asarray(self.moved, np.int32).reshape(-1, 2)
         arrays = {
-            **nodes,
+            "nodes": appended(f.nodes, *self.nodes),
             "roots": f.roots,
             "leaf_ptr": appended(f.leaf_ptr, f.leaf_ptr[-1] + np.cumsum(sizes)),
             "leaf_class": appended(f.leaf_class, lc),
@@ -499,80 +499,70 @@ class _Grown:
             _FROM: appended(f.redirect_from, moved[:, 0]),
             _TO: appended(f.redirect_to, moved[:, 1]),
         }
-        records = f._records.grown(n_old_nodes, nodes, moved)
-        return FlatForest(arrays, n_classes, f.n_features, check=False, records=records)
+        redirects = f._redirects.grown(n_old, self.n_leaves, f.n_nodes)
+        redirects.point(f.leaf_index(moved[:, 0]), moved[:, 1])
+        return FlatForest(arrays, n_classes, f.n_features, check=False, redirects=redirects)
 
 
-class _WalkRecords:
-    """The walk's node records (``_packed``) of a forest and of the forests promotions grew
-    from it, in one buffer with spare rows. A promotion writes its new nodes' records into
-    the spare rows and points each leaf it replaced at the replacement, in place (the
-    records are the forests' own, derived from their arrays and never stored). A forest
-    walks the first rows, as many as it has nodes, and follows a replaced leaf only to a
-    node among them, so it sees no later promotion's redirects: the forest before a
-    promotion answers as it did while and after the promotion is built."""
+class _Redirects:
+    """Where a walk goes on from each leaf of a forest and of the forests promotions grew
+    from it: the node that replaced the leaf, or -1 (one int32 per leaf, made from
+    ``redirect_from`` / ``redirect_to``, never stored), in one buffer with spare rows. A
+    promotion points the leaves it replaced at their replacements in place, and a forest
+    follows a leaf's replacement only to a node among its own, so it sees no later
+    promotion's: the forest before a promotion answers as it did while and after the
+    promotion is built, and the node records themselves are never written."""
 
-    def __init__(self, nodes: dict[str, np.ndarray], first: np.ndarray | None = None) -> None:
-        """The records of node arrays ``nodes``, after the records ``first`` if given."""
-        n_first = 0 if first is None else len(first)
-        n = n_first + len(nodes["feature"])
-        self._buffer = np.empty((n + n // 4 + 1, 4), np.int32)
+    def __init__(self, n_leaves: int, first: np.ndarray | None = None) -> None:
+        """For ``n_leaves`` leaves, the first as ``first`` says if given, the rest -1."""
+        self._buffer = np.full(n_leaves + n_leaves // 4 + 1, -1, np.int32)
         if first is not None:
-            self._buffer[:n_first] = first
-        _packed(nodes, slice(None), out=self._buffer[n_first:n])
-        self._filled = n
+            self._buffer[: len(first)] = first
+        self._filled = n_leaves
         self._lock = threading.Lock()
 
-    def first(self, n: int) -> np.ndarray:
-        """The records of a forest of ``n`` nodes, read-only."""
-        view = self._buffer[:n]
+    def first(self, n_leaves: int) -> np.ndarray:
+        """Those of a forest of ``n_leaves`` leaves, read-only."""
+        view = self._buffer[:n_leaves]
         view.flags.writeable = False
         return view
 
-    def redirect(self, leaf_nodes: np.ndarray, to: np.ndarray) -> None:
-        self._buffer[leaf_nodes, 3] = to  # 4-byte stores: a walk reads the old or the new
+    def point(self, leaves: np.ndarray, to: np.ndarray) -> None:
+        self._buffer[leaves] = to  # 4-byte stores: a walk reads the old or the new
 
-    def grown(self, n_old: int, nodes: dict[str, np.ndarray], moved: np.ndarray):
-        """The records of the first ``n_old`` nodes, then those of ``nodes[...][n_old:]``,
-        with leaf node ``moved[:, 0]`` redirected to node ``moved[:, 1]``: these records
-        when no forest has grown from those first nodes yet and the spare rows suffice,
-        else a copy."""
-        new = {k: v[n_old:] for k, v in nodes.items()}
-        n = n_old + len(new["feature"])
+    def grown(self, n_old: int, n_leaves: int, n_old_nodes: int) -> _Redirects:
+        """For a forest grown from one of ``n_old`` leaves and ``n_old_nodes`` nodes to
+        ``n_leaves`` leaves: these, when no forest has grown from those first leaves yet
+        and the spare rows suffice, else a copy of the first ``n_old``."""
         with self._lock:
-            in_place = self._filled == n_old and n <= len(self._buffer)
+            in_place = self._filled == n_old and n_leaves <= len(self._buffer)
             if in_place:
-                self._filled = n  # a second promotion of the same forest copies
+                self._filled = n_leaves  # a second promotion of the same forest copies
         if in_place:
-            out = self
-            _packed(new, slice(None), out=self._buffer[n_old:n])
-        else:
-            out = _WalkRecords(new, first=self._buffer[:n_old])
-            # drop redirects to nodes past n_old: a sibling promotion's, which these are not
-            right = out._buffer[:n_old, 3]
-            right[right >= n_old] = -1
-        out.redirect(moved[:, 0], moved[:, 1])
-        return out
+            return self
+        first = self._buffer[:n_old].copy()
+        first[first >= n_old_nodes] = -1  # a sibling promotion's, which these are not
+        return _Redirects(n_leaves, first)
 
 
-def _packed(nodes: dict[str, np.ndarray], at: Any, out: np.ndarray | None = None) -> np.ndarray:
-    """The walk's node records of ``nodes[...][at]``: one 16-byte record per node, so a step
-    touches one cache line (split feature, float32 threshold bits, left and right child; a
-    leaf, feature -1, keeps its leaf index where the left child would be, and where the
-    right child would be -1 or, once a promotion replaced it, its replacement: the caller
-    sets that from ``redirect_from`` / ``redirect_to``). For a float32 x,
-    x <= t (float64) exactly when x <= the largest float32 <= t, so the walk compares in
-    float32 (half the memory traffic) with the same outcome."""
-    feature, threshold = nodes["feature"][at], nodes["threshold"][at]
+def _packed(nodes: dict[str, np.ndarray]) -> np.ndarray:
+    """The node records of node arrays (``feature``, float64 ``threshold``, ``left``,
+    ``right``, ``leaf_of_node``; -1 where a node has none): one 16-byte record per node,
+    so a step touches one cache line (split feature, float32 threshold bits, left and
+    right child; a leaf, feature -1, keeps its leaf index where the left child would be,
+    and -1 as its right child). For a float32 x, x <= t (float64) exactly when x <= the
+    largest float32 <= t, so the walk compares in float32 (half the memory traffic) with
+    the same outcome."""
+    feature, threshold = np.asarray(nodes["feature"]), np.asarray(nodes["threshold"])
     t32 = threshold.astype(np.float32)
     above = t32.astype(np.float64) > threshold
     t32[above] = np.nextafter(t32[above], np.float32(-np.inf))
     leaf = feature < 0
-    out = np.empty((len(feature), 4), np.int32) if out is None else out
+    out = np.empty((len(feature), 4), np.int32)
     out[:, 0] = feature
     out[:, 1] = t32.view(np.int32)
-    out[:, 2] = np.where(leaf, nodes["leaf_of_node"][at], nodes["left"][at])
-    out[:, 3] = nodes["right"][at]
+    out[:, 2] = np.where(leaf, nodes["leaf_of_node"], nodes["left"])
+    out[:, 3] = np.where(leaf, -1, nodes["right"])
     return out
 
 
@@ -615,9 +605,10 @@ _BLOCK = 8  # samples taken through a tree together (independent load chains)
 
 
 @njit(cache=True, nogil=True)
-def _descend(x, rows, nodes, thresholds, at, n):
+def _descend(x, rows, nodes, thresholds, after, at, n):
     """Chains k < n, each sample ``x[rows[k]]`` from node ``at[k]``, down to their leaf
-    nodes (into ``at``), a step of every chain at a time: independent load chains."""
+    nodes (into ``at``), a step of every chain at a time: independent load chains.
+    ``after``: per leaf, the node a promotion replaced it with, or -1."""
     descending = True
     while descending:
         descending = False
@@ -627,10 +618,10 @@ def _descend(x, rows, nodes, thresholds, at, n):
             if f >= 0:
                 at[k] = nodes[node, 2 + (x[rows[k], f] > thresholds[node, 1])]
                 descending = True
-            elif 0 <= nodes[node, 3] < nodes.shape[0]:
+            elif 0 <= after[nodes[node, 2]] < nodes.shape[0]:
                 # a leaf a promotion of this forest replaced: on from its replacement (a
                 # later promotion's, past this forest's nodes, is not this forest's)
-                at[k] = nodes[node, 3]
+                at[k] = after[nodes[node, 2]]
                 descending = True
 
 
@@ -646,7 +637,9 @@ def _reached(i, t, node, nodes, leaf_ptr, leaf_class, leaf_value, leaves, proba)
 
 
 @njit(cache=True, nogil=True)
-def walk_trees(x, i, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, leaves, proba):
+def walk_trees(
+    x, i, nodes, thresholds, after, roots, leaf_ptr, leaf_class, leaf_value, leaves, proba
+):
     """``_walk`` of sample i alone: _BLOCK trees taken down together (a single sample has
     one path per tree, so a block of samples gives it no independent chains), their leaves
     then added in tree order, so the sums have the same bits as ``_walk``'s."""
@@ -655,13 +648,13 @@ def walk_trees(x, i, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value,
     for lo in range(0, roots.shape[0], _BLOCK):
         hi = min(lo + _BLOCK, roots.shape[0])
         at[: hi - lo] = roots[lo:hi]
-        _descend(x, rows, nodes, thresholds, at, hi - lo)
+        _descend(x, rows, nodes, thresholds, after, at, hi - lo)
         for k in range(hi - lo):
             _reached(i, lo + k, at[k], nodes, leaf_ptr, leaf_class, leaf_value, leaves, proba)
 
 
 @njit(cache=True, nogil=True)
-def _walk(x, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, leaves, proba):
+def _walk(x, nodes, thresholds, after, roots, leaf_ptr, leaf_class, leaf_value, leaves, proba):
     """Every sample through every tree: the leaf node reached into ``leaves`` (N, T) and/or
     the leaf distributions summed into ``proba`` (N, K); an empty array skips that output.
     Sums go tree by tree in tree order (the same bits on every call and after a bundle
@@ -669,7 +662,17 @@ def _walk(x, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, leaves,
     if x.shape[0] < _BLOCK:
         for i in range(x.shape[0]):
             walk_trees(
-                x, i, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, leaves, proba
+                x,
+                i,
+                nodes,
+                thresholds,
+                after,
+                roots,
+                leaf_ptr,
+                leaf_class,
+                leaf_value,
+                leaves,
+                proba,
             )
         return
     at = np.empty(_BLOCK, np.int32)
@@ -679,6 +682,6 @@ def _walk(x, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, leaves,
         for t in range(roots.shape[0]):
             for k in range(hi - lo):
                 at[k], rows[k] = roots[t], lo + k
-            _descend(x, rows, nodes, thresholds, at, hi - lo)
+            _descend(x, rows, nodes, thresholds, after, at, hi - lo)
             for k in range(hi - lo):
                 _reached(lo + k, t, at[k], nodes, leaf_ptr, leaf_class, leaf_value, leaves, proba)

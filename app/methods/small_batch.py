@@ -396,6 +396,7 @@ def _scale_and_walk(
     per_feature,
     settings,
     nodes,
+    after,
     roots,
     leaf_ptr,
     leaf_class,
@@ -428,7 +429,9 @@ def _scale_and_walk(
     thresholds = nodes.view(np.float32)
     no_leaves = np.zeros((0, 0), np.int32)
     for i in range(n):
-        walk_trees(z, i, nodes, thresholds, roots, leaf_ptr, leaf_class, leaf_value, no_leaves, p)
+        walk_trees(
+            z, i, nodes, thresholds, after, roots, leaf_ptr, leaf_class, leaf_value, no_leaves, p
+        )
     n_trees = np.float64(roots.shape[0])
     for i in range(n):
         first, second, arg = -np.inf, -np.inf, 0

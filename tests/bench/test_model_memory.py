@@ -1,5 +1,6 @@
 """``bench.model_memory`` on a small store: it names the version it loaded and the bytes
-of the model's arrays and walk records, and a folder without a model is an error."""
+of the model's arrays, its forests' node records among them and their leaf redirects, and a
+folder without a model is an error."""
 
 import re
 
@@ -29,9 +30,10 @@ def test_it_reports_the_active_models_memory(tmp_path, capsys):
     out = capsys.readouterr().out
     assert f"model version 1 ({len(model.registry.known_names)} known classes)" in out
     arrays, records = map(
-        float, re.search(r"arrays (\S+) MB, forest walk records (\S+) MB", out).groups()
+        float, re.search(r"arrays (\S+) MB, of which forest node records (\S+) MB", out).groups()
     )
-    assert arrays > 0 and records > 0
+    redirects = float(re.search(r"leaf redirects \(made at load\) (\S+) MB", out).group(1))
+    assert 0 < records < arrays and 0 < redirects < records
 
 
 def test_a_folder_without_a_model_is_refused(tmp_path):

@@ -53,9 +53,11 @@ def test_inputs_at_the_thresholds_go_where_sklearn_sends_them(data):
     x, y = data
     model = ExtraTreesClassifier(n_estimators=10, random_state=0).fit(x, y)
     flat = FlatForest.from_sklearn(model)
-    internal = flat.feature >= 0
+    feature = np.concatenate([e.tree_.feature for e in model.estimators_])
+    threshold = np.concatenate([e.tree_.threshold for e in model.estimators_])
+    internal = feature >= 0
     rows = []
-    for f, t in zip(flat.feature[internal][:200], flat.threshold[internal][:200], strict=True):
+    for f, t in zip(feature[internal][:200], threshold[internal][:200], strict=True):
         t32 = np.float32(t)
         for v in (
             t32,
@@ -98,15 +100,27 @@ def test_rejects_bad_state_and_inputs(data):
     flat = FlatForest.from_sklearn(ExtraTreesClassifier(n_estimators=5, random_state=0).fit(x, y))
     state = flat.get_state()
     with pytest.raises(ValueError, match="lacks"):
-        FlatForest.from_state({k: v for k, v in state.items() if k != "threshold"}, 4, 7)
-    broken = dict(state, left=np.full_like(state["left"], 10**6))
+        FlatForest.from_state({k: v for k, v in state.items() if k != "roots"}, 4, 7)
+    nodes = state["nodes"]
+    internal = nodes[:, 0] >= 0
+
+    def with_left(left):
+        changed = nodes.copy()
+        changed[internal, 2] = left
+        return dict(state, nodes=changed)
+
     with pytest.raises(ValueError, match="out of range"):
-        FlatForest.from_state(broken, 4, 7)
+        FlatForest.from_state(with_left(10**6), 4, 7)
     with pytest.raises(ValueError, match="out of range"):
         FlatForest.from_state(state, 4, 2)  # split features beyond the input width
-    cycle = dict(state, left=np.where(state["feature"] >= 0, 0, state["left"]))  # back to the root
     with pytest.raises(ValueError, match="after their parent"):
-        FlatForest.from_state(cycle, 4, 7)
+        FlatForest.from_state(with_left(0), 4, 7)  # back to the root
+    with pytest.raises(ValueError, match=r"\(nodes, 4\)"):
+        FlatForest.from_state(dict(state, nodes=nodes[:, :3]), 4, 7)
+    leaf_with_child = nodes.copy()
+    leaf_with_child[np.flatnonzero(~internal)[0], 3] = 0
+    with pytest.raises(ValueError, match="leaf records"):
+        FlatForest.from_state(dict(state, nodes=leaf_with_child), 4, 7)
     ptr = state["leaf_ptr"].copy()
     ptr[1] = ptr[-1] + 5  # a leaf's distribution beyond the stored ones
     with pytest.raises(ValueError, match="leaf distributions"):

@@ -71,7 +71,7 @@ def test_grown_leaves_hold_what_reaches_them_and_the_rest_is_copied():
     grown = forest.with_samples(x[~old], y[~old], OBJECTS, x[old], y[old], "sqrt", 0)
     # every leaf a training sample (seen or new) reaches: its distribution and count are
     # those samples' (a forest grown with codes counts its leaves exactly)
-    reached = grown.leaf_of_node[grown.apply(x)]  # (N, trees) leaf ids
+    reached = grown.leaf_index(grown.apply(x))  # (N, trees) leaf ids
     for t in range(grown.n_trees):
         for leaf in np.unique(reached[:, t]):
             labels = y[reached[:, t] == leaf]
@@ -85,15 +85,15 @@ def test_grown_leaves_hold_what_reaches_them_and_the_rest_is_copied():
     before, after = forest.get_state(), grown.get_state()
     for key in set(before) - {"roots"}:
         np.testing.assert_array_equal(after[key][: len(before[key])], before[key], err_msg=key)
-    assert (after["redirect_to"] >= len(before["feature"])).all()
+    assert (after["redirect_to"] >= len(before["nodes"])).all()
     assert set(after["redirect_from"]) == set(np.unique(forest.apply(x[~old])))
     # a stored forest whose redirects could loop, or that redirects a split node, is refused
     for to in (after["redirect_from"], np.zeros_like(after["redirect_to"])):
         with pytest.raises(ValueError, match="redirected leaves"):
             FlatForest.from_state({**after, "redirect_to": to}, OBJECTS, x.shape[1])
-    # the extended walk records are those packed from scratch
+    # the extended redirects are those a load makes from the stored state
     fresh = FlatForest.from_state(grown.get_state(), OBJECTS, x.shape[1])
-    np.testing.assert_array_equal(grown.walk_arrays()[0], fresh.walk_arrays()[0])
+    np.testing.assert_array_equal(grown.walk_arrays()[1], fresh.walk_arrays()[1])
 
 
 def test_promotions_append_in_place_and_earlier_forests_answer_as_before():
@@ -103,9 +103,9 @@ def test_promotions_append_in_place_and_earlier_forests_answer_as_before():
     grown = forest.with_samples(x[first], y[first], OBJECTS, x[old], y[old], "sqrt", 0)
     p1 = grown.predict_proba(x)
     # written behind the forest's rows (a fitted forest has room): no row was copied
-    for key in ("feature", "threshold", "leaf_class", "leaf_value"):
+    for key in ("nodes", "leaf_class", "leaf_value"):
         assert np.shares_memory(getattr(grown, key), getattr(forest, key)), key
-    assert np.shares_memory(grown.walk_arrays()[0], forest.walk_arrays()[0])
+    assert np.shares_memory(grown.walk_arrays()[1], forest.walk_arrays()[1])
     seen_x, seen_y = np.concatenate([x[old], x[first]]), np.concatenate([y[old], y[first]])
     twice = grown.with_samples(x[second], y[second], OBJECTS, seen_x, seen_y, "sqrt", 1)
     assert np.shares_memory(twice.leaf_class, forest.leaf_class)
@@ -119,18 +119,18 @@ def test_promotions_append_in_place_and_earlier_forests_answer_as_before():
     loaded = FlatForest.from_state(forest.get_state(), OBJECTS - 1, x.shape[1])
     alone = loaded.with_samples(x[second], y[second], OBJECTS, x[old], y[old], "sqrt", 1)
     np.testing.assert_array_equal(sibling.predict_proba(x), alone.predict_proba(x))
-    np.testing.assert_array_equal(sibling.walk_arrays()[0], alone.walk_arrays()[0])
+    np.testing.assert_array_equal(sibling.walk_arrays()[1], alone.walk_arrays()[1])
     for forest_, p in ((forest, p0), (grown, p1)):
         np.testing.assert_array_equal(forest_.predict_proba(x), p)
-    # and every forest's records are those packed from its stored state, but for the
-    # redirects of later promotions, past its nodes, which its walk does not follow
+    # and every forest's redirects are those a load makes from its stored state, but for
+    # the redirects of later promotions, past its nodes, which its walk does not follow
     for forest_ in (grown, twice, sibling):
         fresh = FlatForest.from_state(forest_.get_state(), OBJECTS, x.shape[1])
-        records = forest_.walk_arrays()[0].copy()
-        later = records[:, 3] >= len(records)
+        after = forest_.walk_arrays()[1].copy()
+        later = after >= forest_.n_nodes
         assert later.any() == (forest_ is grown)
-        records[later, 3] = -1
-        np.testing.assert_array_equal(records, fresh.walk_arrays()[0])
+        after[later] = -1
+        np.testing.assert_array_equal(after, fresh.walk_arrays()[1])
         np.testing.assert_array_equal(forest_.apply(x), fresh.apply(x))
         np.testing.assert_array_equal(forest_.predict_proba(x), fresh.predict_proba(x))
 
@@ -152,7 +152,7 @@ def test_growing_reads_only_the_seen_samples_of_the_classes_it_reaches():
     whole = forest.with_samples(x[~old], y[~old], OBJECTS, x[old], y[old], "sqrt", 0)
     for key, value in whole.get_state().items():
         np.testing.assert_array_equal(partial.get_state()[key], value, err_msg=key)
-    reached = forest.leaf_of_node[np.unique(forest.apply(x[~old]))]
+    reached = forest.leaf_index(np.unique(forest.apply(x[~old])))
     held = {int(forest.leaf_class[e]) for n in reached for e in range(*forest.leaf_ptr[n : n + 2])}
     assert {int(c) for c in y[old][Seen.read]} == held  # those classes' samples, no others
     assert len(Seen.read) < old.sum()
@@ -182,18 +182,57 @@ def test_a_grown_model_round_trips_and_keeps_its_novel_classes(fitted):
     assert grown.registry.known_names[-1] == ds.class_names[promoted]
     assert grown.shot_prototypes_.shape == (1, OBJECTS - PROMOTED + 1)
     again = from_bytes(to_bytes(grown))
-    # a grown forest's bundle is format 3: a build that reads only 1 and 2 refuses it
-    # instead of serving the forest without its grown leaves
-    assert _format(to_bytes(grown)) == bundle.GROWN_FORMAT_VERSION
-    assert _format(to_bytes(with_novel)) == bundle.FORMAT_VERSION
+    # a forest's bundle is format 4 (its nodes as records): a build that reads only 1 to 3
+    # refuses it instead of failing to find the forest's node arrays
+    assert _format(to_bytes(grown)) == _format(to_bytes(with_novel))
+    assert _format(to_bytes(grown)) == bundle.RECORDS_FORMAT_VERSION
     with pytest.MonkeyPatch.context() as m:
-        m.setattr(bundle, "READS", (bundle.FORMAT_VERSION, bundle.RAW_TRIALS_FORMAT_VERSION))
-        with pytest.raises(BundleError, match="format version 3"):
+        m.setattr(bundle, "READS", bundle.READS[:-1])
+        with pytest.raises(BundleError, match="format version 4"):
             from_bytes(to_bytes(grown))
     x = ds.samples[~train]
     a, b = grown.recognize_batch(x), again.recognize_batch(x)
     np.testing.assert_array_equal(a.top_index, b.top_index)
     np.testing.assert_array_equal(a.novelty_score, b.novelty_score)
+
+
+def _five_arrays(nodes: np.ndarray) -> dict[str, np.ndarray]:
+    """A forest's records as the five node arrays bundles held before the records."""
+    leaf = nodes[:, 0] < 0
+    return {
+        "feature": nodes[:, 0].copy(),
+        "threshold": nodes[:, 1].view(np.float32).astype(np.float64),
+        "left": np.where(leaf, -1, nodes[:, 2]),
+        "right": np.where(leaf, -1, nodes[:, 3]),
+        "leaf_of_node": np.where(leaf, nodes[:, 2], -1),
+    }
+
+
+def test_a_bundle_from_before_the_records_loads_and_answers_the_same(fitted):
+    """Bundles written before 2026-11-26 held each forest as five node arrays (format 3 for
+    a grown one); they load into the same records and the same answers."""
+    ds, train, base = fitted
+    c = OBJECTS - PROMOTED
+    grown = promote(base, ds, train, [c])
+    manifest, arrays = bundle._contents(grown)
+    old = {}
+    for name, value in arrays.items():
+        if name.endswith("forest/nodes"):
+            prefix = name.removesuffix("nodes")
+            old.update({prefix + k: v for k, v in _five_arrays(value).items()})
+        else:
+            old[name] = value
+    assert len(old) > len(arrays)
+    loaded = from_bytes(bundle._zip({**manifest, "format_version": 3}, old))
+    x = ds.samples[~train]
+    a, b = grown.recognize_batch(x), loaded.recognize_batch(x)
+    np.testing.assert_array_equal(a.top_index, b.top_index)
+    np.testing.assert_array_equal(a.novelty_score, b.novelty_score)
+    for m in (grown, loaded):
+        assert m.known_.cues_model.forest.redirect_from.size > 0
+    np.testing.assert_array_equal(
+        loaded.known_.cues_model.forest.nodes, grown.known_.cues_model.forest.nodes
+    )
 
 
 def test_a_novel_class_is_promoted_with_its_enrolled_description(fitted):

@@ -135,11 +135,11 @@ def test_a_promotion_writes_only_the_blocks_it_appended(store, base_model, monke
     fresh = bundle.split(grown, min_bytes=1024)
     assert second[1] == fresh[1] and bundle.part_refs(second[0]) == bundle.part_refs(fresh[0])
     before, after = bundle.part_refs(first[0]), bundle.part_refs(second[0])
-    appended = [n for n in after if n.endswith(("forest/threshold", "reference"))]
-    # a head listing row blocks is format 3: older builds refuse it
+    appended = [n for n in after if n.endswith(("forest/nodes", "reference"))]
+    # a head listing row blocks is format 3 or later: older builds refuse it
     assert (
         json.loads(zipfile.ZipFile(io.BytesIO(second[0])).read("manifest.json"))["format_version"]
-        == bundle.GROWN_FORMAT_VERSION
+        >= bundle.GROWN_FORMAT_VERSION
     )
     assert appended and all(isinstance(after[n], list) for n in appended)
     for name in appended:
@@ -164,7 +164,7 @@ def test_a_promotion_writes_only_the_blocks_it_appended(store, base_model, monke
         # the new rows were appended behind the arrays v1's blocks were joined into
         for name in ("distances", "forest"):
             a, b = (getattr(m.known_.cues_model, name) for m in (loaded, old))
-            a, b = (x.reference if name == "distances" else x.threshold for x in (a, b))
+            a, b = (x.reference if name == "distances" else x.nodes for x in (a, b))
             assert np.shares_memory(a, b) and len(a) > len(b), name
 
 
@@ -191,7 +191,7 @@ def test_a_worker_that_loaded_a_version_stores_the_next_without_encoding_its_par
     # the forests and references are the store's read-only parts
     _, arrays = bundle._contents(loaded)
     made = {n for n, a in arrays.items() if not bundle.unchangeable(a)}
-    assert not any(n.endswith(("forest/threshold", "reference")) for n in made)
+    assert not any(n.endswith(("forest/nodes", "reference")) for n in made)
     again = encoder.split(loaded)
     refs = bundle.part_refs(again[0])
     assert refs == bundle.part_refs(first[0])
@@ -201,7 +201,7 @@ def test_a_worker_that_loaded_a_version_stores_the_next_without_encoding_its_par
     vector = np.asarray(unused_vectors(dataset, 1)[0], np.float32)
     grown = loaded.with_known_samples({"mug": dataset.samples[:4] * 1.1}, {"mug": vector})
     forest, before = grown.known_.cues_model.forest, loaded.known_.cues_model.forest
-    assert np.shares_memory(forest.threshold, before.threshold)  # appended, not copied
+    assert np.shares_memory(forest.nodes, before.nodes)  # appended, not copied
     second = encoder.split(grown)
     fresh = bundle.split(grown, min_bytes=1024)
     assert bundle.part_refs(second[0]) == bundle.part_refs(fresh[0])
