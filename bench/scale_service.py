@@ -35,9 +35,12 @@ a 409; ``free_novel`` and ``novel_vectors_taken`` say how many there were):
 
 First, in process on the loaded bundle (``in_process``: the method's own share, freed before
 the service starts; ``--in-process-only`` stops there): the same objects' registration,
-first sample and promotion as calls of the model. Besides: ``startup_s`` (the service's
-first start: storing the dataset and the bundle, to ``/readyz``), ``recognise_1_ms``
-(``POST /v1/recognize`` of one known object's sample, an .npy body over one kept-alive
+first sample and promotion as calls of the model. Besides: ``memory`` (the resident
+memory of each of the service's processes once it is ready, their sum at its largest
+during the enrolments, and the machine's least available memory; below 1 GB available
+the service is stopped and the run fails), ``startup_s`` (the service's first start:
+storing the dataset and the bundle, to ``/readyz``), ``recognise_1_ms`` (``POST
+/v1/recognize`` of one known object's sample, an .npy body over one kept-alive
 connection, ``--recognise`` different samples). Each figure
 is given as its median and worst over the repeats. The JSON (``scale_service.json`` in
 ``--out``) has every repeat's figures, the machine, the commit and the load averages at
@@ -55,6 +58,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 import zipfile
 from pathlib import Path
@@ -194,6 +198,59 @@ class Service:
 
 
 # ------------------------------------------------------------------------ measuring
+class MemoryWatch(threading.Thread):
+    """The resident memory of the service's processes (those of its session: ``serve`` and
+    its API processes) and the machine's available memory, every ``every`` seconds. When
+    the machine's available memory falls below ``floor_gb`` it stops the service (the run
+    then fails, ``stopped_for_memory``) before the kernel's OOM killer picks a process."""
+
+    def __init__(self, service: Service, floor_gb: float = 1.0, every: float = 0.5) -> None:
+        super().__init__(daemon=True)
+        self.service, self.floor_gb, self.every = service, floor_gb, every
+        self.peak_gb = 0.0  # the processes' resident memory together, at its largest
+        self.least_available_gb = float("inf")
+        self.stopped_for_memory = False
+        self._done = threading.Event()
+
+    def processes_gb(self) -> dict[int, float]:
+        """Each process of the service's session: its resident memory, in GB."""
+        out = {}
+        for stat in Path("/proc").glob("[0-9]*/stat"):
+            try:
+                fields = stat.read_text().rsplit(")", 1)[1].split()
+                if int(fields[3]) != self.service.popen.pid:  # its session
+                    continue
+                status = (stat.parent / "status").read_text()
+            except (OSError, IndexError, ValueError):
+                continue  # gone meanwhile
+            found = re.search(r"VmRSS:\s+(\d+) kB", status)
+            if found:
+                out[int(stat.parent.name)] = int(found.group(1)) * 1024 / 1e9
+        return out
+
+    def run(self) -> None:
+        while not self._done.wait(self.every):
+            self.peak_gb = max(self.peak_gb, sum(self.processes_gb().values()))
+            meminfo = Path("/proc/meminfo").read_text()
+            available = int(re.search(r"MemAvailable:\s+(\d+) kB", meminfo).group(1)) * 1024
+            self.least_available_gb = min(self.least_available_gb, available / 1e9)
+            if available / 1e9 < self.floor_gb and not self.stopped_for_memory:
+                self.stopped_for_memory = True
+                say(f"available memory below {self.floor_gb} GB: stopping the service")
+                os.killpg(self.service.popen.pid, signal.SIGKILL)
+
+    def stop(self) -> None:
+        self._done.set()
+
+    def figures(self, after_start: dict[int, float]) -> dict:
+        return {
+            "after_start_gb": sorted(after_start.values(), reverse=True),
+            "peak_total_gb": self.peak_gb,
+            "least_available_gb": self.least_available_gb,
+            "stopped_for_memory": self.stopped_for_memory,
+        }
+
+
 def wait_job(client, job_id: int, timeout: float) -> dict:
     """The job once it has succeeded or failed (RuntimeError after ``timeout`` seconds)."""
     deadline = time.monotonic() + timeout
@@ -380,6 +437,13 @@ def table(report: dict) -> str:
         f"(p90 {r['p90']:.3g} ms) | | | |"
     )
     lines.append(f"\nservice start (dataset and bundle stored): {report['startup_s']:.0f} s")
+    m = report["memory"]
+    lines.append(
+        "resident memory of its processes after the start: "
+        + ", ".join(f"{gb:.2f} GB" for gb in m["after_start_gb"])
+        + f"; together at most {m['peak_total_gb']:.2f} GB during the enrolments; the "
+        f"machine's available memory at least {m['least_available_gb']:.2f} GB"
+    )
     return "\n".join(lines)
 
 
@@ -486,7 +550,7 @@ def main(argv: list[str] | None = None) -> int:
         print(in_process_table(method))
         return 0
     root = Path(tempfile.mkdtemp(prefix="scale-service-"))
-    service = None
+    service = watch = None
     try:
         say(f"writing the known objects as a folder dataset in {root} ...")
         write_folder(known, root / "dataset")
@@ -497,6 +561,10 @@ def main(argv: list[str] | None = None) -> int:
         startup = time.perf_counter() - t
         processes = service.processes()
         say(f"ready in {startup:.0f} s on {service.url} with {processes} API processes")
+        watch = MemoryWatch(service)
+        after_start = watch.processes_gb()
+        say("resident memory: " + ", ".join(f"{gb:.2f} GB" for gb in after_start.values()))
+        watch.start()
         repeats = []
         with TactileClient(service.url, timeout=60) as client:
             for r, k in enumerate(free[: args.repeats]):
@@ -519,6 +587,10 @@ def main(argv: list[str] | None = None) -> int:
             say(f"recognising {len(rows)} samples one at a time ...")
             recognise = recognise_latency(client, known.samples[rows])
     finally:
+        if watch is not None:
+            watch.stop()
+            if watch.stopped_for_memory:
+                say(f"stopped for memory: {watch.figures(after_start)}")
         if service is not None:
             service.stop()
             if args.keep:
@@ -531,6 +603,7 @@ def main(argv: list[str] | None = None) -> int:
         load_average={"start": load_start, "end": os.getloadavg()},
         api_processes=processes,
         startup_s=startup,
+        memory=watch.figures(after_start),
         summary=summary(repeats, recognise),
         repeats=repeats,
     )

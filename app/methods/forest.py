@@ -2,14 +2,18 @@
 
 Model bundles hold only JSON and numeric arrays (no pickle), so a fitted
 ``ExtraTreesClassifier`` is flattened into one record per node, the trees one after
-another (``_packed``: split feature, float32 threshold, children; 16 bytes), and its
-leaves' class distributions in compressed sparse rows. Inference is a small compiled
-walk (numba) over those records, so predictions do not depend on scikit-learn's private
-estimator layout and are bit-identical after a bundle round-trip. The records are what
-is stored and what the walk reads: a process holds each node once (bundles made before
-2026-11-26 stored five arrays per node, 24 bytes, and the walk packed a copy of them at
-load). Internal nodes' class counts are not kept (inference never reads them), which
-keeps a 300-tree forest on PHAC-2 at a few MB instead of hundreds.
+another (``_packed``: split feature, float32 threshold, children; 16 bytes). A leaf's
+record holds its answer: the class of a leaf whose samples are all of one class (every
+leaf of a fitted forest, grown until its leaves are pure), or the number of its class
+distribution in compressed sparse rows (``mixed_*``: leaves a promotion counted samples
+of another class into). Inference is a small compiled walk (numba) over those records,
+so predictions do not depend on scikit-learn's private estimator layout and are
+bit-identical after a bundle round-trip. The records are what is stored and what the
+walk reads: a process holds each node once. Bundles made before 2026-11-26 stored five
+arrays per node (24 bytes), a distribution for every leaf (20 bytes a leaf), and the
+walk packed a copy of the nodes at load; they are converted at load. Internal nodes'
+class counts are not kept (inference never reads them), which keeps a 300-tree forest
+on PHAC-2 at a few MB instead of hundreds.
 
 The walk takes a block of samples through one tree at a time: the tree's nodes
 stay in cache, and the block's paths are independent chains of loads that the
@@ -28,14 +32,16 @@ from numba import njit
 
 from app.framework.growing import appended, with_room
 
-_KEYS = ("nodes", "roots", "leaf_ptr", "leaf_class", "leaf_value")
+_KEYS = ("nodes", "roots", "mixed_ptr", "mixed_class", "mixed_value", "leaf_count")
 #: the node arrays of bundles made before the records (``_packed`` makes records of them)
 _NODE_KEYS = ("feature", "threshold", "left", "right", "leaf_of_node")
+#: the leaf distributions of those bundles, one per leaf (``_split_leaves``)
+_LEAF_KEYS = ("leaf_ptr", "leaf_class", "leaf_value")
 #: optional state: leaf nodes a promotion replaced, and the nodes appended in their place
 #: (``with_samples``); a forest never grown so has none
 _FROM, _TO = "redirect_from", "redirect_to"
-#: optional state: training samples per leaf (weights of ``with_samples``); bundles made
-#: before it lack it, and each leaf then counts as one sample
+#: training samples per leaf (weights of ``with_samples``); bundles made before it lack
+#: it, and each leaf then counts as one sample
 _COUNTS = "leaf_count"
 
 
@@ -50,14 +56,17 @@ class FlatForest:
         check: bool = True,
         redirects: _Redirects | None = None,
     ) -> None:
-        """``arrays``: the state (``get_state``); node arrays of a bundle made before the
-        records are packed into records here. ``check``: validate the arrays (a stored
-        forest's); False only for arrays this module has just built (a promotion's grown
-        forest: the check reads every node). ``redirects``: where the walk goes on from a
-        leaf a promotion replaced, where the caller has them (a promotion extends its
-        forest's); otherwise made here from ``redirect_from`` / ``redirect_to``."""
+        """``arrays``: the state (``get_state``); the node arrays and leaf distributions of
+        a bundle made before the records are converted here. ``check``: validate the
+        arrays (a stored forest's); False only for arrays this module has just built (a
+        promotion's grown forest: the check reads every node). ``redirects``: where the
+        walk goes on from a leaf a promotion replaced, where the caller has them (a
+        promotion extends its forest's); otherwise made here from ``redirect_from`` /
+        ``redirect_to``."""
         if "nodes" not in arrays and all(k in arrays for k in _NODE_KEYS):
             arrays = {**arrays, "nodes": _packed(arrays)}
+        if "mixed_ptr" not in arrays and all(k in arrays for k in (*_LEAF_KEYS, "nodes")):
+            arrays = {**arrays, **_split_leaves(arrays)}
         missing = [k for k in _KEYS if k not in arrays]
         if missing:
             raise ValueError(f"forest state lacks {missing}")
@@ -65,14 +74,10 @@ class FlatForest:
         if self.nodes.ndim != 2 or self.nodes.shape[1] != 4:
             raise ValueError(f"forest node records must be (nodes, 4), not {self.nodes.shape}")
         self.roots = np.asarray(arrays["roots"], np.int32)
-        self.leaf_ptr = np.asarray(arrays["leaf_ptr"], np.int64)
-        self.leaf_class = np.asarray(arrays["leaf_class"], np.int32)
-        self.leaf_value = np.asarray(arrays["leaf_value"], np.float64)
-        n_leaves = len(self.leaf_ptr) - 1
-        counts = arrays.get(_COUNTS)
-        self.leaf_count = (
-            np.ones(n_leaves, np.int32) if counts is None else np.asarray(counts, np.int32)
-        )
+        self.mixed_ptr = np.asarray(arrays["mixed_ptr"], np.int64)
+        self.mixed_class = np.asarray(arrays["mixed_class"], np.int32)
+        self.mixed_value = np.asarray(arrays["mixed_value"], np.float64)
+        self.leaf_count = np.asarray(arrays[_COUNTS], np.int32)
         none = np.zeros(0, np.int32)
         self.redirect_from = np.asarray(arrays.get(_FROM, none), np.int32)
         self.redirect_to = np.asarray(arrays.get(_TO, none), np.int32)
@@ -91,8 +96,25 @@ class FlatForest:
         return len(self.nodes)
 
     def leaf_index(self, leaf_nodes: np.ndarray) -> np.ndarray:
-        """The leaf ordinals (rows of ``leaf_count``, of ``leaf_ptr``) of leaf nodes."""
+        """The leaf ordinals (rows of ``leaf_count``) of leaf nodes."""
         return self.nodes[leaf_nodes, 2]
+
+    def distribution(self, leaf_node: int) -> tuple[np.ndarray, np.ndarray]:
+        """(classes, shares) of the samples that reached leaf node ``leaf_node``."""
+        answer = int(self.nodes[leaf_node, 3])
+        if answer >= 0:
+            return np.asarray([answer], np.int32), np.ones(1)
+        at = slice(self.mixed_ptr[-1 - answer], self.mixed_ptr[-answer])
+        return self.mixed_class[at], self.mixed_value[at]
+
+    def _classes_at(self, leaf_nodes: np.ndarray) -> np.ndarray:
+        """Every class that reached any of ``leaf_nodes``."""
+        answers = self.nodes[leaf_nodes, 3]
+        mixed = -1 - answers[answers < 0]
+        starts, ends = self.mixed_ptr[mixed], self.mixed_ptr[mixed + 1]
+        sizes = ends - starts
+        entries = np.repeat(ends - np.cumsum(sizes), sizes) + np.arange(int(sizes.sum()))
+        return np.union1d(answers[answers >= 0], self.mixed_class[entries])
 
     def _check(self) -> None:
         n = len(self.nodes)
@@ -109,8 +131,8 @@ class FlatForest:
             parents = np.flatnonzero(internal)
             if (left[parents] <= parents).any() or (right[parents] <= parents).any():
                 raise ValueError("forest children must come after their parent node")
-        if (feature[~internal] != -1).any() or (right[~internal] != -1).any():
-            raise ValueError("forest leaf records must have feature and right child -1")
+        if (feature[~internal] != -1).any():
+            raise ValueError("forest leaf records must have feature -1")
         moved, to = self.redirect_from, self.redirect_to
         if len(moved) != len(to) or (
             len(moved)
@@ -123,20 +145,24 @@ class FlatForest:
             )
         ):
             raise ValueError("forest redirected leaves are inconsistent")
-        leaves = left[~internal]
-        if leaves.min() < 0 or leaves.max() + 1 >= len(self.leaf_ptr):
+        leaves, answers = left[~internal], right[~internal]
+        if leaves.min() < 0 or leaves.max() >= len(self.leaf_count):
             raise ValueError("forest leaves are out of range")
+        if (self.leaf_count < 1).any():
+            raise ValueError("forest leaf sample counts must be positive")
+        n_mixed = len(self.mixed_ptr) - 1
         if (
-            len(self.leaf_class) != len(self.leaf_value)
-            or self.leaf_ptr[0] != 0
-            or self.leaf_ptr[-1] != len(self.leaf_class)
-            or (np.diff(self.leaf_ptr) < 0).any()
+            n_mixed < 0
+            or len(self.mixed_class) != len(self.mixed_value)
+            or self.mixed_ptr[0] != 0
+            or self.mixed_ptr[-1] != len(self.mixed_class)
+            or (np.diff(self.mixed_ptr) < 0).any()
+            or answers.min() < -n_mixed
         ):
             raise ValueError("forest leaf distributions are inconsistent")
-        if self.leaf_count.shape != (len(self.leaf_ptr) - 1,) or (self.leaf_count < 1).any():
-            raise ValueError("forest leaf sample counts do not match its leaves")
-        if len(self.leaf_class) and (
-            self.leaf_class.min() < 0 or self.leaf_class.max() >= self.n_classes
+        if answers.max() >= self.n_classes or (
+            len(self.mixed_class)
+            and (self.mixed_class.min() < 0 or self.mixed_class.max() >= self.n_classes)
         ):
             raise ValueError("forest leaf classes are out of range")
 
@@ -258,8 +284,7 @@ class FlatForest:
             raise ValueError(f"sample classes must lie in 0 … {n_classes - 1}")
         x = self._inputs(x)
         new_leaf = self.apply(x)  # (N, trees) leaf nodes
-        leaves = self.leaf_index(np.unique(new_leaf))
-        near_rows = np.flatnonzero(np.isin(seen_y, self.leaf_class[self._entries(leaves)]))
+        near_rows = np.flatnonzero(np.isin(seen_y, self._classes_at(np.unique(new_leaf))))
         seen_x, seen_y = self._inputs(np.asarray(seen_x[near_rows])), seen_y[near_rows]
         seen_leaf = self.apply(seen_x)
         out = _Grown(self)
@@ -287,12 +312,6 @@ class FlatForest:
                     out.graft(node, sub)
         return out.done(n_classes)
 
-    def _entries(self, leaves: np.ndarray) -> np.ndarray:
-        """Indices into ``leaf_class`` / ``leaf_value`` of the entries of ``leaves``."""
-        starts, ends = self.leaf_ptr[leaves], self.leaf_ptr[leaves + 1]
-        sizes = ends - starts
-        return np.repeat(ends - np.cumsum(sizes), sizes) + np.arange(int(sizes.sum()))
-
     # --------------------------------------------------------------- inference
     def _inputs(self, x: np.ndarray) -> np.ndarray:
         x = np.ascontiguousarray(x, np.float32)  # scikit-learn compares float32 inputs
@@ -310,8 +329,15 @@ class FlatForest:
     def walk_arrays(self) -> tuple[np.ndarray, ...]:
         """What the compiled walk takes, for a caller that walks the trees itself: the node
         records (``_packed``), where a walk goes on from each leaf (``_Redirects``),
-        ``roots``, ``leaf_ptr``, ``leaf_class``, ``leaf_value``. Read, never written."""
-        return self.nodes, self._next, self.roots, self.leaf_ptr, self.leaf_class, self.leaf_value
+        ``roots``, ``mixed_ptr``, ``mixed_class``, ``mixed_value``. Read, never written."""
+        return (
+            self.nodes,
+            self._next,
+            self.roots,
+            self.mixed_ptr,
+            self.mixed_class,
+            self.mixed_value,
+        )
 
     def predict_proba(self, x: np.ndarray) -> np.ndarray:
         """(N, K) mean over trees of the reached leaf's class distribution."""
@@ -331,16 +357,16 @@ class FlatForest:
             self.nodes.view(np.float32),
             self._next,
             self.roots,
-            self.leaf_ptr,
-            self.leaf_class,
-            self.leaf_value,
+            self.mixed_ptr,
+            self.mixed_class,
+            self.mixed_value,
             none if leaves is None else leaves,
             none.astype(np.float64) if proba is None else proba,
         )
 
     # ------------------------------------------------------------ persistence
     def get_state(self) -> dict[str, np.ndarray]:
-        out = {**{k: getattr(self, k) for k in _KEYS}, _COUNTS: self.leaf_count}
+        out = {k: getattr(self, k) for k in _KEYS}
         if len(self.redirect_from):
             out.update({_FROM: self.redirect_from, _TO: self.redirect_to})
         return out
@@ -357,14 +383,15 @@ class FlatForest:
 
 
 class _ForestArrays:
-    """Node and leaf arrays of trees flattened one after another (``FlatForest``'s state)."""
+    """Node records and leaf distributions of trees flattened one after another
+    (``FlatForest``'s state)."""
 
     def __init__(self) -> None:
         self.parts: dict[str, list[np.ndarray]] = {
-            k: [] for k in (*_KEYS, _COUNTS) if k != "leaf_ptr"
+            k: [] for k in ("nodes", "roots", "mixed_class", "mixed_value", _COUNTS)
         }
-        self.counts: list[np.ndarray] = []
-        self.offset = self.n_leaves = 0
+        self.mixed_sizes: list[np.ndarray] = []
+        self.offset = self.n_leaves = self.n_mixed = 0
 
     def add(
         self,
@@ -380,23 +407,87 @@ class _ForestArrays:
         n, off = tree.node_count, self.offset
         is_leaf = tree.children_left < 0
         leaves = int(is_leaf.sum())
+        answers, sizes, mixed_class, mixed_value = _answers(
+            rows, cols, values, leaves, self.n_mixed
+        )
+        records = _tree_records(tree, off, self.n_leaves)
+        records[is_leaf, 3] = answers
         p = self.parts
-        p["nodes"].append(_tree_records(tree, off, self.n_leaves))
+        p["nodes"].append(records)
         p["roots"].append(np.asarray([off], np.int32))
-        p["leaf_class"].append(np.asarray(cols, np.int32))
-        p["leaf_value"].append(np.asarray(values, np.float64))
+        p["mixed_class"].append(mixed_class.astype(np.int32))
+        p["mixed_value"].append(mixed_value.astype(np.float64))
         p[_COUNTS].append(np.maximum(np.asarray(leaf_count), 1).astype(np.int32))
-        self.counts.append(np.bincount(rows, minlength=leaves))
+        self.mixed_sizes.append(sizes)
         self.offset += n
         self.n_leaves += leaves
+        self.n_mixed += len(sizes)
 
     def done(self) -> dict[str, np.ndarray]:
         # with room behind them: a promotion appends to them without copying (``_Grown``)
         out = {k: with_room(*v) for k, v in self.parts.items()}
-        out["leaf_ptr"] = with_room(
-            np.r_[0, np.cumsum(np.concatenate(self.counts))].astype(np.int64)
-        )
+        sizes = np.concatenate([np.zeros(0, np.int64), *self.mixed_sizes])
+        out["mixed_ptr"] = with_room(np.r_[0, np.cumsum(sizes)].astype(np.int64))
         return out
+
+
+def _answers(
+    rows: np.ndarray, cols: np.ndarray, values: np.ndarray, n_leaves: int, first_mixed: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """What the records of ``n_leaves`` leaves answer, given their distributions' entries
+    (leaf ``rows`` in 0 … n_leaves-1, ordered by leaf, ``cols``, ``values``): a leaf whose
+    one entry holds all its mass answers that class; any other leaf answers -1 - m, m its
+    number among the mixed distributions, numbered from ``first_mixed``. Returns the
+    answers and the mixed distributions' sizes, classes and values."""
+    sizes = np.bincount(rows, minlength=n_leaves)
+    starts = np.cumsum(sizes) - sizes
+    single = sizes == 1
+    single[single] = values[starts[single]] == 1.0
+    answers = np.empty(n_leaves, np.int32)
+    answers[single] = cols[starts[single]]
+    mixed = np.flatnonzero(~single)
+    answers[mixed] = -1 - (first_mixed + np.arange(len(mixed)))
+    kept = ~single[rows]
+    return answers, sizes[mixed], cols[kept], values[kept]
+
+
+def _split_leaves(arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The answers of a bundle made before the records' leaf answers: its one distribution
+    per leaf (``leaf_ptr``, ``leaf_class``, ``leaf_value``) as answers written into a copy
+    of its records, and the mixed distributions; one sample per leaf where it has no
+    ``leaf_count``."""
+    ptr = np.asarray(arrays["leaf_ptr"], np.int64)
+    classes = np.asarray(arrays["leaf_class"], np.int32)
+    values = np.asarray(arrays["leaf_value"], np.float64)
+    nodes = np.array(arrays["nodes"], np.int32)  # a copy: the answers are written into it
+    if (
+        ptr.ndim != 1
+        or len(ptr) < 2
+        or ptr[0] != 0
+        or ptr[-1] != len(classes)
+        or len(classes) != len(values)
+        or (np.diff(ptr) < 0).any()
+    ):
+        raise ValueError("forest leaf distributions are inconsistent")
+    if nodes.ndim != 2 or nodes.shape[1] != 4:
+        raise ValueError(f"forest node records must be (nodes, 4), not {nodes.shape}")
+    n_leaves = len(ptr) - 1
+    rows = np.repeat(np.arange(n_leaves), np.diff(ptr))
+    answers, sizes, mixed_class, mixed_value = _answers(rows, classes, values, n_leaves, 0)
+    leaf = np.flatnonzero(nodes[:, 0] < 0)
+    ordinals = nodes[leaf, 2]
+    if len(leaf) and (ordinals.min() < 0 or ordinals.max() >= n_leaves):
+        raise ValueError("forest leaves are out of range")
+    nodes[leaf, 3] = answers[ordinals]
+    out = {
+        "nodes": nodes,
+        "mixed_ptr": np.r_[0, np.cumsum(sizes)].astype(np.int64),
+        "mixed_class": mixed_class,
+        "mixed_value": mixed_value,
+    }
+    if _COUNTS not in arrays:
+        out[_COUNTS] = np.ones(n_leaves, np.int32)
+    return out
 
 
 def _tree_records(tree: Any, first_node: int, first_leaf: int) -> np.ndarray:
@@ -457,14 +548,14 @@ class _Grown:
         its entries again, the old ones as value x samples, then the new samples."""
         f = self.forest
         leaf = int(f.nodes[node, 2])
-        old = slice(f.leaf_ptr[leaf], f.leaf_ptr[leaf + 1])
-        cols = np.concatenate([f.leaf_class[old], classes])
+        old_classes, old_shares = f.distribution(node)
+        cols = np.concatenate([old_classes, classes])
         self._append(
             node,
             np.asarray([[-1, f.nodes[node, 1], self.n_leaves, -1]], np.int32),
             np.full(len(cols), self.n_leaves),
             cols,
-            np.concatenate([f.leaf_value[old] * f.leaf_count[leaf], samples.astype(np.float64)]),
+            np.concatenate([old_shares * f.leaf_count[leaf], samples.astype(np.float64)]),
             [int(f.leaf_count[leaf]) + int(samples.sum())],
         )
 
@@ -487,14 +578,19 @@ class _Grown:
             np.concatenate([np.zeros(0), *self.mass]),
         )
         n_old = len(f.leaf_count)
-        sizes = np.bincount(lr - n_old, minlength=self.n_leaves - n_old)
+        answers, sizes, mixed_class, mixed_value = _answers(
+            lr - n_old, lc, lv, self.n_leaves - n_old, len(f.mixed_ptr) - 1
+        )
+        new = np.concatenate([np.zeros((0, 4), np.int32), *self.nodes])
+        leaf = new[:, 0] < 0
+        new[leaf, 3] = answers[new[leaf, 2] - n_old]
         moved = np.asarray(self.moved, np.int32).reshape(-1, 2)
         arrays = {
-            "nodes": appended(f.nodes, *self.nodes),
+            "nodes": appended(f.nodes, new),
             "roots": f.roots,
-            "leaf_ptr": appended(f.leaf_ptr, f.leaf_ptr[-1] + np.cumsum(sizes)),
-            "leaf_class": appended(f.leaf_class, lc),
-            "leaf_value": appended(f.leaf_value, lv),
+            "mixed_ptr": appended(f.mixed_ptr, f.mixed_ptr[-1] + np.cumsum(sizes)),
+            "mixed_class": appended(f.mixed_class, mixed_class),
+            "mixed_value": appended(f.mixed_value, mixed_value),
             _COUNTS: appended(f.leaf_count, *self.counts),
             _FROM: appended(f.redirect_from, moved[:, 0]),
             _TO: appended(f.redirect_to, moved[:, 1]),
@@ -550,9 +646,9 @@ def _packed(nodes: dict[str, np.ndarray]) -> np.ndarray:
     ``right``, ``leaf_of_node``; -1 where a node has none): one 16-byte record per node,
     so a step touches one cache line (split feature, float32 threshold bits, left and
     right child; a leaf, feature -1, keeps its leaf index where the left child would be,
-    and -1 as its right child). For a float32 x, x <= t (float64) exactly when x <= the
-    largest float32 <= t, so the walk compares in float32 (half the memory traffic) with
-    the same outcome."""
+    and -1 where the right child would be, for its answer: ``_answers``). For a float32
+    x, x <= t (float64) exactly when x <= the largest float32 <= t, so the walk compares
+    in float32 (half the memory traffic) with the same outcome."""
     feature, threshold = np.asarray(nodes["feature"]), np.asarray(nodes["threshold"])
     t32 = threshold.astype(np.float32)
     above = t32.astype(np.float64) > threshold
@@ -626,19 +722,23 @@ def _descend(x, rows, nodes, thresholds, after, at, n):
 
 
 @njit(cache=True, nogil=True)
-def _reached(i, t, node, nodes, leaf_ptr, leaf_class, leaf_value, leaves, proba):
+def _reached(i, t, node, nodes, mixed_ptr, mixed_class, mixed_value, leaves, proba):
     """Sample i reached leaf ``node`` in tree t: into ``leaves`` and/or ``proba``."""
     if leaves.shape[0] > 0:
         leaves[i, t] = node
     if proba.shape[0] > 0:
-        leaf = nodes[node, 2]
-        for j in range(leaf_ptr[leaf], leaf_ptr[leaf + 1]):
-            proba[i, leaf_class[j]] += leaf_value[j]
+        answer = nodes[node, 3]
+        if answer >= 0:  # all of the leaf's samples are of one class
+            proba[i, answer] += 1.0
+        else:
+            m = -1 - answer
+            for j in range(mixed_ptr[m], mixed_ptr[m + 1]):
+                proba[i, mixed_class[j]] += mixed_value[j]
 
 
 @njit(cache=True, nogil=True)
 def walk_trees(
-    x, i, nodes, thresholds, after, roots, leaf_ptr, leaf_class, leaf_value, leaves, proba
+    x, i, nodes, thresholds, after, roots, mixed_ptr, mixed_class, mixed_value, leaves, proba
 ):
     """``_walk`` of sample i alone: _BLOCK trees taken down together (a single sample has
     one path per tree, so a block of samples gives it no independent chains), their leaves
@@ -650,11 +750,11 @@ def walk_trees(
         at[: hi - lo] = roots[lo:hi]
         _descend(x, rows, nodes, thresholds, after, at, hi - lo)
         for k in range(hi - lo):
-            _reached(i, lo + k, at[k], nodes, leaf_ptr, leaf_class, leaf_value, leaves, proba)
+            _reached(i, lo + k, at[k], nodes, mixed_ptr, mixed_class, mixed_value, leaves, proba)
 
 
 @njit(cache=True, nogil=True)
-def _walk(x, nodes, thresholds, after, roots, leaf_ptr, leaf_class, leaf_value, leaves, proba):
+def _walk(x, nodes, thresholds, after, roots, mixed_ptr, mixed_class, mixed_value, leaves, proba):
     """Every sample through every tree: the leaf node reached into ``leaves`` (N, T) and/or
     the leaf distributions summed into ``proba`` (N, K); an empty array skips that output.
     Sums go tree by tree in tree order (the same bits on every call and after a bundle
@@ -668,9 +768,9 @@ def _walk(x, nodes, thresholds, after, roots, leaf_ptr, leaf_class, leaf_value, 
                 thresholds,
                 after,
                 roots,
-                leaf_ptr,
-                leaf_class,
-                leaf_value,
+                mixed_ptr,
+                mixed_class,
+                mixed_value,
                 leaves,
                 proba,
             )
@@ -684,4 +784,6 @@ def _walk(x, nodes, thresholds, after, roots, leaf_ptr, leaf_class, leaf_value, 
                 at[k], rows[k] = roots[t], lo + k
             _descend(x, rows, nodes, thresholds, after, at, hi - lo)
             for k in range(hi - lo):
-                _reached(lo + k, t, at[k], nodes, leaf_ptr, leaf_class, leaf_value, leaves, proba)
+                _reached(
+                    lo + k, t, at[k], nodes, mixed_ptr, mixed_class, mixed_value, leaves, proba
+                )

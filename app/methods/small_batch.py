@@ -398,9 +398,9 @@ def _scale_and_walk(
     nodes,
     after,
     roots,
-    leaf_ptr,
-    leaf_class,
-    leaf_value,
+    mixed_ptr,
+    mixed_class,
+    mixed_value,
     z,
     q,
     p,
@@ -430,7 +430,7 @@ def _scale_and_walk(
     no_leaves = np.zeros((0, 0), np.int32)
     for i in range(n):
         walk_trees(
-            z, i, nodes, thresholds, after, roots, leaf_ptr, leaf_class, leaf_value, no_leaves, p
+            z, i, nodes, thresholds, after, roots, mixed_ptr, mixed_class, mixed_value, no_leaves, p
         )
     n_trees = np.float64(roots.shape[0])
     for i in range(n):

@@ -1,7 +1,7 @@
 """bench/scale_service.py end to end at a tiny size: a real ``serve`` on a fitted bundle,
 every enrolment's job succeeded, the promoted class known, every figure positive, the
-bundle reused with ``--model`` (and refused for other objects), and clear refusals of bad
-arguments. The times themselves
+bundle reused with ``--model`` (and refused for other objects), the service's memory
+watched, and clear refusals of bad arguments. The times themselves
 mean nothing at this size."""
 
 from __future__ import annotations
@@ -36,6 +36,12 @@ def test_a_tiny_service_measures_every_enrolment_and_reuses_its_bundle(tmp_path)
     for name, figure in s.items():
         assert 0 < figure["median"] <= figure["worst"], name
     assert s["recognise_1_ms"]["median"] <= s["recognise_1_ms"]["p90"]
+    # the service's processes (serve and its API processes) watched for memory
+    memory = report["memory"]
+    assert len(memory["after_start_gb"]) >= 1 + report["api_processes"]
+    assert 0 < min(memory["after_start_gb"]) and memory["peak_total_gb"] > 0
+    assert 1 < memory["least_available_gb"] and not memory["stopped_for_memory"]
+    assert "resident memory of its processes" in done.stdout
     assert_in_process(report["in_process"], 2)
     assert "| register |" in done.stdout and "| promote |" in done.stdout
     bundle = tmp_path / "best-60-6-0.bundle"

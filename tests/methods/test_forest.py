@@ -31,6 +31,9 @@ def test_matches_sklearn(data, cls):
     np.testing.assert_allclose(flat.predict_proba(x), model.predict_proba(x), atol=1e-12)
     assert np.array_equal(flat.apply(q) - flat.roots[None, :], model.apply(q))
     assert flat.n_trees == 25
+    # both kinds of leaf answered: one class from the record, a mixed one from its entries
+    answers = flat.nodes[flat.nodes[:, 0] < 0, 3]
+    assert (answers >= 0).any() and (answers < 0).any()
 
 
 @pytest.mark.parametrize("rows", [1, 3, 7])
@@ -117,14 +120,22 @@ def test_rejects_bad_state_and_inputs(data):
         FlatForest.from_state(with_left(0), 4, 7)  # back to the root
     with pytest.raises(ValueError, match=r"\(nodes, 4\)"):
         FlatForest.from_state(dict(state, nodes=nodes[:, :3]), 4, 7)
-    leaf_with_child = nodes.copy()
-    leaf_with_child[np.flatnonzero(~internal)[0], 3] = 0
+    first_leaf = np.flatnonzero(~internal)[0]
+
+    def with_leaf(column, value):
+        changed = nodes.copy()
+        changed[first_leaf, column] = value
+        return dict(state, nodes=changed)
+
     with pytest.raises(ValueError, match="leaf records"):
-        FlatForest.from_state(dict(state, nodes=leaf_with_child), 4, 7)
-    ptr = state["leaf_ptr"].copy()
-    ptr[1] = ptr[-1] + 5  # a leaf's distribution beyond the stored ones
+        FlatForest.from_state(with_leaf(0, -5), 4, 7)
+    with pytest.raises(ValueError, match="leaf classes"):
+        FlatForest.from_state(with_leaf(3, 4), 4, 7)  # answers a class beyond K
     with pytest.raises(ValueError, match="leaf distributions"):
-        FlatForest.from_state(dict(state, leaf_ptr=ptr), 4, 7)
+        # a mixed distribution beyond those stored
+        FlatForest.from_state(with_leaf(3, -len(state["mixed_ptr"])), 4, 7)
+    with pytest.raises(ValueError, match="leaf distributions"):  # beyond the stored entries
+        FlatForest.from_state(dict(state, mixed_ptr=np.asarray([0, 5])), 4, 7)
     with pytest.raises(ValueError, match="shape"):
         flat.predict_proba(x[:, :3])
 

@@ -62,7 +62,8 @@ def test_grown_forest_keeps_what_it_knew_and_learns_the_new_class():
     again = FlatForest.from_state(grown.get_state(), OBJECTS, x.shape[1])
     np.testing.assert_array_equal(again.predict_proba(x), p)
     # a forest stored before leaf counts were kept loads with one sample per leaf
-    state = {k: v for k, v in forest.get_state().items() if k != "leaf_count"}
+    state = _before_records(forest.get_state())
+    del state["leaf_count"]
     assert (FlatForest.from_state(state, OBJECTS - 1, x.shape[1]).leaf_count == 1).all()
 
 
@@ -71,15 +72,17 @@ def test_grown_leaves_hold_what_reaches_them_and_the_rest_is_copied():
     grown = forest.with_samples(x[~old], y[~old], OBJECTS, x[old], y[old], "sqrt", 0)
     # every leaf a training sample (seen or new) reaches: its distribution and count are
     # those samples' (a forest grown with codes counts its leaves exactly)
-    reached = grown.leaf_index(grown.apply(x))  # (N, trees) leaf ids
+    reached = grown.apply(x)  # (N, trees) leaf nodes
     for t in range(grown.n_trees):
-        for leaf in np.unique(reached[:, t]):
-            labels = y[reached[:, t] == leaf]
+        for node in np.unique(reached[:, t]):
+            labels = y[reached[:, t] == node]
             classes, n = np.unique(labels, return_counts=True)
-            entries = slice(*grown.leaf_ptr[leaf : leaf + 2])
-            np.testing.assert_array_equal(grown.leaf_class[entries], classes)
-            np.testing.assert_allclose(grown.leaf_value[entries], n / n.sum(), rtol=1e-12)
-            assert grown.leaf_count[leaf] == len(labels)
+            held, shares = grown.distribution(node)
+            np.testing.assert_array_equal(held, classes)
+            np.testing.assert_allclose(shares, n / n.sum(), rtol=1e-12)
+            assert grown.leaf_count[grown.leaf_index(node)] == len(labels)
+            # a leaf of one class answers it from its record, others from their entries
+            assert (grown.nodes[node, 3] >= 0) == (len(classes) == 1)
     # a promotion only appends: the forest's own arrays start the grown one's, unchanged
     # (a store then writes only the new blocks), and reached leaves are redirected
     before, after = forest.get_state(), grown.get_state()
@@ -103,19 +106,19 @@ def test_promotions_append_in_place_and_earlier_forests_answer_as_before():
     grown = forest.with_samples(x[first], y[first], OBJECTS, x[old], y[old], "sqrt", 0)
     p1 = grown.predict_proba(x)
     # written behind the forest's rows (a fitted forest has room): no row was copied
-    for key in ("nodes", "leaf_class", "leaf_value"):
+    for key in ("nodes", "leaf_count", "mixed_ptr"):
         assert np.shares_memory(getattr(grown, key), getattr(forest, key)), key
     assert np.shares_memory(grown.walk_arrays()[1], forest.walk_arrays()[1])
     seen_x, seen_y = np.concatenate([x[old], x[first]]), np.concatenate([y[old], y[first]])
     twice = grown.with_samples(x[second], y[second], OBJECTS, seen_x, seen_y, "sqrt", 1)
-    assert np.shares_memory(twice.leaf_class, forest.leaf_class)
+    assert np.shares_memory(twice.nodes, forest.nodes)
     # the forests before answer as they did: a later promotion's redirects are not theirs
     np.testing.assert_array_equal(forest.predict_proba(x), p0)
     np.testing.assert_array_equal(grown.predict_proba(x), p1)
     # a second promotion of the same forest copies, and answers as one of a forest that
     # never had room (loaded from its state) does
     sibling = forest.with_samples(x[second], y[second], OBJECTS, x[old], y[old], "sqrt", 1)
-    assert not np.shares_memory(sibling.leaf_class, forest.leaf_class)
+    assert not np.shares_memory(sibling.nodes, forest.nodes)
     loaded = FlatForest.from_state(forest.get_state(), OBJECTS - 1, x.shape[1])
     alone = loaded.with_samples(x[second], y[second], OBJECTS, x[old], y[old], "sqrt", 1)
     np.testing.assert_array_equal(sibling.predict_proba(x), alone.predict_proba(x))
@@ -152,8 +155,8 @@ def test_growing_reads_only_the_seen_samples_of_the_classes_it_reaches():
     whole = forest.with_samples(x[~old], y[~old], OBJECTS, x[old], y[old], "sqrt", 0)
     for key, value in whole.get_state().items():
         np.testing.assert_array_equal(partial.get_state()[key], value, err_msg=key)
-    reached = forest.leaf_index(np.unique(forest.apply(x[~old])))
-    held = {int(forest.leaf_class[e]) for n in reached for e in range(*forest.leaf_ptr[n : n + 2])}
+    reached = np.unique(forest.apply(x[~old]))
+    held = {int(c) for n in reached for c in forest.distribution(n)[0]}
     assert {int(c) for c in y[old][Seen.read]} == held  # those classes' samples, no others
     assert len(Seen.read) < old.sum()
 
@@ -196,33 +199,49 @@ def test_a_grown_model_round_trips_and_keeps_its_novel_classes(fitted):
     np.testing.assert_array_equal(a.novelty_score, b.novelty_score)
 
 
-def _five_arrays(nodes: np.ndarray) -> dict[str, np.ndarray]:
-    """A forest's records as the five node arrays bundles held before the records."""
+def _before_records(state: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """A forest's state as bundles held it before the records: five node arrays, and a
+    class distribution for every leaf (``leaf_ptr``, ``leaf_class``, ``leaf_value``)."""
+    nodes, ptr = state["nodes"], state["mixed_ptr"]
     leaf = nodes[:, 0] < 0
+    by_ordinal = np.flatnonzero(leaf)[np.argsort(nodes[leaf, 2])]
+    classes, values = [], []
+    for answer in nodes[by_ordinal, 3]:
+        if answer >= 0:
+            classes.append([answer])
+            values.append([1.0])
+        else:
+            at = slice(ptr[-1 - answer], ptr[-answer])
+            classes.append(state["mixed_class"][at])
+            values.append(state["mixed_value"][at])
+    out = {k: v for k, v in state.items() if k != "nodes" and not k.startswith("mixed_")}
     return {
+        **out,
         "feature": nodes[:, 0].copy(),
         "threshold": nodes[:, 1].view(np.float32).astype(np.float64),
         "left": np.where(leaf, -1, nodes[:, 2]),
         "right": np.where(leaf, -1, nodes[:, 3]),
         "leaf_of_node": np.where(leaf, nodes[:, 2], -1),
+        "leaf_ptr": np.r_[0, np.cumsum([len(c) for c in classes])].astype(np.int64),
+        "leaf_class": np.concatenate(classes).astype(np.int32),
+        "leaf_value": np.concatenate(values).astype(np.float64),
     }
 
 
 def test_a_bundle_from_before_the_records_loads_and_answers_the_same(fitted):
-    """Bundles written before 2026-11-26 held each forest as five node arrays (format 3 for
-    a grown one); they load into the same records and the same answers."""
+    """Bundles written before 2026-11-26 held each forest as five node arrays and a class
+    distribution for every leaf (format 3 for a grown one); they load into the same
+    records and the same answers."""
     ds, train, base = fitted
     c = OBJECTS - PROMOTED
     grown = promote(base, ds, train, [c])
     manifest, arrays = bundle._contents(grown)
-    old = {}
-    for name, value in arrays.items():
-        if name.endswith("forest/nodes"):
-            prefix = name.removesuffix("nodes")
-            old.update({prefix + k: v for k, v in _five_arrays(value).items()})
-        else:
-            old[name] = value
-    assert len(old) > len(arrays)
+    forests = {name.removesuffix("nodes") for name in arrays if name.endswith("forest/nodes")}
+    old = {k: v for k, v in arrays.items() if not k.startswith(tuple(forests))}
+    for prefix in forests:
+        state = {k[len(prefix) :]: v for k, v in arrays.items() if k.startswith(prefix)}
+        old.update({prefix + k: v for k, v in _before_records(state).items()})
+    assert len(forests) > 1 and len(old) > len(arrays)
     loaded = from_bytes(bundle._zip({**manifest, "format_version": 3}, old))
     x = ds.samples[~train]
     a, b = grown.recognize_batch(x), loaded.recognize_batch(x)

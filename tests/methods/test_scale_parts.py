@@ -47,8 +47,8 @@ def test_code_forest_leaves_are_pure_and_it_classifies_like_the_classifier(sim):
     assert grown.n_trees == 60  # grown 7 at a time, the last chunk smaller
     # distinct samples end in leaves of one class: the training samples are recognised
     assert (grown.predict_proba(z[~test]).argmax(axis=1) == y[~test]).all()
-    leaf_sizes = np.diff(grown.leaf_ptr)
-    assert (leaf_sizes == 1).all()
+    leaves = grown.nodes[:, 0] < 0
+    assert (grown.nodes[leaves, 3] >= 0).all() and len(grown.mixed_class) == 0
     classifier = FlatForest.grow(z[~test], y[~test], 40, 60, "sqrt", 0, 1, codes=0)
     acc = {
         name: (f.predict_proba(z[test]).argmax(axis=1) == y[test]).mean()
