@@ -300,3 +300,30 @@ def test_methods_that_cannot_grow_say_so():
     paper = make_method("paper", **QUICK_PARAMS).fit(ds)
     with pytest.raises(UnsupportedOperationError, match="fit it again"):
         paper.with_known_samples({"x": ds.samples[:2]})
+
+
+def test_a_load_checks_only_the_records_appended_to_records_checked_before():
+    """A promoted version that another process built extends the records that process
+    checked when it loaded the version before: only the appended ones are read, and bad
+    ones among them are still refused."""
+    from app.framework.growing import appended
+    from app.methods import forest as forest_module
+
+    x, y, old, forest = _one_new_class()  # checked when grown: its records are known valid
+    bounds = (len(forest.leaf_count), len(forest.mixed_ptr) - 1, OBJECTS - 1, x.shape[1])
+    assert forest_module._checked.rows(forest.nodes, bounds) == forest.n_nodes
+    grown = forest.with_samples(x[~old], y[~old], OBJECTS, x[old], y[old], "sqrt", 0)
+    state = grown.get_state()
+    bigger = (len(grown.leaf_count), len(grown.mixed_ptr) - 1, OBJECTS, x.shape[1])
+    assert forest_module._checked.rows(state["nodes"], bigger) == forest.n_nodes
+    loaded = FlatForest.from_state(state, OBJECTS, x.shape[1])
+    assert forest_module._checked.rows(loaded.nodes, bigger) == grown.n_nodes
+    # against other inputs (features) nothing counts as checked
+    assert forest_module._checked.rows(state["nodes"], (*bigger[:3], x.shape[1] + 1)) == 0
+    # a bad record appended behind checked ones is found: a copy of the first root,
+    # whose children come before it there
+    records = appended(loaded.nodes, loaded.nodes[forest.roots[:1]])
+    assert np.shares_memory(records, loaded.nodes)
+    assert forest_module._checked.rows(records, bigger) == grown.n_nodes
+    with pytest.raises(ValueError, match="after their parent"):
+        FlatForest.from_state({**state, "nodes": records}, OBJECTS, x.shape[1])
