@@ -32,6 +32,7 @@ import numpy as np
 from numba import njit
 
 from app.framework.growing import appended, with_room
+from app.methods.leaf_trees import LeafTree, grow_leaf
 
 _KEYS = ("nodes", "roots", "mixed_ptr", "mixed_class", "mixed_value", "leaf_count")
 #: the node arrays of bundles made before the records (``_packed`` makes records of them)
@@ -275,7 +276,7 @@ class FlatForest:
         ``seen_x``, ``seen_y``: the samples it was grown on (or those it has learnt since);
         ``seen_x`` is anything whose rows ``seen_x[rows]`` gives. In every tree, a leaf that
         the new samples reach is grown further on its own samples, seen and new, by
-        scikit-learn's ``ExtraTreeClassifier`` (``max_features`` as grown, ``grow_leaf``)
+        extremely randomised tree (``max_features`` as grown, ``leaf_trees.grow_leaf``)
         until its leaves are pure; a leaf that stays one class only counts the new samples.
         Only the seen samples of the classes those leaves hold are taken through the trees
         (a leaf's distribution names every class that reached it). The forest's arrays are
@@ -317,7 +318,7 @@ class FlatForest:
                         max_features,
                         int(rng.integers(2**31)),
                     )
-                    sub = local if local.tree_.node_count > 1 else None
+                    sub = local if local.node_count > 1 else None
                 if sub is None:  # one class, or no split separates them: count them in
                     out.count_in(node, *np.unique(y[members], return_counts=True))
                 else:
@@ -520,8 +521,8 @@ def _split_leaves(arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 
 def _tree_records(tree: Any, first_node: int, first_leaf: int) -> np.ndarray:
-    """The records (``_packed``) of a scikit-learn ``tree_`` whose nodes are numbered from
-    ``first_node`` and whose leaves from ``first_leaf``."""
+    """The records (``_packed``) of a scikit-learn ``tree_`` (or a ``LeafTree``) whose
+    nodes are numbered from ``first_node`` and whose leaves from ``first_leaf``."""
     is_leaf = tree.children_left < 0
     leaf_ids = np.full(tree.node_count, -1, np.int64)
     leaf_ids[is_leaf] = first_leaf + np.arange(int(is_leaf.sum()))
@@ -555,11 +556,10 @@ class _Grown:
         self.mass: list[np.ndarray] = []
         self.counts: list[np.ndarray] = []
 
-    def graft(self, node: int, local: Any) -> None:
-        """Leaf ``node`` replaced by fitted tree ``local``."""
-        sub = local.tree_
+    def graft(self, node: int, sub: LeafTree) -> None:
+        """Leaf ``node`` replaced by tree ``sub`` grown on its samples."""
         is_leaf = sub.children_left < 0
-        value = sub.value[is_leaf, 0, :]
+        value = sub.value[is_leaf]
         lr, lc = np.nonzero(value)
         share = value[lr, lc] / value[lr].sum(axis=1)
         n_here = sub.n_node_samples[is_leaf]
@@ -567,7 +567,7 @@ class _Grown:
             node,
             _tree_records(sub, self.n_nodes, self.n_leaves),
             self.n_leaves + lr,
-            local.classes_[lc],
+            sub.classes[lc],
             share * n_here[lr],
             n_here,
         )
@@ -744,19 +744,6 @@ def _members(nodes: np.ndarray) -> dict[int, np.ndarray]:
     order = np.argsort(nodes, kind="stable")
     found, starts = np.unique(nodes[order], return_index=True)
     return {int(n): part for n, part in zip(found, np.split(order, starts[1:]), strict=True)}
-
-
-def grow_leaf(x: np.ndarray, y: np.ndarray, max_features: Any, seed: int):
-    """scikit-learn's ``ExtraTreeClassifier(max_features, random_state=seed).fit(x, y)`` on a
-    leaf's few samples (float32 ``x``, finite), the same tree, without the checks of its
-    arguments: a promotion grows ~4,500 such leaves (100 trees, the whole model and each
-    procedure's), and the checks were three quarters of each fit's ~2 ms."""
-    import sklearn
-    from sklearn.tree import ExtraTreeClassifier
-
-    tree = ExtraTreeClassifier(max_features=max_features, random_state=seed)
-    with sklearn.config_context(skip_parameter_validation=True):
-        return tree.fit(np.ascontiguousarray(x, np.float32), y, check_input=False)
 
 
 def _leaf_distributions(

@@ -144,20 +144,3 @@ def test_refuses_classes_it_cannot_index(data):
     x, y = data
     with pytest.raises(ValueError, match="0 … K-1"):
         FlatForest.from_sklearn(ExtraTreesClassifier(n_estimators=3, random_state=0).fit(x, y + 5))
-
-
-def test_a_leaf_grows_into_the_tree_scikit_learn_grows_with_its_checks():
-    from sklearn.tree import ExtraTreeClassifier
-
-    from app.methods.forest import grow_leaf
-
-    rng = np.random.default_rng(3)
-    for n in (2, 5, 17):
-        x = rng.normal(size=(n, 40)).astype(np.float32)
-        y = rng.integers(0, 3, n) + 1000  # class numbers as a grown forest's leaves hold them
-        seed = int(rng.integers(2**31))
-        ours = grow_leaf(x, y, "sqrt", seed)
-        theirs = ExtraTreeClassifier(max_features="sqrt", random_state=seed).fit(x, y)
-        np.testing.assert_array_equal(ours.classes_, theirs.classes_)
-        for key in ("feature", "threshold", "children_left", "children_right", "value"):
-            np.testing.assert_array_equal(getattr(ours.tree_, key), getattr(theirs.tree_, key))
