@@ -48,13 +48,13 @@ FORMAT_VERSION = 1
 # a build older than the featurizer refuses it clearly instead of serving it as a model of
 # samples; bundles without one stay version 1, which every build reads
 RAW_TRIALS_FORMAT_VERSION = 2
-# a bundle holding a forest that a promotion grew (its reached leaves redirected) or, split,
-# arrays stored in row blocks is written as version 3: a build older than them would serve
-# the forest without its grown leaves, or not find the blocks, instead of refusing it
+# a split bundle whose arrays are stored in row blocks is written as version 3 (and, until
+# 2026-11-26, one holding a forest a promotion grew): a build older than them would not
+# find the blocks, or serve the forest without its grown leaves, instead of refusing it
 GROWN_FORMAT_VERSION = 3
-# a bundle holding a forest as one record per node (``app.methods.forest``, 2026-11-26)
-# is written as version 4: a build older than the records would not find the forest's
-# node arrays
+# a bundle holding a forest as one record per node (``app.methods.forest``, 2026-11-26),
+# grown or not, is written as version 4: a build older than the records would not find the
+# forest's node arrays
 RECORDS_FORMAT_VERSION = 4
 READS = (FORMAT_VERSION, RAW_TRIALS_FORMAT_VERSION, GROWN_FORMAT_VERSION, RECORDS_FORMAT_VERSION)
 _MANIFEST = "manifest.json"
@@ -290,8 +290,6 @@ def _contents(model: TactileRecognizer) -> tuple[dict[str, Any], dict[str, np.nd
         manifest["format_version"] = RAW_TRIALS_FORMAT_VERSION
         for name, value in featurizer_arrays.items():
             all_arrays[_FEATURIZER + name] = value
-    if any(name.endswith("redirect_from") for name in all_arrays):
-        manifest["format_version"] = GROWN_FORMAT_VERSION
     if any(name.endswith("forest/nodes") for name in all_arrays):
         manifest["format_version"] = RECORDS_FORMAT_VERSION
     all_arrays[_REG + "known_attributes"] = reg.known_attributes

@@ -342,18 +342,7 @@ class FlatForest:
     def _tree_leaves(self, x: np.ndarray, t: int) -> np.ndarray:
         """(N,) the leaf node float32 samples ``x`` reach in tree ``t``."""
         out = np.empty((len(x), 1), np.int32)
-        _walk(
-            x,
-            self.nodes,
-            self.nodes.view(np.float32),
-            self._next,
-            self.roots[t : t + 1],
-            self.mixed_ptr,
-            self.mixed_class,
-            self.mixed_value,
-            out,
-            np.zeros((0, 0), np.float64),
-        )
+        self._walk(x, leaves=out, trees=slice(t, t + 1))
         return out[:, 0]
 
     def walk_arrays(self) -> tuple[np.ndarray, ...]:
@@ -378,7 +367,11 @@ class FlatForest:
         return out
 
     def _walk(
-        self, x: np.ndarray, leaves: np.ndarray | None = None, proba: np.ndarray | None = None
+        self,
+        x: np.ndarray,
+        leaves: np.ndarray | None = None,
+        proba: np.ndarray | None = None,
+        trees: slice = slice(None),
     ) -> None:
         none = np.zeros((0, 0), np.int32)
         _walk(
@@ -386,7 +379,7 @@ class FlatForest:
             self.nodes,
             self.nodes.view(np.float32),
             self._next,
-            self.roots,
+            self.roots[trees],
             self.mixed_ptr,
             self.mixed_class,
             self.mixed_value,
