@@ -57,6 +57,23 @@ def gathered(parts: Iterator[np.ndarray], max_rows: int, spare: float = SPARE) -
     return buffer[:at]
 
 
+def buffer_of(rows: np.ndarray) -> np.ndarray | None:
+    """The buffer this module made whose first rows ``rows`` are (an array ``with_room``
+    or ``appended`` returned, or a view of its first rows), else None. Its rows handed out
+    are never written again."""
+    buffer = rows.base
+    if not isinstance(buffer, np.ndarray):
+        return None
+    with _lock:
+        ours = id(buffer) in _rooms
+    same = (
+        rows.__array_interface__["data"][0] == buffer.__array_interface__["data"][0]
+        and rows.strides == buffer.strides
+        and rows.dtype == buffer.dtype
+    )
+    return buffer if ours and same else None
+
+
 def appended(rows: np.ndarray, *parts: np.ndarray, spare: float = SPARE) -> np.ndarray:
     """``np.concatenate([rows, *parts])``, read-only: written into the room behind ``rows``
     when it is a ``with_room`` or ``appended`` array that nothing has been appended to yet
@@ -64,15 +81,12 @@ def appended(rows: np.ndarray, *parts: np.ndarray, spare: float = SPARE) -> np.n
     rows = np.asarray(rows)
     parts = tuple(np.asarray(p, rows.dtype).reshape(-1, *rows.shape[1:]) for p in parts)
     n_new = sum(len(p) for p in parts)
-    buffer = rows.base
+    buffer = buffer_of(rows)
     with _lock:
         fits = (
-            isinstance(buffer, np.ndarray)
+            buffer is not None
             and _rooms.get(id(buffer)) == len(rows)
             and len(rows) + n_new <= len(buffer)
-            and rows.__array_interface__["data"][0] == buffer.__array_interface__["data"][0]
-            and rows.strides == buffer.strides
-            and rows.dtype == buffer.dtype
         )
         if fits:
             at = len(rows)

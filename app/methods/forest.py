@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from app.framework.growing import appended, with_room
+from app.framework.growing import appended, buffer_of, with_room
 from app.methods.leaf_trees import LeafTree, grow_leaf
 
 _KEYS = ("nodes", "roots", "mixed_ptr", "mixed_class", "mixed_value", "leaf_count")
@@ -623,38 +623,30 @@ class _Grown:
 
 
 class _Checked:
-    """Node records checked in this process, by the buffer they begin (``growing``): how
-    many rows, against which bounds (leaves, mixed distributions, classes, features). A
-    buffer's rows are never written again once handed out, and bounds only grow, so rows
-    checked once stay valid for a forest that begins with them within larger bounds. The
-    check read every node: 7 s at 10,000 objects for the process that loads a promoted
-    version another process built."""
+    """Node records checked in this process, by the buffer they begin
+    (``growing.buffer_of``): how many rows, against which bounds (leaves, mixed
+    distributions, classes, features). Such a buffer's rows are never written again once
+    handed out, and bounds only grow, so rows checked once stay valid for a forest that
+    begins with them within larger bounds. The check read every node: 7 s at 10,000
+    objects for the process that loads a promoted version another process built."""
 
     def __init__(self) -> None:
         self._done: dict[int, tuple[int, tuple[int, ...]]] = {}
         self._lock = threading.Lock()
 
-    @staticmethod
-    def _buffer(records: np.ndarray) -> np.ndarray | None:
-        base = records.base
-        # a read-only buffer that owns its memory (nobody can write rows handed out)
-        if not isinstance(base, np.ndarray) or base.base is not None or base.flags.writeable:
-            return None
-        same = base.__array_interface__["data"][0] == records.__array_interface__["data"][0]
-        return base if same and base.strides == records.strides else None
-
     def rows(self, records: np.ndarray, bounds: tuple[int, ...]) -> int:
         """Rows from the first of ``records`` known to be valid within ``bounds``."""
-        buffer = self._buffer(records)
+        buffer = buffer_of(records)
         with self._lock:
-            rows, checked = (
-                self._done.get(id(buffer), (0, bounds)) if buffer is not None else (0, bounds)
-            )
-        fits = rows <= len(records) and all(a <= b for a, b in zip(checked, bounds, strict=True))
-        return rows if fits and checked[3] == bounds[3] else 0
+            found = None if buffer is None else self._done.get(id(buffer))
+        if found is None:
+            return 0
+        rows, checked = found
+        grown = all(a <= b for a, b in zip(checked, bounds, strict=True))
+        return rows if rows <= len(records) and grown and checked[3] == bounds[3] else 0
 
     def add(self, records: np.ndarray, bounds: tuple[int, ...]) -> None:
-        buffer = self._buffer(records)
+        buffer = buffer_of(records)
         if buffer is None:
             return
         with self._lock:
