@@ -72,6 +72,8 @@ EVERYWHERE = 8  # fresh connections in a row that must see a version
 JOB_WAIT_S = 20  # the longest wait GET /v1/jobs/{id} takes
 STARTUP_TIMEOUT_S = 1800
 FIGURES = ("register", "one_shot", "promote")
+FIGURES_IN_PROCESS = ("register_s", "one_shot_s", "promote_s", "promote_encode_s",
+                      "promote_new_mb", "load_promoted_s")  # fmt: skip
 
 
 def say(msg: str) -> None:
@@ -345,7 +347,10 @@ def in_process(model_path: Path, ds, objects: list[int], threshold: int) -> dict
     past the first object, leave out. Each promoted model is then split as the worker
     stores it, after its base (``bundle.PartEncoder``): ``promote_encode_s`` and the bytes
     of the parts its base does not have, ``promote_new_mb`` (``encode_base_s``: the loaded
-    bundle's own first split)."""
+    bundle's own first split). Each version is stored in a SQLite store of its own, and
+    ``load_promoted_s`` is the load of each promoted version by a reader that holds the
+    version before, as the API process that did not build it loads it (``PartCache``; the
+    reader's first load of the base: ``store_load_base_s``)."""
     from app.framework import bundle
 
     t = time.perf_counter()
@@ -353,8 +358,11 @@ def in_process(model_path: Path, ds, objects: list[int], threshold: int) -> dict
     out: dict = {"load_s": time.perf_counter() - t, "repeats": []}
     encoder = bundle.PartEncoder(freeze=True)  # as the worker splits each version it stores
     t = time.perf_counter()
-    _, base_parts = encoder.split(base)
+    first_split = encoder.split(base)
+    base_parts = first_split[1]
     out["encode_base_s"] = time.perf_counter() - t
+    reader = StoreReader(first_split)
+    out["store_load_base_s"] = reader.seconds
     promoted = base  # the model the next promotion grows
     for k in objects:
         name, vector = ds.class_names[k], ds.class_attributes[k]
@@ -371,19 +379,64 @@ def in_process(model_path: Path, ds, objects: list[int], threshold: int) -> dict
         promote = time.perf_counter() - t
         out.setdefault("first_promote_s", promote)
         t = time.perf_counter()
-        _, parts = encoder.split(grown)  # after its base's split, as the worker stores it
+        split = encoder.split(grown)  # after its base's split, as the worker stores it
         encode = time.perf_counter() - t
+        parts = split[1]
         new_mb = sum(len(b) for sha, b in parts.items() if sha not in base_parts) / 1e6
         promoted, base_parts = grown, parts
+        load = reader.load(split)
         out["repeats"].append({"register_s": register, "one_shot_s": shot, "promote_s": promote,
-                               "promote_encode_s": encode, "promote_new_mb": new_mb})  # fmt: skip
+                               "promote_encode_s": encode, "promote_new_mb": new_mb,
+                               "load_promoted_s": load})  # fmt: skip
         say(f"  in process {name}: registered {register * 1e3:.1f} ms, one-shot "
             f"{shot * 1e3:.1f} ms, promoted {promote:.2f} s, its version encoded in "
-            f"{encode:.2f} s with {new_mb:.1f} MB of new parts")  # fmt: skip
-    for fig in ("register_s", "one_shot_s", "promote_s", "promote_encode_s", "promote_new_mb"):
+            f"{encode:.2f} s with {new_mb:.1f} MB of new parts, loaded by another reader "
+            f"in {load:.2f} s")  # fmt: skip
+    reader.close()
+    for fig in FIGURES_IN_PROCESS:
         values = [r[fig] for r in out["repeats"][1:] or out["repeats"]]  # past the first
         out[fig] = {"median": float(np.median(values)), "worst": max(values)}
     return out
+
+
+class StoreReader:
+    """A SQLite store of its own, in a temporary directory, holding the versions it is
+    given, and a reader of them that holds the one it loaded last as an API process does
+    (``ModelHolder``: a ``PartCache`` that keeps only that version's parts); ``seconds``:
+    its last load."""
+
+    def __init__(self, split) -> None:
+        from app.store import bundles
+        from app.store.db import make_engine, make_sessionmaker
+        from app.store.migrate import upgrade
+
+        self._dir = Path(tempfile.mkdtemp(prefix="scale-service-store-"))
+        self._engine = make_engine(f"sqlite:///{self._dir / 'store.db'}")
+        upgrade(self._engine)
+        self._sessions = make_sessionmaker(self._engine)
+        self._cache = bundles.PartCache()
+        self.model = None
+        self.load(split)
+
+    def load(self, split) -> float:
+        """Store the split version, then load it; the seconds of the load alone."""
+        from app.framework import bundle
+        from app.store import bundles
+
+        with self._sessions.begin() as s:
+            head = bundles.store_model(s, split)
+        t = time.perf_counter()
+        with self._sessions() as s:
+            model = bundles.load_model(s, head, self._cache)
+            self._cache.keep_only(set(bundle.part_shas(split[0])))
+        self.seconds = time.perf_counter() - t
+        self.model = model  # the version before is let go only now, as a swap does
+        return self.seconds
+
+    def close(self) -> None:
+        self.model = None
+        self._engine.dispose()
+        shutil.rmtree(self._dir, ignore_errors=True)
 
 
 def recognise_latency(client, samples: np.ndarray) -> list[float]:
@@ -453,7 +506,9 @@ def in_process_table(figures: dict) -> str:
     lines = ["| in process | median / worst |", "| --- | --- |"]
     for fig, unit, scale in (("register_s", "ms", 1e3), ("one_shot_s", "ms", 1e3),
                              ("promote_s", "s", 1), ("promote_encode_s", "s", 1),
-                             ("promote_new_mb", "MB", 1)):  # fmt: skip
+                             ("promote_new_mb", "MB", 1), ("load_promoted_s", "s", 1)):  # fmt: skip
+        if fig not in figures:  # a JSON written before the figure was measured
+            continue
         f = figures[fig]
         label = fig.rsplit("_", 1)[0]
         lines.append(f"| {label} | {f['median'] * scale:.3g} / {f['worst'] * scale:.3g} {unit} |")
@@ -463,6 +518,10 @@ def in_process_table(figures: dict) -> str:
         lines.append(f"| first promotion after the load (copies the file's rows) | {first:.3g} s |")
     lines.append(f"| load the bundle | {figures['load_s']:.3g} s |")
     lines.append(f"| encode the loaded bundle's parts | {figures['encode_base_s']:.3g} s |")
+    if "store_load_base_s" in figures:
+        lines.append(
+            f"| a reader's first load from the store | {figures['store_load_base_s']:.3g} s |"
+        )
     return "\n".join(lines)
 
 

@@ -23,6 +23,7 @@ import itertools
 import threading
 import weakref
 from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 
@@ -101,3 +102,34 @@ def appended(rows: np.ndarray, *parts: np.ndarray, spare: float = SPARE) -> np.n
     if not fits:
         return with_room(rows, *parts, spare=spare)
     return buffer[:at]
+
+
+class ByBuffer:
+    """What a process derived from an array's rows, kept by the buffer the array begins
+    (``buffer_of``) while that buffer lives. Rows handed out are never written again, so
+    what was derived from a buffer's first rows holds for every array that begins with
+    them: a promoted version that another process built is loaded as the version before
+    with rows appended (``bundles.PartCache.joined``), and only those rows need deriving.
+    An array in no such buffer has nothing kept."""
+
+    def __init__(self) -> None:
+        self._values: dict[int, Any] = {}
+        self._lock = threading.Lock()
+
+    def get(self, rows: np.ndarray) -> Any | None:
+        buffer = buffer_of(rows)
+        with self._lock:
+            return None if buffer is None else self._values.get(id(buffer))
+
+    def put(self, rows: np.ndarray, value: Any) -> None:
+        buffer = buffer_of(rows)
+        if buffer is None:
+            return
+        with self._lock:
+            if id(buffer) not in self._values:
+                weakref.finalize(buffer, self._forget, id(buffer))
+            self._values[id(buffer)] = value
+
+    def _forget(self, key: int) -> None:
+        with self._lock:
+            self._values.pop(key, None)

@@ -25,13 +25,12 @@ together in numpy, and a single sample takes ~15 us instead of ~300 us
 from __future__ import annotations
 
 import threading
-import weakref
 from typing import Any
 
 import numpy as np
 from numba import njit
 
-from app.framework.growing import appended, buffer_of, with_room
+from app.framework.growing import ByBuffer, appended, with_room
 from app.methods.leaf_trees import LeafTree, grow_leaf
 
 _KEYS = ("nodes", "roots", "mixed_ptr", "mixed_class", "mixed_value", "leaf_count")
@@ -623,22 +622,18 @@ class _Grown:
 
 
 class _Checked:
-    """Node records checked in this process, by the buffer they begin
-    (``growing.buffer_of``): how many rows, against which bounds (leaves, mixed
-    distributions, classes, features). Such a buffer's rows are never written again once
-    handed out, and bounds only grow, so rows checked once stay valid for a forest that
-    begins with them within larger bounds. The check read every node: 7 s at 10,000
-    objects for the process that loads a promoted version another process built."""
+    """Node records checked in this process, by the buffer they begin (``ByBuffer``): how
+    many rows, against which bounds (leaves, mixed distributions, classes, features).
+    Bounds only grow, so rows checked once stay valid for a forest that begins with them
+    within larger bounds. The check read every node: 7 s at 10,000 objects for the process
+    that loads a promoted version another process built."""
 
     def __init__(self) -> None:
-        self._done: dict[int, tuple[int, tuple[int, ...]]] = {}
-        self._lock = threading.Lock()
+        self._done = ByBuffer()
 
     def rows(self, records: np.ndarray, bounds: tuple[int, ...]) -> int:
         """Rows from the first of ``records`` known to be valid within ``bounds``."""
-        buffer = buffer_of(records)
-        with self._lock:
-            found = None if buffer is None else self._done.get(id(buffer))
+        found = self._done.get(records)
         if found is None:
             return 0
         rows, checked = found
@@ -646,17 +641,7 @@ class _Checked:
         return rows if rows <= len(records) and grown and checked[3] == bounds[3] else 0
 
     def add(self, records: np.ndarray, bounds: tuple[int, ...]) -> None:
-        buffer = buffer_of(records)
-        if buffer is None:
-            return
-        with self._lock:
-            if id(buffer) not in self._done:
-                weakref.finalize(buffer, self._forget, id(buffer))
-            self._done[id(buffer)] = (len(records), bounds)
-
-    def _forget(self, key: int) -> None:
-        with self._lock:
-            self._done.pop(key, None)
+        self._done.put(records, (len(records), bounds))
 
 
 _checked = _Checked()

@@ -34,7 +34,7 @@ import numpy as np
 from numba import njit
 
 from app.data.dataset import TactileDataset
-from app.framework.growing import appended, with_room
+from app.framework.growing import ByBuffer, appended, with_room
 from app.framework.scaling import RobustInputScaler, flatten
 from app.methods.forest import FlatForest
 from app.methods.neighbours import ApproximateNeighbours
@@ -47,6 +47,10 @@ KNN = 3
 DISTANCE_EPS = 1e-6
 _ROWS = 8192  # rows a blocked pass over the samples takes at a time
 _PROJECTED_ROWS = 4096  # reference rows projected together (``ReferenceDistances``)
+_NO_GROUPS = np.zeros(0, np.int64)  # ``nearest_from_products`` leaving no reference out
+#: reference rows projected in this process, by the buffer they begin: (rows, centre, basis,
+#: coordinates, residual norms, squared norms), for ``ReferenceDistances._projection``
+_PROJECTIONS = ByBuffer()
 
 
 def fisher_weights(z: np.ndarray, y: np.ndarray, n_classes: int) -> np.ndarray:
@@ -384,7 +388,7 @@ class ReferenceDistances:
         )
         if self.center.shape != (self.reference.shape[1],):
             raise ValueError("novelty reference centre does not match the inputs")
-        self._ref, self._ref_res, self._ref_sq = self._projected(0)
+        self._ref, self._ref_res, self._ref_sq = self._projection()
         self.index: ApproximateNeighbours | None = None
         self._points: np.ndarray | None = None  # the reference's coordinates, with an index
         if index is not None:
@@ -422,6 +426,33 @@ class ReferenceDistances:
         if self.index is not None:  # over the new reference's points, as a load computes them
             out._index(self.index.with_points, appended(self._points, _points(ref, res)))
         return out
+
+    def _projection(self) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """``_projected(0)``, taking the rows this process projected before, with the same
+        centre and basis, for a reference this one begins with (``_PROJECTIONS``): a
+        promoted version that another process built is loaded as the version before with
+        rows appended, and projecting every row again took 1.4 s at 10,000 objects."""
+        n = len(self.reference)
+        held = _PROJECTIONS.get(self.reference)
+        if held is not None and held[0] <= n and self._same_space(held[1], held[2]):
+            rows, ref, res, sq = held[0], *held[3:]
+            new_ref, new_res, new_sq = self._projected(rows)
+            out = (
+                appended(ref, new_ref),
+                None if res is None else appended(res, new_res),
+                appended(sq, new_sq),
+            )
+        else:
+            out = self._projected(0)
+        _PROJECTIONS.put(self.reference, (n, self.center, self.basis, *out))
+        return out
+
+    def _same_space(self, center: np.ndarray, basis: np.ndarray | None) -> bool:
+        if (basis is None) != (self.basis is None):
+            return False
+        return np.array_equal(center, self.center) and (
+            basis is None or basis is self.basis or np.array_equal(basis, self.basis)
+        )
 
     def _projected(self, start: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
         """(``_split``'s coordinates and residual norms, squared norms of the coordinates) of
@@ -503,6 +534,30 @@ class ReferenceDistances:
             np.asarray(labels, np.int64),
             np.asarray(top, np.int64),
             KNN,
+            _NO_GROUPS,
+            _NO_GROUPS,
+        )
+
+    def nearest_in_other_trials(
+        self, rows: slice, labels: np.ndarray, trials: np.ndarray
+    ) -> np.ndarray:
+        """``nearest``'s three columns for the reference's own samples ``rows`` (exact search),
+        each compared only with the samples of other ``trials`` and its own label as
+        ``top``: one matrix product and one compiled pass, where masking a distance matrix
+        took seven passes over it (``_offsets``)."""
+        labels, trials = np.asarray(labels, np.int64), np.asarray(trials, np.int64)
+        res = np.zeros(0, np.float32) if self._ref_res is None else self._ref_res
+        return nearest_from_products(
+            self._ref[rows] @ self._ref.T,
+            self._ref_sq[rows],
+            self._ref_sq,
+            res[rows] if len(res) else res,
+            res,
+            labels,
+            labels[rows],
+            KNN,
+            trials[rows],
+            trials,
         )
 
     def reference_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -532,17 +587,21 @@ def _points(ref: np.ndarray, res: np.ndarray | None) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
-def nearest_from_products(g, q_sq, ref_sq, q_res, ref_res, labels, top, k):
+def nearest_from_products(g, q_sq, ref_sq, q_res, ref_res, labels, top, k, q_groups, ref_groups):
     # One pass over the query-reference products instead of a full distance matrix and its
     # partition and masked minimum (each a pass of its own): the formula of to_reference.
+    # With groups (not empty), a reference in the query's group is left out.
     n, m = g.shape
     k = min(k, m)
+    grouped = q_groups.shape[0] > 0
     out = np.empty((n, 3))
     smallest = np.empty(k)  # ascending
     for i in range(n):
         smallest[:] = np.inf
         own = np.inf
         for j in range(m):
+            if grouped and ref_groups[j] == q_groups[i]:
+                continue
             d = q_sq[i] - 2.0 * g[i, j] + ref_sq[j]
             if q_res.shape[0] > 0:
                 r = q_res[i] - ref_res[j]
@@ -610,13 +669,6 @@ def _principal_directions(rows: np.ndarray, components: int) -> np.ndarray:
     return vectors[:, ::-1][:, :components]
 
 
-def _knn(d2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Mean of the (up to) 3 smallest squared distances per row, and the smallest."""
-    k = min(KNN, d2.shape[1])
-    part = np.partition(d2, k - 1, axis=1)[:, :k]
-    return part.mean(axis=1), part.min(axis=1)
-
-
 def _offsets(
     distances: ReferenceDistances,
     y: np.ndarray,
@@ -635,16 +687,12 @@ def _offsets(
     if distances.index is not None:
         knn3, knn1, own = _approximate_spacing(distances, y, trials)
         return _median_offsets(knn3, knn1, own, y, n_classes)
-    ref = distances.reference
-    n = len(ref)
-    knn3, knn1, own = np.empty(n), np.empty(n), np.empty(n)
+    n = len(distances.reference)
+    found = np.empty((n, 3))
     for lo in range(0, n, block):  # row blocks keep memory at block x n
         rows = slice(lo, min(lo + block, n))
-        d2 = distances.to_reference(ref[rows])
-        d2[trials[rows, None] == trials[None, :]] = np.inf
-        knn3[rows], knn1[rows] = _knn(d2)
-        own[rows] = np.where(y[rows, None] == y[None, :], d2, np.inf).min(axis=1)
-    return _median_offsets(knn3, knn1, own, y, n_classes)
+        found[rows] = distances.nearest_in_other_trials(rows, y, trials)
+    return _median_offsets(found[:, 0], found[:, 1], found[:, 2], y, n_classes)
 
 
 def _approximate_spacing(

@@ -467,7 +467,10 @@ def _near(q, proj, g, ref_sq, ref_res, labels, top, settings, near):
     for i in range(n):
         best[i] = np.int64(top[i, 2])
     knn, eps = np.int64(settings[_KNN]), settings[_EPS]
-    found = nearest_from_products(g, proj_sq, ref_sq, res, ref_res, labels, best, knn)
+    no_groups = np.zeros(0, np.int64)
+    found = nearest_from_products(
+        g, proj_sq, ref_sq, res, ref_res, labels, best, knn, no_groups, no_groups
+    )
     for i in range(n):
         for c in range(3):
             near[i, c] = found[i, c] + eps

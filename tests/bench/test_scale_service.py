@@ -60,9 +60,10 @@ def test_a_tiny_service_measures_every_enrolment_and_reuses_its_bundle(tmp_path)
 
 def assert_in_process(figures: dict, repeats: int) -> None:
     assert figures["load_s"] > 0 and figures["first_one_shot_s"] > 0
-    assert figures["encode_base_s"] > 0
+    assert figures["encode_base_s"] > 0 and figures["store_load_base_s"] > 0
     assert len(figures["repeats"]) == repeats
-    for fig in ("register_s", "one_shot_s", "promote_s", "promote_encode_s", "promote_new_mb"):
+    for fig in ("register_s", "one_shot_s", "promote_s", "promote_encode_s", "promote_new_mb",
+                "load_promoted_s"):  # fmt: skip
         assert 0 < figures[fig]["median"] <= figures[fig]["worst"], fig
         assert all(r[fig] > 0 for r in figures["repeats"]), fig
 
@@ -75,7 +76,8 @@ def test_in_process_only_measures_the_method_and_starts_no_service(tmp_path):
     assert_in_process(report["in_process"], 2)
     assert "startup_s" not in report and "starting tactile-zsl serve" not in done.stderr
     assert "| promote |" in done.stdout and "first one-shot" in done.stdout
-    assert "| promote_new | " in done.stdout
+    assert "| promote_new | " in done.stdout and "| load_promoted | " in done.stdout
+    assert "a reader's first load from the store" in done.stdout
 
 
 def test_bad_arguments_exit_2_with_a_message(tmp_path):

@@ -63,3 +63,22 @@ def test_a_buffer_is_forgotten_with_its_last_array():
     del a, b
     gc.collect()
     assert len(growing._rooms) == before
+
+
+def test_what_was_derived_from_a_buffer_holds_for_arrays_that_begin_with_it():
+    """``ByBuffer``: a value put for an array is found for any array its buffer's first rows
+    make (one appended to it, a view of its first rows), not for a copy or an array that is
+    in no buffer, and it goes with the buffer."""
+    kept = growing.ByBuffer()
+    a = with_room(np.zeros((100, 3)))
+    kept.put(a, "derived")
+    longer = appended(a, np.ones((4, 3)))
+    assert kept.get(longer) == kept.get(a[:10]) == "derived"
+    assert kept.get(a.copy()) is None and kept.get(np.zeros((100, 3))) is None
+    kept.put(np.zeros(5), "nowhere")  # in no buffer: nothing kept
+    assert len(kept._values) == 1
+    copied = appended(a, np.ones((4, 3)))  # a second append to ``a``: a new buffer
+    assert kept.get(copied) is None
+    del a, longer
+    gc.collect()
+    assert len(kept._values) == 0

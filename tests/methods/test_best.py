@@ -327,6 +327,27 @@ def test_distance_offsets_are_blockwise_exact_and_finite():
     assert np.isfinite(whole).all() and whole.shape == (10,)
 
 
+def test_distance_offsets_match_a_masked_distance_matrix():
+    """The compiled pass (``nearest_in_other_trials``) against the rule written out: the
+    full distance matrix, a sample's own trial masked, the 3 nearest and the nearest of its
+    class taken from what is left; exact and in a principal subspace."""
+    from app.methods.known import KNN, ReferenceDistances, _median_offsets, _offsets
+
+    rng = np.random.default_rng(3)
+    x = rng.normal(size=(60, 6)) + np.repeat(rng.normal(size=(12, 6)) * 3, 5, axis=0)
+    y, trials = np.repeat(np.arange(12), 5), rng.integers(0, 9, 60)
+    trials[55:] = 4  # class 11: one trial only
+    for basis in (None, ReferenceDistances.fit(x, 3).basis):
+        dist = ReferenceDistances(x, basis)
+        d2 = dist.to_reference(x).astype(np.float64)
+        d2[trials[:, None] == trials[None, :]] = np.inf
+        part = np.sort(d2, axis=1)[:, :KNN]
+        own = np.where(y[:, None] == y[None, :], d2, np.inf).min(axis=1)
+        expected = _median_offsets(part.mean(axis=1), part[:, 0], own, y, 12)
+        assert np.isinf(own).any()  # some class has a single trial: no spacing of its own
+        np.testing.assert_allclose(_offsets(dist, y, trials, 12, block=16), expected, atol=1e-4)
+
+
 def test_reference_distances_exact_and_in_a_principal_subspace():
     from app.methods.known import ReferenceDistances
 

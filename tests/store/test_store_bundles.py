@@ -121,7 +121,11 @@ def test_a_promotion_writes_only_the_blocks_it_appended(store, base_model, monke
     monkeypatch.setattr(bundle, "BLOCK_BYTES", 2048)  # blocks of this small model's arrays
     _, sessions = store
     dataset = base_model[1]
-    model = make_method("best", n_estimators=10, seed=0).fit(dataset)
+    # distances in a principal subspace, and a neighbour graph over the reference points
+    # (``approximate_above``), which the promotion keeps
+    model = make_method(
+        "best", n_estimators=10, seed=0, distance_components=8, approximate_above=50
+    ).fit(dataset)
     vector = np.asarray(unused_vectors(dataset, 1)[0], np.float32)
     samples = dataset.samples[dataset.labels == 0][:4] * 1.1
     encoder = bundle.PartEncoder(min_bytes=1024, freeze=True)  # as the worker splits
@@ -166,6 +170,17 @@ def test_a_promotion_writes_only_the_blocks_it_appended(store, base_model, monke
             a, b = (getattr(m.known_.cues_model, name) for m in (loaded, old))
             a, b = (x.reference if name == "distances" else x.nodes for x in (a, b))
             assert np.shares_memory(a, b) and len(a) > len(b), name
+    # and it derived anew only what the new rows need: the reference's projection is v1's
+    # with rows appended, the graph v1's; both as a load that held nothing makes them
+    cold = bundle.from_bytes(second[0], part=lambda sha: bundle.decode_part(second[1][sha]))
+    new, was, fresh = (m.known_.cues_model.distances for m in (loaded, old, cold))
+    assert new.index is not None and new.index.index is was.index.index
+    assert fresh.index.index is not was.index.index
+    for name in ("_ref", "_ref_sq", "_ref_res"):
+        a, b = getattr(new, name), getattr(was, name)
+        assert np.shares_memory(a, b) and len(a) > len(b), name
+        np.testing.assert_array_equal(a, getattr(fresh, name), err_msg=name)
+    np.testing.assert_array_equal(loaded.novelty_score(x), cold.novelty_score(x))
 
 
 def test_a_worker_that_loaded_a_version_stores_the_next_without_encoding_its_parts(
