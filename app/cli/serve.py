@@ -70,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
         ensure_ready(settings, engine, make_sessionmaker(engine))
     finally:
         engine.dispose()
+    _give_back_freed_memory()
     server = {
         "log_level": "info",
         "access_log": settings.access_log,
@@ -91,3 +92,23 @@ def run(args: argparse.Namespace) -> int:
         uvicorn.run(create_app(settings), host=settings.host, port=port, **server)
         return 0
     return processes.serve({**overrides, "port": port}, n, server)
+
+
+def _give_back_freed_memory() -> None:
+    """Return the heap's free pages to the system after the bootstrap (glibc's
+    ``malloc_trim``; elsewhere nothing). Training or storing the first model frees its
+    arrays, but glibc keeps freed heap pages mapped: this process, which only supervises
+    the API processes from then on (or is the one API process), held 1.24 GB after storing
+    a 3,000-object model where its API processes held 1.39 GB each."""
+    import ctypes
+    import ctypes.util
+    import gc
+
+    gc.collect()
+    name = ctypes.util.find_library("c")
+    try:
+        trim = ctypes.CDLL(name).malloc_trim if name else None
+    except (OSError, AttributeError):  # not glibc: nothing to trim
+        return
+    if trim is not None:
+        trim(0)
