@@ -9,6 +9,7 @@ those are ranked by ``ranked`` (a stable order: among equal values the lower ind
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -185,7 +186,7 @@ def rows_batch(
         for probs, offset, rows in ((known_p, 0, ~use_novel), (novel_p, n_known, use_novel)):
             top_index[rows], top_p[rows] = top_k_ranks(probs[rows], k, offset)
     return RecognitionBatch(
-        tuple([*known_names, *novel_names]),
+        joined_names(known_names, novel_names),
         n_known,
         top_index,
         top_p,
@@ -223,7 +224,7 @@ def one_row_batch(
     batch = object.__new__(RecognitionBatch)
     # the frozen dataclass's fields, set without its __init__'s object.__setattr__ calls
     batch.__dict__.update(
-        class_names=(*known_names, *novel_names),
+        class_names=joined_names(known_names, novel_names),
         n_known=len(known_names),
         top_index=order[None],
         top_probability=value[None],
@@ -234,6 +235,31 @@ def one_row_batch(
         next_procedure=None,
     )
     return batch
+
+
+def joined_names(known_names: Sequence[str], novel_names: Sequence[str]) -> tuple[str, ...]:
+    """``(*known_names, *novel_names)``: the same tuple for the same two sequences while
+    their lengths stay (a model's registry replaces its name lists, never edits them).
+    Joining visits every class, 50 µs of one sample's 420 µs answer at 10,000 objects, and
+    the service checks the tuple against the one its labels were built for, ``is`` first
+    (``RecognitionService._model_labels``)."""
+    key = (id(known_names), id(novel_names))
+    held = _JOINED.get(key)
+    if held is not None and held[2] == (len(known_names), len(novel_names)):
+        return held[3]
+    names = (*known_names, *novel_names)
+    with _JOINED_LOCK:  # requests answer in threads
+        if len(_JOINED) >= _JOINED_KEPT:
+            del _JOINED[next(iter(_JOINED))]  # the oldest: models in turn, not all kept
+        # the sequences held, so that their ids stay theirs while the entry lives
+        _JOINED[key] = (known_names, novel_names, (len(known_names), len(novel_names)), names)
+    return names
+
+
+# joined name tuples of the last few (known, novel) name sequences, by their ids
+_JOINED: dict[tuple[int, int], tuple[Sequence[str], Sequence[str], tuple[int, int], tuple]] = {}
+_JOINED_KEPT = 8
+_JOINED_LOCK = threading.Lock()
 
 
 def ranked(p: np.ndarray, k: int) -> np.ndarray:

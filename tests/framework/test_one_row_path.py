@@ -255,3 +255,24 @@ def test_best_classes_from_samples_alone_one_row(data):
         for i in range(len(x)):
             one = x[i : i + 1]
             assert_same(model.recognize_batch(one, top_k), general_path(model, one, top_k))
+
+
+def test_answers_of_one_model_share_one_tuple_of_class_names():
+    """``joined_names``: the known and novel names joined once per pair of name lists, so
+    that an answer does not visit every class (the service's labels check ``is`` first); a
+    list that grew, or other lists, get a tuple of their own."""
+    from app.framework.results import joined_names
+
+    known, novel = [f"k{i}" for i in range(50)], ["n0"]
+    first = joined_names(known, novel)
+    assert first == (*known, *novel) and joined_names(known, novel) is first
+    novel.append("n1")  # never done by a registry, but a stale tuple must not come back
+    assert joined_names(known, novel) == (*known, "n0", "n1")
+    other = list(known)
+    assert joined_names(other, []) == tuple(known) and joined_names(other, []) is not first
+    reg = ClassRegistry(known_names=known, novel_names=novel)
+    model = SimpleNamespace(registry=reg, novelty_threshold=0.5)
+    scores, p = np.array([0.1]), np.full((1, 50), 0.02)
+    a = TactileRecognizer._one_row(model, scores, p, None, 3)
+    b = TactileRecognizer._rows(model, np.array([0.1, 0.2]), np.r_[p, p], None, 3)
+    assert a.class_names is b.class_names is joined_names(known, novel)
