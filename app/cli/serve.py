@@ -101,14 +101,11 @@ def _give_back_freed_memory() -> None:
     the API processes from then on (or is the one API process), held 1.24 GB after storing
     a 3,000-object model where its API processes held 1.39 GB each."""
     import ctypes
-    import ctypes.util
     import gc
 
     gc.collect()
-    name = ctypes.util.find_library("c")
     try:
-        trim = ctypes.CDLL(name).malloc_trim if name else None
-    except (OSError, AttributeError):  # not glibc: nothing to trim
+        trim = ctypes.CDLL(None).malloc_trim  # the C library this process runs on
+    except (OSError, TypeError, AttributeError):  # not glibc: nothing to trim
         return
-    if trim is not None:
-        trim(0)
+    trim(0)

@@ -104,7 +104,35 @@ def appended(rows: np.ndarray, *parts: np.ndarray, spare: float = SPARE) -> np.n
     return buffer[:at]
 
 
-class ByBuffer:
+class WhileAlive:
+    """Values kept per array object while it lives (by its id, dropped when it is freed):
+    what a process derived from an array that nothing writes, for the next caller given
+    the very same array."""
+
+    def __init__(self) -> None:
+        self._values: dict[int, Any] = {}
+        self._lock = threading.Lock()
+
+    def get(self, array: np.ndarray | None) -> Any | None:
+        if array is None:
+            return None
+        with self._lock:
+            return self._values.get(id(array))
+
+    def put(self, array: np.ndarray | None, value: Any) -> None:
+        if array is None:
+            return
+        with self._lock:
+            if id(array) not in self._values:
+                weakref.finalize(array, self._forget, id(array))
+            self._values[id(array)] = value
+
+    def _forget(self, key: int) -> None:
+        with self._lock:
+            self._values.pop(key, None)
+
+
+class ByBuffer(WhileAlive):
     """What a process derived from an array's rows, kept by the buffer the array begins
     (``buffer_of``) while that buffer lives. Rows handed out are never written again, so
     what was derived from a buffer's first rows holds for every array that begins with
@@ -112,24 +140,8 @@ class ByBuffer:
     with rows appended (``bundles.PartCache.joined``), and only those rows need deriving.
     An array in no such buffer has nothing kept."""
 
-    def __init__(self) -> None:
-        self._values: dict[int, Any] = {}
-        self._lock = threading.Lock()
-
     def get(self, rows: np.ndarray) -> Any | None:
-        buffer = buffer_of(rows)
-        with self._lock:
-            return None if buffer is None else self._values.get(id(buffer))
+        return super().get(buffer_of(rows))
 
     def put(self, rows: np.ndarray, value: Any) -> None:
-        buffer = buffer_of(rows)
-        if buffer is None:
-            return
-        with self._lock:
-            if id(buffer) not in self._values:
-                weakref.finalize(buffer, self._forget, id(buffer))
-            self._values[id(buffer)] = value
-
-    def _forget(self, key: int) -> None:
-        with self._lock:
-            self._values.pop(key, None)
+        super().put(buffer_of(rows), value)

@@ -240,9 +240,9 @@ def one_row_batch(
 def joined_names(known_names: Sequence[str], novel_names: Sequence[str]) -> tuple[str, ...]:
     """``(*known_names, *novel_names)``: the same tuple for the same two sequences while
     their lengths stay (a model's registry replaces its name lists, never edits them).
-    Joining visits every class, 50 µs of one sample's 420 µs answer at 10,000 objects, and
-    the service checks the tuple against the one its labels were built for, ``is`` first
-    (``RecognitionService._model_labels``)."""
+    Joining visits every class, for every answer, and the service checks the tuple against
+    the one its labels were built for, ``is`` first (``RecognitionService._model_labels``):
+    at 10,000 objects one sample's answer took 440–483 µs joining, 298–300 µs without."""
     key = (id(known_names), id(novel_names))
     held = _JOINED.get(key)
     if held is not None and held[2] == (len(known_names), len(novel_names)):

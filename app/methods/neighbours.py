@@ -18,9 +18,9 @@ reference, searched exactly and merged with the graph's answer, until the tail o
 
 from __future__ import annotations
 
-import weakref
-
 import numpy as np
+
+from app.framework.growing import WhileAlive
 
 #: links per node (faiss's M), candidates kept while building and while searching
 GRAPH_LINKS, BUILD_CANDIDATES, SEARCH_CANDIDATES = 32, 64, 32
@@ -111,7 +111,7 @@ class ApproximateNeighbours:
         if data.ndim != 1:
             raise ValueError("the neighbour index must be a 1-d byte array")
         stored = not data.flags.writeable  # a store's part: it is the serialisation, unchanged
-        index = _GRAPHS.get(id(data)) if stored else None
+        index = _GRAPHS.get(data) if stored else None
         if index is None:
             try:
                 index = faiss.deserialize_index(data)
@@ -122,9 +122,7 @@ class ApproximateNeighbours:
         out = cls(index, points)
         if stored:
             out._bytes = data
-            if id(data) not in _GRAPHS:
-                _GRAPHS[id(data)] = index
-                weakref.finalize(data, _GRAPHS.pop, id(data), None)
+            _GRAPHS.put(data, index)
         return out
 
 
@@ -132,4 +130,4 @@ class ApproximateNeighbours:
 #: a promotion that kept the graph stores the same part (``with_points``), and the process
 #: that loads that version takes the graph it read for the version before (reading it again
 #: took 0.7 s at 10,000 objects). A graph is never changed once built, so versions share it.
-_GRAPHS: dict[int, object] = {}
+_GRAPHS = WhileAlive()
