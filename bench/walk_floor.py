@@ -1,16 +1,22 @@
-"""The floor under one sample's latency at scale: ``best``'s forest walk alone, against the
-whole answer at 60 objects.
+"""The floor under one sample's latency at scale: ``best``'s forest walk and neighbour
+search alone, against the whole answer at 60 objects.
 
     .venv/bin/python -m bench.walk_floor [--sizes 60,3000] [--repeats 300] [--rounds 3]
-                                         [--out DIR]
+                                         [--approximate-above N] [--out DIR]
 
 For each size N, ``best`` (``by_procedure`` off: a complete sample is answered by the whole
 model either way) is fitted on ``simulate_dataset(N, 10 trials)``; then, on the same
 samples, alternately for ``--rounds`` rounds, the median wall time of one sample's:
 
-- ``answer_us``: ``recognize_batch`` (what ``bench.scale`` reports as recognise 1);
+- ``answer_us``: ``recognize_batch`` (what ``bench.scale`` reports as recognise 1; one
+  sample takes ``small_batch``'s scorer);
+- ``general_us``: the same answer on the general path (``small_batch_max`` 0), the path
+  one sample took through a neighbour index before 2026-11-27;
 - ``walk_us``: the known-class forest's ``predict_proba`` on the scaled sample (the walk of
-  every tree, the leaves' distributions summed): what any answer from this forest costs.
+  every tree, the leaves' distributions summed): what any answer from this forest costs;
+- ``search_us``: faiss's search of the HNSW graph for the sample's 3 nearest reference
+  points (0 where the model compares exactly, below ``approximate_above``): what any
+  answer with these novelty cues costs.
 
 It prints a table with each figure divided by ``answer_us`` at the smallest size (the goal
 is 3x at 30,000 objects) and writes ``walk_floor.json`` with the machine and the commit.
@@ -19,6 +25,8 @@ is 3x at 30,000 objects) and writes ``walk_floor.json`` with the machine and the
 from __future__ import annotations
 
 import argparse
+import copy
+import functools
 import json
 import sys
 import time
@@ -39,25 +47,36 @@ def _median_us(fn, xs: np.ndarray) -> float:
     return float(np.median(times)) * 1e6
 
 
-def measure(n: int, repeats: int, rounds: int) -> dict:
+def measure(n: int, repeats: int, rounds: int, approximate_above: int | None) -> dict:
     from app.data.simulator import simulate_dataset
     from app.framework.scaling import flatten
     from app.methods.best import BestRecognizer
 
     ds = simulate_dataset(n, 10, seed=0)
-    model = BestRecognizer(n_jobs=-1, by_procedure=False).fit(ds)
+    options = {} if approximate_above is None else {"approximate_above": approximate_above}
+    model = BestRecognizer(n_jobs=-1, by_procedure=False, **options).fit(ds)
+    general = copy.copy(model)
+    general.small_batch_max = 0
     cues = model.known_.cues_model
-    f = cues.forest
+    f, dist = cues.forest, cues.distances
     rows = np.linspace(0, len(ds) - 1, repeats).astype(int)
     samples = ds.samples[rows]
     z = cues.scaled(flatten(samples)).astype(np.float32)
-    figures: dict[str, list[float]] = {"answer_us": [], "walk_us": []}
+    points = dist.coordinates(z * cues.weights)
+    graph = None if dist.index is None else dist.index.index  # faiss's HNSW graph alone
+    figures: dict[str, list[float]] = {k: [] for k in ("answer_us", "general_us", "walk_us")}
+    if dist.index is not None:
+        figures["search_us"] = []
     for _ in range(rounds):
         figures["answer_us"].append(_median_us(lambda x: model.recognize_batch(x, 1), samples))
+        figures["general_us"].append(_median_us(lambda x: general.recognize_batch(x, 1), samples))
         figures["walk_us"].append(_median_us(f.predict_proba, z))
+        if dist.index is not None:
+            figures["search_us"].append(_median_us(functools.partial(graph.search, k=3), points))
     return {
         "objects": n,
         "forest_nodes": f.n_nodes,
+        "search_us": 0.0,
         **{k: float(np.median(v)) for k, v in figures.items()},
     }
 
@@ -67,24 +86,35 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--sizes", default="60,3000")
     p.add_argument("--repeats", type=int, default=300)
     p.add_argument("--rounds", type=int, default=3)
+    p.add_argument(
+        "--approximate-above",
+        type=int,
+        default=None,
+        help="best's approximate_above (default: best's own, 20000 samples)",
+    )
     p.add_argument("--out", type=Path, default=None)
     args = p.parse_args(argv)
     sizes = parse_sizes(p, args.sizes)
     if args.repeats < 1 or args.rounds < 1:
         p.error("--repeats and --rounds must be 1 at least")
+    if args.approximate_above is not None and args.approximate_above < 0:
+        p.error("--approximate-above must be 0 or more")
     records = []
     for n in sizes:
         print(f"walk_floor: {n} objects ...", file=sys.stderr, flush=True)
-        records.append(measure(n, args.repeats, args.rounds))
+        records.append(measure(n, args.repeats, args.rounds, args.approximate_above))
     base = records[0]["answer_us"]
     at = sizes[0]
-    print(f"| objects | nodes | answer | walk alone | answer ÷ at {at} | walk ÷ answer at {at} |")
-    print("| --- | --- | --- | --- | --- | --- |")
+    print(
+        f"| objects | nodes | answer | general path | walk alone | search alone | "
+        f"answer ÷ at {at} | walk + search ÷ answer at {at} |"
+    )
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     for r in records:
         print(
             f"| {r['objects']:,} | {r['forest_nodes']:,} | {r['answer_us']:.0f} µs | "
-            f"{r['walk_us']:.0f} µs | "
-            f"{r['answer_us'] / base:.1f}x | {r['walk_us'] / base:.1f}x |"
+            f"{r['general_us']:.0f} µs | {r['walk_us']:.0f} µs | {r['search_us']:.0f} µs | "
+            f"{r['answer_us'] / base:.1f}x | {(r['walk_us'] + r['search_us']) / base:.1f}x |"
         )
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)

@@ -490,7 +490,7 @@ class BestRecognizer(TactileRecognizer):
         return self.attributes_.predict_proba(self.known_.cues_model.scaled(flatten(samples)))
 
     def _all_scores(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        if len(samples) <= self.small_batch_max and self.known_.cues_model.distances.index is None:
+        if len(samples) <= self.small_batch_max:
             if getattr(self, "_small_batch", None) is None:
                 self._small_batch = SmallBatchScorer(ScoringConstants.of(self))
             return self._small_batch.scores(flatten(samples))

@@ -517,11 +517,7 @@ class ReferenceDistances:
         """(N, 3) float64 per query: the mean squared distance to its 3 nearest references, to
         the nearest one, and to the nearest one labelled ``top[i]`` (inf if none is)."""
         if self.index is not None:
-            points = self.coordinates(q)
-            d2, _ = self.index.search(points, min(KNN, len(self.reference)))
-            grouped, starts, _ = self._class_groups(np.asarray(labels, np.int64))
-            own = _nearest_in_class(points, grouped, starts, np.asarray(top, np.int64))
-            return np.stack([d2.mean(axis=1), d2[:, 0], own], axis=1)
+            return self.nearest_to_points(self.coordinates(q), labels, top)
         p, res = self._split(q)
         g = p @ self._ref.T
         no_res = np.zeros(0, np.float32)
@@ -537,6 +533,16 @@ class ReferenceDistances:
             _NO_GROUPS,
             _NO_GROUPS,
         )
+
+    def nearest_to_points(
+        self, points: np.ndarray, labels: np.ndarray, top: np.ndarray
+    ) -> np.ndarray:
+        """``nearest`` through the index, from the queries' ``coordinates`` (a caller that
+        computes them itself: ``small_batch``)."""
+        d2, _ = self.index.search(points, min(KNN, len(self.reference)))
+        grouped, starts, _ = self._class_groups(np.asarray(labels, np.int64))
+        own = _nearest_in_class(points, grouped, starts, np.asarray(top, np.int64))
+        return np.stack([d2.mean(axis=1), d2[:, 0], own], axis=1)
 
     def nearest_in_other_trials(
         self, rows: slice, labels: np.ndarray, trials: np.ndarray

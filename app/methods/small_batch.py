@@ -37,6 +37,11 @@ would change BLAS's order of additions; float32 log1p, tanh, log and exp have SI
 versions in numpy (SVML on AVX-512) that libm, which the kernels would call, need not
 match.
 
+With an index over the reference samples (``best``'s ``approximate_above``), the scorer
+computes the queries' coordinates in a kernel and hands them to the index's own search
+(``ReferenceDistances.nearest_to_points``, which the general path calls too): comparing a
+query with every reference sample there would cost milliseconds at 30,000 objects.
+
 A cue whose weight is 0 in the novelty score (the entropy, in ``best``) is not computed:
 its product with 0 adds nothing to the weighted sum.
 """
@@ -56,6 +61,7 @@ from app.methods.known import CUES, DISTANCE_EPS, KNN, nearest_from_products
 
 if TYPE_CHECKING:
     from app.methods.best import BestRecognizer
+    from app.methods.known import ReferenceDistances
 
 _add = np.add.reduce
 _ENTROPY = CUES.index("entropy")
@@ -177,9 +183,12 @@ class ScoringConstants:
     log_compress: bool
     walk: tuple[np.ndarray, ...]  # FlatForest.walk_arrays()
     basis: np.ndarray | None  # the distances' subspace, None when exact
-    ref_t: np.ndarray  # ReferenceDistances.reference_terms()
+    # exact search: ReferenceDistances.reference_terms(); through an index: empty, and the
+    # distances whose ``nearest_to_points`` searches it
+    ref_t: np.ndarray
     ref_sq: np.ndarray
     ref_res: np.ndarray
+    indexed: ReferenceDistances | None
     labels: np.ndarray  # the reference samples' classes
     offsets: np.ndarray  # the log-distance cues' offsets
     cue_weights: np.ndarray
@@ -190,8 +199,6 @@ class ScoringConstants:
     def of(cls, model: BestRecognizer) -> ScoringConstants:
         cues = model.known_.cues_model
         forest, dist, scaler = cues.forest, cues.distances, cues.scaler
-        if dist.index is not None:
-            raise ValueError("the small-batch path needs exact distances (no index)")
         per_feature = np.stack(
             [scaler.center_.reshape(-1), scaler.scale_.reshape(-1), cues.weights, dist.center]
         ).astype(np.float32)
@@ -210,7 +217,10 @@ class ScoringConstants:
             if novel.has_attributes:
                 settings[_DAP_LO], settings[_DAP_HI] = novel.dap_clip, 1 - novel.dap_clip
                 settings[_SAE_TEMPERATURE] = novel.sae_temperature
-        ref_t, ref_sq, ref_res = dist.reference_terms()
+        if dist.index is None:
+            ref_t, ref_sq, ref_res = dist.reference_terms()
+        else:
+            ref_t, ref_sq, ref_res = _NONE32, np.zeros(0, np.float32), np.zeros(0, np.float32)
         return cls(
             n_classes=forest.n_classes,
             per_feature=per_feature,
@@ -221,6 +231,7 @@ class ScoringConstants:
             ref_t=ref_t,
             ref_sq=ref_sq,
             ref_res=ref_res,
+            indexed=None if dist.index is None else dist,
             labels=cues.reference_labels,
             offsets=cues.offsets,
             cue_weights=cue_weights,
@@ -277,13 +288,12 @@ class SmallBatchScorer:
         p = np.empty((n, c.n_classes))
         _scale_and_walk(x, mag, c.per_feature, c.settings, *c.walk, z, q, p, top)
         proj = q if c.basis is None else q @ c.basis
-        g = proj @ c.ref_t
         entropy = _NO_ROWS
         if c.entropy_used:
             entropy = -_add(p * np.log(np.clip(p, 1e-12, None)), axis=1)
         nv = c.novel
+        self._nearest(q, proj, top, near)
         if nv is None:
-            _near(q, proj, g, c.ref_sq, c.ref_res, c.labels, top, c.settings, near)
             _cues(top, np.log(near), c.offsets, entropy, c.settings, cues)
             return cues @ c.cue_weights, p, None
         # BestRecognizer._novel_from: LinearAttributeModel.predict_proba, dap_log_scores,
@@ -294,10 +304,7 @@ class SmallBatchScorer:
             attr = z @ nv.attr_weights_t
             if nv.sae_t is not None:
                 sae = z @ nv.sae_t
-        _near_and_novel_inputs(
-            q, proj, g, c.ref_sq, c.ref_res, c.labels, p, top, c.settings, near, attr,
-            nv.attr_bias, half, sae, unit, sig,
-        )  # fmt: skip
+        _novel_inputs(p, attr, nv.attr_bias, half, sae, unit, sig)
         log_d = np.log(near)
         sim = sig @ nv.prototypes_t if nv.any_shot else _NONE64
         present, absent, cosine = _NONE64, _NONE64, _NONE64
@@ -315,6 +322,21 @@ class SmallBatchScorer:
         out = np.empty((n, nv.n_novel))
         _mix(np.exp(shifted), nv.zsl_columns, nv.shot_columns, out)
         return novelty, p, out
+
+    def _nearest(self, q: np.ndarray, proj: np.ndarray, top: np.ndarray, near: np.ndarray):
+        """ReferenceDistances.nearest plus ForestCues.cues' epsilon, into ``near``: from the
+        products with every reference sample (exact search), or through the index from the
+        queries' coordinates, which ``_points`` computes as ``coordinates`` does."""
+        c = self.constants
+        if c.indexed is None:
+            g = proj @ c.ref_t
+            _near(q, proj, g, c.ref_sq, c.ref_res, c.labels, top, c.settings, near)
+            return
+        with_res = c.basis is not None
+        points = np.empty((len(q), proj.shape[1] + with_res), np.float32)
+        _points(q, proj, with_res, points)
+        near[:] = c.indexed.nearest_to_points(points, c.labels, top[:, 2].astype(np.int64))
+        near += c.settings[_EPS]
 
 
 def _unit(m: np.ndarray) -> np.ndarray:
@@ -446,23 +468,46 @@ def _scale_and_walk(
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _norms(q, proj, i, squares, residual):
+    """Of query ``i``: |P q|^2 and, with ``residual``, the residual norm
+    sqrt(max(|q|^2 - |P q|^2, 0)) (else 0), in float32 as ``_split`` takes them."""
+    zero = np.float32(0.0)
+    for j in range(proj.shape[1]):
+        squares[j] = proj[i, j] * proj[i, j]
+    proj_sq = _row_sum(squares[: proj.shape[1]], zero)
+    if not residual:
+        return proj_sq, zero
+    for j in range(q.shape[1]):
+        squares[j] = q[i, j] * q[i, j]
+    return proj_sq, np.sqrt(max(_row_sum(squares, zero) - proj_sq, zero))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _points(q, proj, residual, out):
+    """ReferenceDistances.coordinates: the projections, then (with ``residual``) the
+    residual norms."""
+    squares = np.empty(q.shape[1], np.float32)
+    k = proj.shape[1]
+    for i in range(q.shape[0]):
+        for j in range(k):
+            out[i, j] = proj[i, j]
+        if residual:
+            out[i, k] = _norms(q, proj, i, squares, True)[1]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def _near(q, proj, g, ref_sq, ref_res, labels, top, settings, near):
     """ReferenceDistances.nearest from the products ``g``, plus ForestCues.cues' epsilon
-    (into ``near``): |P q|^2, and with a basis (``ref_res`` not empty) the residual norms
-    sqrt(max(|q|^2 - |P q|^2, 0)) in float32 as ``_split`` takes them."""
+    (into ``near``), with |P q|^2 and, with a basis (``ref_res`` not empty), the residual
+    norms (``_norms``)."""
     n = q.shape[0]
-    zero = np.float32(0.0)
     proj_sq = np.empty(n, np.float32)
     res = np.empty(n if ref_res.shape[0] > 0 else 0, np.float32)
     squares = np.empty(q.shape[1], np.float32)
     for i in range(n):
-        for j in range(proj.shape[1]):
-            squares[j] = proj[i, j] * proj[i, j]
-        proj_sq[i] = _row_sum(squares[: proj.shape[1]], zero)
+        proj_sq[i], r = _norms(q, proj, i, squares, res.shape[0] > 0)
         if res.shape[0] > 0:
-            for j in range(q.shape[1]):
-                squares[j] = q[i, j] * q[i, j]
-            res[i] = np.sqrt(max(_row_sum(squares, zero) - proj_sq[i], zero))
+            res[i] = r
     best = np.empty(n, np.int64)
     for i in range(n):
         best[i] = np.int64(top[i, 2])
@@ -491,14 +536,11 @@ def _unit_rows(m, out):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _near_and_novel_inputs(
-    q, proj, g, ref_sq, ref_res, labels, p, top, settings, near, attr, bias, half, sae, unit, sig
-):
-    """``_near``; 0.5 x the attribute logits (float32 products ``attr`` to float64, plus the
+def _novel_inputs(p, attr, bias, half, sae, unit, sig):
+    """0.5 x the attribute logits (float32 products ``attr`` to float64, plus the
     bias) for the sigmoid by tanh; the autoencoder's projections ``sae`` as float64 over
     their norms; the signatures of the known-class posteriors (``best.signatures``). An
     empty output is a part the model lacks."""
-    _near(q, proj, g, ref_sq, ref_res, labels, top, settings, near)
     for i in range(half.shape[0]):
         for j in range(half.shape[1]):
             half[i, j] = 0.5 * (np.float64(attr[i, j]) + bias[j])

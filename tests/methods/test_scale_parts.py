@@ -189,11 +189,11 @@ def test_a_model_with_an_index_answers_the_same_after_a_bundle_round_trip(indexe
     assert model.known_.cues_model.distances.index is not None
     loaded = bundle.from_bytes(bundle.to_bytes(model))
     assert loaded.known_.cues_model.distances.index is not None
-    for n in (1, len(x)):  # a single sample takes the general path too: no small-batch scorer
+    for n in (1, len(x)):  # one sample takes the small-batch scorer, through the index too
         a, b = model.recognize_batch(x[:n]), loaded.recognize_batch(x[:n])
         assert a.top_index.tobytes() == b.top_index.tobytes()
         assert a.novelty_score.tobytes() == b.novelty_score.tobytes()
-    assert model._small_batch is None
+    assert model._small_batch.constants.indexed is model.known_.cues_model.distances
 
 
 def test_a_damaged_index_is_refused(indexed_model):

@@ -1,8 +1,8 @@
 """``best``'s small-batch path (``app.methods.small_batch``) gives the general path's answers
 bit for bit: every output of ``recognize_batch`` and ``attribute_proba``, for single samples,
 small batches and a large one, on models with and without novel classes, one-shot samples,
-the semantic autoencoder, subspace or exact distances, and attributes; and its sums along a
-row add in numpy's order."""
+the semantic autoencoder, subspace or exact distances, a neighbour index, and attributes;
+and its sums along a row add in numpy's order."""
 
 from __future__ import annotations
 
@@ -103,6 +103,8 @@ def grown(model, ds, novel, shots: int):
     params=[
         pytest.param(dict(distance_components=8), id="subspace"),
         pytest.param(dict(distance_components=0, sae_lambda=0.0), id="exact-no-sae"),
+        # 60 training samples: the nearest ones found through the HNSW index
+        pytest.param(dict(distance_components=8, approximate_above=40), id="indexed"),
     ],
 )
 def models(request, data):
@@ -178,6 +180,18 @@ def test_default_threshold_sends_one_sample_down_the_small_path(models, data):
     assert bigger._small_batch is None
     assert_same_bits(bigger.recognize_batch(x), general(bigger).recognize_batch(x))
     assert_same_bits(model.recognize_batch(x), general(model).recognize_batch(x))
+
+
+def test_an_indexed_model_takes_the_small_path_through_its_index(models, data):
+    """With a neighbour index the scorer searches it (exact products with every reference
+    sample would cost milliseconds at 30,000 objects); without one it keeps the products."""
+    model = models["one-shot"]
+    indexed = model.known_.cues_model.distances.index is not None
+    constants = ScoringConstants.of(model)
+    assert (constants.indexed is not None) == indexed
+    assert (constants.ref_t.size == 0) == indexed
+    x = queries(data[0], seed=8)[:1]
+    assert_same_bits(small(model).recognize_batch(x), general(model).recognize_batch(x))
 
 
 def test_the_scorer_reads_only_its_frozen_constants(models):
