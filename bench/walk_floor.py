@@ -5,8 +5,10 @@ search alone, against the whole answer at 60 objects.
                                          [--approximate-above N] [--out DIR]
 
 For each size N, ``best`` (``by_procedure`` off: a complete sample is answered by the whole
-model either way) is fitted on ``simulate_dataset(N, 10 trials)``; then, on the same
-samples, alternately for ``--rounds`` rounds, the median wall time of one sample's:
+model either way) is fitted on ``simulate_dataset(N, 10 trials)``; then, in turn for
+``--rounds`` rounds, each on training samples of its own (at most ``--repeats``, none
+taken twice while there are enough, so that no figure finds its samples' tree paths and
+graph nodes in the caches where another left them), the median wall time of one sample's:
 
 - ``answer_us``: ``recognize_batch`` (what ``bench.scale`` reports as recognise 1; one
   sample takes ``small_batch``'s scorer);
@@ -59,20 +61,30 @@ def measure(n: int, repeats: int, rounds: int, approximate_above: int | None) ->
     general.small_batch_max = 0
     cues = model.known_.cues_model
     f, dist = cues.forest, cues.distances
-    rows = np.linspace(0, len(ds) - 1, repeats).astype(int)
-    samples = ds.samples[rows]
-    z = cues.scaled(flatten(samples)).astype(np.float32)
-    points = dist.coordinates(z * cues.weights)
     graph = None if dist.index is None else dist.index.index  # faiss's HNSW graph alone
-    figures: dict[str, list[float]] = {k: [] for k in ("answer_us", "general_us", "walk_us")}
-    if dist.index is not None:
-        figures["search_us"] = []
-    for _ in range(rounds):
-        figures["answer_us"].append(_median_us(lambda x: model.recognize_batch(x, 1), samples))
-        figures["general_us"].append(_median_us(lambda x: general.recognize_batch(x, 1), samples))
-        figures["walk_us"].append(_median_us(f.predict_proba, z))
-        if dist.index is not None:
-            figures["search_us"].append(_median_us(functools.partial(graph.search, k=3), points))
+
+    def scaled(x: np.ndarray) -> np.ndarray:
+        return cues.scaled(flatten(x)).astype(np.float32)
+
+    # each figure's inputs, from samples of its own: a figure timed on the samples another
+    # just took would find their trees' paths and graph nodes in the caches
+    timed = {
+        "answer_us": (lambda x: model.recognize_batch(x, 1), lambda x: x),
+        "general_us": (lambda x: general.recognize_batch(x, 1), lambda x: x),
+        "walk_us": (f.predict_proba, scaled),
+    }
+    if graph is not None:
+        timed["search_us"] = (
+            functools.partial(graph.search, k=3),
+            lambda x: dist.coordinates(scaled(x) * cues.weights),
+        )
+    order = np.random.default_rng(0).permutation(len(ds))
+    per = max(1, min(repeats, len(ds) // (len(timed) * rounds)))
+    figures: dict[str, list[float]] = {k: [] for k in timed}
+    for r in range(rounds):
+        for j, (name, (fn, inputs)) in enumerate(timed.items()):
+            rows = order[((r * len(timed) + j) * per + np.arange(per)) % len(order)]
+            figures[name].append(_median_us(fn, inputs(ds.samples[rows])))
     return {
         "objects": n,
         "forest_nodes": f.n_nodes,

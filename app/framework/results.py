@@ -274,6 +274,8 @@ def ranked(p: np.ndarray, k: int) -> np.ndarray:
     k = min(k, width)
     if width <= 8 * k + 64:
         return np.argsort(-p, axis=1, kind="stable")[:, :k]
+    if k == 1:  # the largest alone: no copy to take it out of
+        return p.argmax(axis=1)[:, None]
     out = np.empty((n, k), np.int64)
     if k <= 8:
         rows, left = np.arange(n), np.array(p, np.float64)  # a copy: the places taken go

@@ -194,6 +194,22 @@ def test_an_indexed_model_takes_the_small_path_through_its_index(models, data):
     assert_same_bits(small(model).recognize_batch(x), general(model).recognize_batch(x))
 
 
+def test_samples_that_reach_one_class_alone_match_too(models, data):
+    """The kernel skips the classes no tree reached; where every tree reached one class, the
+    second largest probability is one of those zeros, as the general path finds it."""
+    model, x = models["one-shot"], queries(data[0], seed=9)
+    _, known_p, _ = general(model)._all_scores(x)
+    one = np.flatnonzero((known_p > 0).sum(axis=1) == 1)
+    several = np.flatnonzero((known_p > 0).sum(axis=1) > 1)
+    assert len(one) and len(several)
+    for rows in (one[:5], several[:5]):
+        for i in rows:
+            assert_same_bits(
+                small(model).recognize_batch(x[i : i + 1], 3),
+                general(model).recognize_batch(x[i : i + 1], 3),
+            )
+
+
 def test_the_scorer_reads_only_its_frozen_constants(models):
     """The scorer's contract with ``best``: a frozen ``ScoringConstants`` built through the
     parts' public methods; no private field of another object is read in the module."""
