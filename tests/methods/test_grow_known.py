@@ -108,10 +108,12 @@ def test_promotions_append_in_place_and_earlier_forests_answer_as_before():
     # written behind the forest's rows (a fitted forest has room): no row was copied
     for key in ("nodes", "leaf_count", "mixed_ptr"):
         assert np.shares_memory(getattr(grown, key), getattr(forest, key)), key
-    assert np.shares_memory(grown.walk_arrays()[1], forest.walk_arrays()[1])
+    # a forest no promotion grew has no leaf to go on from: its walk looks none up
+    assert forest.walk_arrays()[1].size == 0 and grown.walk_arrays()[1].size > 0
     seen_x, seen_y = np.concatenate([x[old], x[first]]), np.concatenate([y[old], y[first]])
     twice = grown.with_samples(x[second], y[second], OBJECTS, seen_x, seen_y, "sqrt", 1)
     assert np.shares_memory(twice.nodes, forest.nodes)
+    assert np.shares_memory(twice.walk_arrays()[1], grown.walk_arrays()[1])  # in place too
     # the forests before answer as they did: a later promotion's redirects are not theirs
     np.testing.assert_array_equal(forest.predict_proba(x), p0)
     np.testing.assert_array_equal(grown.predict_proba(x), p1)
