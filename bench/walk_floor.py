@@ -21,7 +21,8 @@ graph nodes in the caches where another left them), the median wall time of one 
   answer with these novelty cues costs.
 
 It prints a table with each figure divided by ``answer_us`` at the smallest size (the goal
-is 3x at 30,000 objects) and writes ``walk_floor.json`` with the machine and the commit.
+is 3x at 30,000 objects) and writes ``walk_floor.json`` with the machine and the commit,
+and ``walk_floor.png``, the figures against the number of objects beside the goal.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.scale import machine, parse_sizes
+from bench.scale import finish_plot, machine, parse_sizes
 
 
 def _median_us(fn, xs: np.ndarray) -> float:
@@ -93,6 +94,38 @@ def measure(n: int, repeats: int, rounds: int, approximate_above: int | None) ->
     }
 
 
+def plot(records: list[dict], path: Path) -> None:
+    """The figures of ``records`` against the number of objects, log-log, and the goal: 3x
+    the answer at the smallest size."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = [r["objects"] for r in records]
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    for key, label in (
+        ("answer_us", "answer (small-batch path)"),
+        ("general_us", "answer, general path"),
+        ("walk_us", "forest walk alone"),
+        ("search_us", "graph search alone"),
+    ):
+        pts = [(x, r[key]) for x, r in zip(n, records, strict=True) if r[key] > 0]
+        if pts:
+            ax.loglog(*zip(*pts, strict=True), "o-", label=label)
+    floor = [r["walk_us"] + r["search_us"] for r in records]
+    ax.loglog(n, floor, "k:", label="walk + search alone")
+    ax.axhline(3 * records[0]["answer_us"], color="r", ls="--", label=f"goal: 3x at {n[0]}")
+    finish_plot(
+        fig,
+        path,
+        "known objects N",
+        "µs for one sample",
+        "best: one sample's answer against what its walk and search cost alone",
+        legend_size=8,
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--sizes", default="60,3000")
@@ -133,6 +166,7 @@ def main(argv: list[str] | None = None) -> int:
         (args.out / "walk_floor.json").write_text(
             json.dumps({"machine": machine(), "sizes": records}, indent=1)
         )
+        plot(records, args.out / "walk_floor.png")
     return 0
 
 

@@ -20,6 +20,7 @@ def test_tiny_sizes_give_a_record_each_and_a_table(tmp_path):
         assert r["forest_nodes"] > 0 and 0 < r["walk_us"] and 0 < r["answer_us"]
         assert 0 < r["general_us"] and r["search_us"] == 0.0  # exact below 20,000 samples
     assert "| 12 |" in done.stdout and "answer ÷ at 6" in done.stdout
+    assert (tmp_path / "walk_floor.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_a_model_with_an_index_times_its_search(tmp_path):
