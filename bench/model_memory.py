@@ -72,7 +72,7 @@ def main(argv: list[str] | None = None) -> None:
     array_mb = sum(a.nbytes for a in arrays.values() if isinstance(a, np.ndarray)) / 1e6
     found = list(forests(model))
     records_mb = sum(f.nodes.nbytes for f in found) / 1e6
-    redirects_mb = sum(f.walk_arrays()[1].nbytes for f in found) / 1e6
+    redirects_mb = sum(f.redirect_nbytes for f in found) / 1e6
     print(f"model version {version.version} ({len(model.registry.known_names)} known classes)")
     rss, peak = answered["VmRSS"], answered["VmHWM"]
     print(f"load: {load_s:.1f} s; resident {loaded['VmRSS']:.2f} GB after it, {rss:.2f} GB")

@@ -102,6 +102,12 @@ class FlatForest:
     def n_nodes(self) -> int:
         return len(self.nodes)
 
+    @property
+    def redirect_nbytes(self) -> int:
+        """Bytes of the leaf-redirect buffer this forest holds (``_Redirects``: shared with
+        the forests promotions grow from it in place), whether or not its walk reads it."""
+        return self._redirects.nbytes
+
     def leaf_index(self, leaf_nodes: np.ndarray) -> np.ndarray:
         """The leaf ordinals (rows of ``leaf_count``) of leaf nodes."""
         return self.nodes[leaf_nodes, 2]
@@ -670,6 +676,10 @@ class _Redirects:
             self._buffer[: len(first)] = first
         self._filled = n_leaves
         self._lock = threading.Lock()
+
+    @property
+    def nbytes(self) -> int:
+        return self._buffer.nbytes
 
     def first(self, n_leaves: int) -> np.ndarray:
         """Those of a forest of ``n_leaves`` leaves, read-only."""
