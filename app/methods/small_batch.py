@@ -457,13 +457,13 @@ def _scale_and_walk(
     n_trees = np.float64(roots.shape[0])
     for i in range(n):
         # the classes no tree reached (all but a few hundred of 30,000) stay 0, as 0 /
-        # n_trees is, and rank below every reached one: they are skipped, and only count
-        # as the second largest (0) where one class alone was reached
-        first, second, arg, zero = -np.inf, -np.inf, 0, -1
+        # n_trees is, and rank below every reached one (each tree reaches some): they are
+        # skipped, and only count as the second largest (0) where one class alone was
+        first, second, arg, unreached = -np.inf, -np.inf, 0, False
         for c in range(p.shape[1]):
             v = p[i, c]
             if v == 0.0:
-                zero = c if zero < 0 else zero
+                unreached = True
                 continue
             v = v / n_trees
             p[i, c] = v
@@ -471,10 +471,7 @@ def _scale_and_walk(
                 first, second, arg = v, first, c
             elif v > second:
                 second = v
-        if zero >= 0 and first == -np.inf:  # no class reached (no trees): all are 0
-            first, arg = 0.0, zero
-            second = 0.0 if p.shape[1] > 1 else -np.inf
-        elif zero >= 0:
+        if unreached:
             second = max(second, 0.0)
         top[i, 0], top[i, 1], top[i, 2] = first, second, arg
 
