@@ -4,6 +4,7 @@
     .venv/bin/python -m bench.scale [--sizes 60,300,1000,3000,10000,30000] [--max N]
                                     [--novel 20] [--trials 10] [--seed 0]
                                     [--separation none|phac2] [--out results/scale/]
+                                    [--param NAME=VALUE ...]
 
 For each size N (up to ``--max``) a child process of its own (so each peak RSS is that
 size's alone) simulates ``simulate_dataset(N + novel, trials, seed, separation)``: the
@@ -11,7 +12,8 @@ first N objects are known, the last ``--novel`` are novel. ``--separation phac2`
 the simulator's objects as far apart as PHAC-2's at every size (``bench/separation.py``
 measures it); ``none``, the default, is the simulator as it is, whose objects crowd together
 as N grows. Two whole trials per known object are held out.
-The child fits ``best`` (its defaults, ``n_jobs`` = the cores) on the rest and measures:
+The child fits ``best`` (its defaults, ``n_jobs`` = the cores, each ``--param`` in place of
+a default, its value read as JSON where it parses) on the rest and measures:
 
 - ``fit_s`` and ``fit_peak_gb``: the fit's wall time and the process's peak RSS while it
   ran (read every 0.1 s; the dataset is in memory already), ``bundle_mb``; ``fit_timings``:
@@ -29,7 +31,9 @@ The child fits ``best`` (its defaults, ``n_jobs`` = the cores) on the rest and m
   ``batch_per_sample_us`` and ``throughput_per_s`` for batches of 1,024;
 - ``known_acc``: top-1 among the known objects on the held-out trials, beside ``nn1_acc``,
   a 1-nearest-neighbour classifier on the same scaled inputs (a reference that tells the
-  method's loss from the simulator's objects crowding together), and ``zsl_acc``: the
+  method's loss from the simulator's objects crowding together), ``known_acc_one_procedure``:
+  the same from one exploratory procedure alone (the others missing), the mean over the
+  procedures (what the per-procedure models answer), and ``zsl_acc``: the
   novel objects' samples among the novel classes enrolled by their attribute vectors, and
   ``zsl_by_novel``: the same for the first 10, 100 and 1,000 novel objects (as many as
   ``--novel`` gives), with how many of them could be enrolled (a vector not yet taken);
@@ -56,6 +60,8 @@ from pathlib import Path
 
 import numpy as np
 
+from app.cli.train import parse_params
+
 COSTS = (
     "fit_s",
     "fit_peak_gb",
@@ -75,8 +81,17 @@ def _rss_gb() -> float:
         return int(f.read().split("VmRSS:")[1].split()[0]) / 1e6
 
 
-def measure(n: int, novel: int, trials: int, seed: int, separation: str = "none") -> dict:
-    """Every figure of one size, in this process (``--one``)."""
+def measure(
+    n: int,
+    novel: int,
+    trials: int,
+    seed: int,
+    separation: str = "none",
+    params: dict | None = None,
+) -> dict:
+    """Every figure of one size, in this process (``--one``); ``params``: ``best``'s
+    hyper-parameters in place of its defaults."""
+    from app.data.procedures import block
     from app.data.simulator import simulate_dataset
     from app.framework import bundle
     from app.framework.registry import make_method
@@ -103,8 +118,10 @@ def measure(n: int, novel: int, trials: int, seed: int, separation: str = "none"
 
     threading.Thread(target=watch, daemon=True).start()
     t = time.perf_counter()
-    model = make_method("best", seed=seed, n_jobs=os.cpu_count()).fit(train, progress=True)
+    model = make_method("best", **{"seed": seed, "n_jobs": os.cpu_count(), **(params or {})})
+    model.fit(train, progress=True)
     out: dict = {"objects": n, "separation": separation, "fit_s": time.perf_counter() - t}
+    out["params"] = params or {}
     done.set()
     out["fit_timings"] = dict(model.metrics.get("timings", {}))
     out["by_procedure_s"] = out["fit_timings"].get("by_procedure_s")
@@ -171,6 +188,17 @@ def measure(n: int, novel: int, trials: int, seed: int, separation: str = "none"
         p = model.known_proba(x_test[lo : lo + BLOCK])
         correct += int((p.argmax(axis=1) == y_test[lo : lo + BLOCK]).sum())
     out["known_acc"] = correct / len(x_test)
+    if model.answers_from_some_procedures:
+        alone = []
+        for j in range(len(model.procedures)):
+            right = 0
+            for lo in range(0, len(x_test), BLOCK):
+                x = np.full_like(x_test[lo : lo + BLOCK], np.nan)
+                rows = block(model.procedures, x.shape[1:], j)
+                x[:, rows] = x_test[lo : lo + BLOCK][:, rows]
+                right += int((model.known_proba(x).argmax(axis=1) == y_test[lo : lo + BLOCK]).sum())
+            alone.append(right / len(x_test))
+        out["known_acc_one_procedure"] = float(np.mean(alone))
     out["nn1_acc"] = _nearest_neighbour_accuracy(
         RobustInputScaler().fit(flatten(train.samples)), train, x_test, y_test
     )
@@ -238,6 +266,7 @@ def markdown_rows(records: list[dict], cols: tuple[str, ...], digits: str) -> li
 
 def table(records: list[dict], slopes: dict) -> str:
     cols = ("objects", *COSTS, "by_procedure_s", "throughput_per_s", "known_acc", "nn1_acc")
+    cols += ("known_acc_one_procedure",)
     cols += ("zsl_acc",)
     cols += ("vectors_distinct", "novel_vectors_taken")
     lines = markdown_rows(records, cols, ".3g")
@@ -324,9 +353,21 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
         help="none (the simulator as it is) or phac2 (objects as far apart as PHAC-2's)",
     )
     p.add_argument("--out", default="results/scale")
+    p.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a hyper-parameter of best in place of its default (repeatable), "
+        "e.g. --param procedure_estimators=100",
+    )
     p.add_argument("--one", type=int, help=argparse.SUPPRESS)  # a child's own size
     args = p.parse_args(argv)
     args.sizes = parse_sizes(p, args.sizes)
+    try:
+        args.params = parse_params(args.param)
+    except ValueError as exc:
+        p.error(str(exc))
     if args.max is not None:
         if args.max < args.sizes[0]:
             p.error(f"--max {args.max} is below the smallest size {args.sizes[0]}")
@@ -343,7 +384,8 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     if args.one is not None:
-        print(json.dumps(measure(args.one, args.novel, args.trials, args.seed, args.separation)))
+        record = measure(args.one, args.novel, args.trials, args.seed, args.separation, args.params)
+        print(json.dumps(record))
         return 0
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -353,6 +395,7 @@ def main(argv: list[str] | None = None) -> int:
         cmd = [sys.executable, "-m", "bench.scale", "--one", str(n)]
         cmd += ["--novel", str(args.novel), "--trials", str(args.trials), "--seed", str(args.seed)]
         cmd += ["--separation", args.separation]
+        cmd += [f"--param={item}" for item in args.param]
         done = subprocess.run(cmd, stdout=subprocess.PIPE, text=True)
         if done.returncode != 0:
             print(f"scale: {n} objects failed (exit {done.returncode})", file=sys.stderr)
@@ -362,6 +405,7 @@ def main(argv: list[str] | None = None) -> int:
         report = {
             "machine": machine(),
             "separation": args.separation,
+            "params": args.params,
             "sizes": records,
             "exponents": slopes,
         }
