@@ -376,10 +376,16 @@ class BestRecognizer(TactileRecognizer):
             trees = self._procedure_trees(len(dataset))
             self.procedures_ = ProcedureModels.fit(
                 dataset,
-                lambda: BestRecognizer(
-                    **{**self.get_params(), "by_procedure": False, "n_estimators": trees}
+                lambda jobs: BestRecognizer(
+                    **{
+                        **self.get_params(),
+                        "by_procedure": False,
+                        "n_estimators": trees,
+                        "n_jobs": jobs,
+                    }
                 ),
                 progress,
+                self.n_jobs,
             )
             timings["by_procedure_s"] = time.perf_counter() - t
         timings["total_s"] = time.perf_counter() - t0
@@ -413,7 +419,9 @@ class BestRecognizer(TactileRecognizer):
             rng = np.random.default_rng(int(self.seed))
             keep = np.sort(rng.choice(len(z), int(self.attribute_samples), replace=False))
             z, y = z[keep], y[keep]
-        self.attributes_ = LinearAttributeModel.fit(z, attrs[y], float(self.attribute_C))
+        self.attributes_ = LinearAttributeModel.fit(
+            z, attrs[y], float(self.attribute_C), n_jobs=self.n_jobs
+        )
         self.prior_ = attribute_prior(attrs)
         self.sae_ = (
             semantic_autoencoder(z, impute(attrs, self.prior_)[y], float(self.sae_lambda)).astype(
