@@ -65,10 +65,6 @@ from app.methods.by_procedure import ProcedureModels
 from app.methods.known import CUES, KnownModel, relabelled
 from app.methods.small_batch import ScoringConstants, SmallBatchScorer
 
-#: training samples from which ``procedure_estimators="auto"`` gives each per-procedure
-#: model half the trees (the size from which ``approximate_above`` also approximates)
-HALF_PROCEDURE_TREES_FROM = 20_000
-
 
 def signatures(known_proba: np.ndarray) -> np.ndarray:
     """Known-class posteriors scaled to unit length (the one-shot embedding)."""
@@ -171,25 +167,23 @@ class BestRecognizer(TactileRecognizer):
         samples (``app.methods.by_procedure``), so that a sample lacking some procedures is
         answered from those it holds and every answer says which procedure to do next.
         False answers complete samples only.
-    procedure_estimators : "auto", int or None, default "auto"
+    procedure_estimators : int or None, default None
         Trees of each per-procedure model (``by_procedure``), at most ``n_estimators``;
-        None: ``n_estimators``; "auto": ``n_estimators`` below ``HALF_PROCEDURE_TREES_FROM``
-        (20,000) training samples and half of them from there on. A per-procedure tree has
-        about as many nodes as a whole-model tree (trees grow until their leaves are pure,
-        whatever the features), so P per-procedure models of ``n_estimators`` trees make
-        the bundle and a promotion about 1 + P times the whole model's alone, and the fit
-        3.4 times (1,000 simulated objects). Half the trees halve what the per-procedure
-        models cost; on PHAC-2's development splits (seeds 1-2, 10 splits, the default
-        stopping rule; ``bench/research/explore_stopping.py --params``) 50 answered as 100
-        did (known_acc -0.009 from all procedures with either; 25 trees: -0.017), but on
-        the reported splits (``evaluate --procedures``, seed 1000, 50 splits) the rule's
-        known_acc fell from 0.977 to 0.973, beyond the 0.01 from all procedures the rule is
-        held to; so a catalogue the size of PHAC-2's (600 samples) keeps every tree. From
-        20,000 samples (2,000 objects of 10 trials) on, where the per-procedure models are
-        most of the fit (104 of 166 s at 3,000 simulated objects, 1,440 of 2,120 s at
-        30,000), "auto" takes half: what that costs in accuracy there is measured by
-        ``bench.scale`` (``known_acc_one_procedure``, against ``--param
-        procedure_estimators=100``; docs/BENCHMARKS.md).
+        None: ``n_estimators``. A per-procedure tree has about as many nodes as a
+        whole-model tree (trees grow until their leaves are pure, whatever the features), so
+        P per-procedure models of ``n_estimators`` trees make the bundle and a promotion
+        about 1 + P times the whole model's alone, and the fit 3.4 times (1,000
+        simulated objects). 50 halves what the per-procedure models cost; on PHAC-2's
+        development splits (seeds 1-2, 10 splits, the default stopping rule;
+        ``bench/research/explore_stopping.py --params``) it answered as 100 did (known_acc
+        -0.009 from all procedures with either; 25 trees: -0.017), but on the reported
+        splits (``evaluate --procedures``, seed 1000, 50 splits) the rule's known_acc fell
+        from 0.977 to 0.973, beyond the 0.01 from all procedures the rule is held to. At
+        3,000 simulated objects 50 trees took the fit from 152 to 115 s, and the known-object
+        accuracy from one procedure alone from 0.052 to 0.038 (0.074 to 0.054 with objects
+        as far apart as PHAC-2's; ``bench.scale --param procedure_estimators=100``,
+        docs/BENCHMARKS.md). So the default keeps every tree, and a catalogue whose fit must
+        be cheaper sets it.
     """
 
     method = "best"
@@ -230,7 +224,7 @@ class BestRecognizer(TactileRecognizer):
         "sae_temperature": number(0, include_low=True, allow_bool=False, finite=True),
         "by_procedure": one_of((True, False), "be true or false"),
         "procedure_estimators": either(
-            one_of((None, "auto")), integer(1), must="be 'auto', None or a positive integer"
+            one_of((None,)), integer(1), must="be None or a positive integer"
         ),
         # featurizer_params: checked by building the featurizer (TactileRecognizer)
     }
@@ -258,7 +252,7 @@ class BestRecognizer(TactileRecognizer):
         n_jobs: int | None = 1,
         featurizer_params: dict[str, Any] | None = None,
         by_procedure: bool = True,
-        procedure_estimators: int | str | None = "auto",
+        procedure_estimators: int | None = None,
     ) -> None:
         super().__init__()
         self.seed = seed
@@ -373,7 +367,7 @@ class BestRecognizer(TactileRecognizer):
             t = time.perf_counter()
             # plain best parts, whatever subclass this is: a part sees one procedure's
             # block of the (featurized) samples, not what a subclass's fit expects
-            trees = self._procedure_trees(len(dataset))
+            trees = min(self.procedure_estimators or self.n_estimators, self.n_estimators)
             self.procedures_ = ProcedureModels.fit(
                 dataset,
                 lambda jobs: BestRecognizer(
@@ -400,14 +394,6 @@ class BestRecognizer(TactileRecognizer):
             "timings": timings,
             "params": self.get_params(),
         }
-
-    def _procedure_trees(self, n_samples: int) -> int:
-        """Trees of each per-procedure model fitted on ``n_samples`` training samples (see
-        ``procedure_estimators``)."""
-        n = int(self.n_estimators)
-        if self.procedure_estimators == "auto":
-            return n if n_samples < HALF_PROCEDURE_TREES_FROM else max(1, n // 2)
-        return min(self.procedure_estimators or n, n)
 
     def _fit_attributes(self, z: np.ndarray, y: np.ndarray) -> None:
         """The parts that learn attributes, from the scaled training inputs ``z`` and their

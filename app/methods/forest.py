@@ -105,7 +105,8 @@ class FlatForest:
     @property
     def redirect_nbytes(self) -> int:
         """Bytes of the leaf-redirect buffer this forest holds (``_Redirects``: shared with
-        the forests promotions grow from it in place), whether or not its walk reads it."""
+        the forests promotions grow from it in place; none until a promotion grows one),
+        whether or not its walk reads it."""
         return self._redirects.nbytes
 
     def leaf_index(self, leaf_nodes: np.ndarray) -> np.ndarray:
@@ -667,40 +668,54 @@ class _Redirects:
     promotion points the leaves it replaced at their replacements in place, and a forest
     follows a leaf's replacement only to a node among its own, so it sees no later
     promotion's: the forest before a promotion answers as it did while and after the
-    promotion is built, and the node records themselves are never written."""
+    promotion is built, and the node records themselves are never written.
+
+    The buffer is made at the first redirect: a forest no promotion grew never reads it
+    (its walk skips the lookup), and every process that loads a model holds its forests
+    (1.25 x 4 bytes a leaf, tens of MB a forest at 10,000 objects)."""
 
     def __init__(self, n_leaves: int, first: np.ndarray | None = None) -> None:
         """For ``n_leaves`` leaves, the first as ``first`` says if given, the rest -1."""
-        self._buffer = np.full(n_leaves + n_leaves // 4 + 1, -1, np.int32)
-        if first is not None:
-            self._buffer[: len(first)] = first
+        self._n_leaves = n_leaves
+        self._buffer: np.ndarray | None = None
         self._filled = n_leaves
         self._lock = threading.Lock()
+        if first is not None:
+            self._made()[: len(first)] = first
+
+    def _made(self) -> np.ndarray:
+        with self._lock:
+            if self._buffer is None:
+                n = self._n_leaves
+                self._buffer = np.full(n + n // 4 + 1, -1, np.int32)
+            return self._buffer
 
     @property
     def nbytes(self) -> int:
-        return self._buffer.nbytes
+        return 0 if self._buffer is None else self._buffer.nbytes
 
     def first(self, n_leaves: int) -> np.ndarray:
         """Those of a forest of ``n_leaves`` leaves, read-only."""
-        view = self._buffer[:n_leaves]
+        view = self._made()[:n_leaves]
         view.flags.writeable = False
         return view
 
     def point(self, leaves: np.ndarray, to: np.ndarray) -> None:
-        self._buffer[leaves] = to  # 4-byte stores: a walk reads the old or the new
+        if len(leaves):
+            self._made()[leaves] = to  # 4-byte stores: a walk reads the old or the new
 
     def grown(self, n_old: int, n_leaves: int, n_old_nodes: int) -> _Redirects:
         """For a forest grown from one of ``n_old`` leaves and ``n_old_nodes`` nodes to
         ``n_leaves`` leaves: these, when no forest has grown from those first leaves yet
         and the spare rows suffice, else a copy of the first ``n_old``."""
+        buffer = self._made()
         with self._lock:
-            in_place = self._filled == n_old and n_leaves <= len(self._buffer)
+            in_place = self._filled == n_old and n_leaves <= len(buffer)
             if in_place:
                 self._filled = n_leaves  # a second promotion of the same forest copies
         if in_place:
             return self
-        first = self._buffer[:n_old].copy()
+        first = buffer[:n_old].copy()
         first[first >= n_old_nodes] = -1  # a sibling promotion's, which these are not
         return _Redirects(n_leaves, first)
 

@@ -128,7 +128,7 @@ def test_bundles_carry_the_parameter_names_they_always_had():
     # tests/methods/test_scale_parts.py); by_procedure came with answers from some
     # procedures, and a bundle without it loads as one whole model (False);
     # procedure_estimators came later, and a bundle without it refits its per-procedure
-    # models with n_estimators trees, as it was made (None, not today's "auto")
+    # models with n_estimators trees, as it was made (None)
 
 
 def test_a_constructor_with_kwargs_is_refused():

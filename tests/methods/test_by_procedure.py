@@ -48,9 +48,7 @@ def test_complete_samples_are_answered_as_by_the_whole_model_alone(data, model):
 
 
 def test_each_procedure_model_has_procedure_estimators_trees(data, model):
-    # the default ("auto") on a small catalogue: as many as the whole model's (30 here), and
-    # never more
-    assert model.procedure_estimators == "auto"
+    # the default: as many as the whole model's (30 here), and never more
     assert {m.known_.cues_model.forest.n_trees for m in model.procedures_.models} == {30}
     more = BestRecognizer(**{**PARAMS, "n_estimators": 10}, procedure_estimators=50)
     assert {m.n_estimators for m in more.fit(data[0]).procedures_.models} == {10}
@@ -58,24 +56,6 @@ def test_each_procedure_model_has_procedure_estimators_trees(data, model):
     fewer = BestRecognizer(**PARAMS, procedure_estimators=7).fit(data[0])
     assert {m.known_.cues_model.forest.n_trees for m in fewer.procedures_.models} == {7}
     assert fewer.known_.cues_model.forest.n_trees == 30
-
-
-def test_auto_takes_half_the_trees_from_a_large_training_set(data, monkeypatch):
-    # "auto" follows the training set's size: below HALF_PROCEDURE_TREES_FROM samples every
-    # tree, from there on half (a fit of 20,000 samples is too slow for a test, so the bound
-    # is lowered to this training set's size)
-    train = data[0]
-    model = BestRecognizer(**PARAMS)
-    assert [model._procedure_trees(n) for n in (19_999, 20_000, 300_000)] == [30, 15, 15]
-    assert BestRecognizer(**{**PARAMS, "n_estimators": 1})._procedure_trees(10**6) == 1
-    assert BestRecognizer(**PARAMS, procedure_estimators=None)._procedure_trees(10**6) == 30
-    monkeypatch.setattr("app.methods.best.HALF_PROCEDURE_TREES_FROM", len(train))
-    halved = BestRecognizer(**PARAMS).fit(train)
-    assert {m.known_.cues_model.forest.n_trees for m in halved.procedures_.models} == {15}
-    assert halved.known_.cues_model.forest.n_trees == 30
-    monkeypatch.setattr("app.methods.best.HALF_PROCEDURE_TREES_FROM", len(train) + 1)
-    kept = BestRecognizer(**PARAMS).fit(train)
-    assert {m.known_.cues_model.forest.n_trees for m in kept.procedures_.models} == {30}
 
 
 def test_every_subset_of_procedures_is_answered_from_its_procedures(data, model):

@@ -108,8 +108,12 @@ def test_promotions_append_in_place_and_earlier_forests_answer_as_before():
     # written behind the forest's rows (a fitted forest has room): no row was copied
     for key in ("nodes", "leaf_count", "mixed_ptr"):
         assert np.shares_memory(getattr(grown, key), getattr(forest, key)), key
-    # a forest no promotion grew has no leaf to go on from: its walk looks none up
+    # a forest no promotion grew has no leaf to go on from: its walk looks none up, and it
+    # holds no redirect buffer until a promotion grows from it (then shared, with room)
     assert forest.walk_arrays()[1].size == 0 and grown.walk_arrays()[1].size > 0
+    loaded = FlatForest.from_state(forest.get_state(), OBJECTS - 1, x.shape[1])
+    assert loaded.redirect_nbytes == 0
+    assert forest.redirect_nbytes == grown.redirect_nbytes > 4 * len(grown.leaf_count)
     seen_x, seen_y = np.concatenate([x[old], x[first]]), np.concatenate([y[old], y[first]])
     twice = grown.with_samples(x[second], y[second], OBJECTS, seen_x, seen_y, "sqrt", 1)
     assert np.shares_memory(twice.nodes, forest.nodes)
