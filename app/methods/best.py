@@ -370,16 +370,10 @@ class BestRecognizer(TactileRecognizer):
             trees = min(self.procedure_estimators or self.n_estimators, self.n_estimators)
             self.procedures_ = ProcedureModels.fit(
                 dataset,
-                lambda jobs: BestRecognizer(
-                    **{
-                        **self.get_params(),
-                        "by_procedure": False,
-                        "n_estimators": trees,
-                        "n_jobs": jobs,
-                    }
+                lambda: BestRecognizer(
+                    **{**self.get_params(), "by_procedure": False, "n_estimators": trees}
                 ),
                 progress,
-                self.n_jobs,
             )
             timings["by_procedure_s"] = time.perf_counter() - t
         timings["total_s"] = time.perf_counter() - t0

@@ -74,34 +74,18 @@ class ProcedureModels:
 
     @classmethod
     def fit(
-        cls,
-        dataset: TactileDataset,
-        new_model: Callable[[int], Any],
-        progress: bool = False,
-        n_jobs: int | None = 1,
+        cls, dataset: TactileDataset, new_model: Callable[[], Any], progress: bool = False
     ) -> ProcedureModels:
-        """One model per procedure of ``dataset``: ``new_model(jobs)`` makes each, unfitted,
-        to fit with ``jobs`` parallel jobs of its own. With ``n_jobs`` (joblib's; -1: every
-        core) above 1, that many models are fitted at once, in threads, sharing the jobs:
-        the same models, sooner, since each fit has single-threaded stretches (flattening a
-        forest, the distances) that another's forest fills."""
-        from joblib import Parallel, delayed, effective_n_jobs  # fitting only
-
+        """One model per procedure of ``dataset`` (``new_model()`` makes each, unfitted)."""
         k = dataset.n_classes
         counts = np.bincount(dataset.labels, minlength=k)
         sums = np.zeros((k, int(np.prod(dataset.input_shape))), np.float64)
         np.add.at(sums, dataset.labels, dataset.samples.reshape(len(dataset), -1))
         means = (sums / np.maximum(counts, 1)[:, None]).reshape(k, *dataset.input_shape)
-        jobs = effective_n_jobs(n_jobs)
-        at_once = max(1, min(jobs, len(dataset.procedures)))
-
-        def fitted(j: int) -> Any:
-            model = new_model(max(1, jobs // at_once))
-            return model.fit(dataset.procedure_view(j), progress=progress)
-
-        models = Parallel(n_jobs=at_once, prefer="threads")(
-            delayed(fitted)(j) for j in range(len(dataset.procedures))
-        )
+        models = [
+            new_model().fit(dataset.procedure_view(j), progress=progress)
+            for j in range(len(dataset.procedures))
+        ]
         out = cls(dataset.procedures, models, means, counts, 0)
         out.first = out._first_procedure()
         return out

@@ -179,8 +179,8 @@ def test_a_bundle_keeps_the_per_procedure_models(data, model):
 
 
 def test_parallel_jobs_fit_the_same_models(data, model):
-    # n_jobs fits per-procedure models (and attribute classifiers) side by side in threads:
-    # the models must be the ones a single job fits, bit for bit
+    # n_jobs fits the attribute classifiers side by side in threads (and the forests'
+    # trees): the models must be the ones a single job fits, bit for bit
     train, test, _ = data
     assert model.n_jobs == 1
     parallel = BestRecognizer(**PARAMS, n_jobs=2).fit(train)
@@ -190,4 +190,4 @@ def test_parallel_jobs_fit_the_same_models(data, model):
         np.testing.assert_array_equal(parallel.novelty_score(x), model.novelty_score(x))
         np.testing.assert_array_equal(parallel.attribute_proba(x), model.attribute_proba(x))
     assert parallel.procedures_.first == model.procedures_.first
-    assert [m.n_jobs for m in parallel.procedures_.models] == [1, 1, 1, 1]
+    assert [m.n_jobs for m in parallel.procedures_.models] == [2, 2, 2, 2]
