@@ -150,8 +150,8 @@ class BestRecognizer(TactileRecognizer):
         Weight of the autoencoder's cosine between a sample's projection and a novel
         class's attribute vector, added to DAP's log scores. A non-negative number.
     n_jobs : int or None, default 1
-        Parallel jobs of scikit-learn when the forests are fitted (None: one, -1: every
-        core); recognition never uses them.
+        Parallel jobs of scikit-learn when the forests are fitted, and attribute classifiers
+        fitted at once (None: one, -1: every core); recognition never uses them.
     featurizer_params : dict or None, default None
         Options of the ``TactileImageFeaturizer`` fitted when ``fit`` is given raw BioTac
         trials (``app.framework.tactile_image.featurizer_from_params``: any of n_steps,
@@ -179,9 +179,9 @@ class BestRecognizer(TactileRecognizer):
         -0.009 from all procedures with either; 25 trees: -0.017), but on the reported
         splits (``evaluate --procedures``, seed 1000, 50 splits) the rule's known_acc fell
         from 0.977 to 0.973, beyond the 0.01 from all procedures the rule is held to. At
-        3,000 simulated objects 50 trees took the fit from 152 to 115 s, and the known-object
+        3,000 simulated objects 50 trees took the fit from 165 to 120 s, and the known-object
         accuracy from one procedure alone from 0.052 to 0.038 (0.074 to 0.054 with objects
-        as far apart as PHAC-2's; ``bench.scale --param procedure_estimators=100``,
+        as far apart as PHAC-2's; ``bench.scale --param procedure_estimators=50``,
         docs/BENCHMARKS.md). So the default keeps every tree, and a catalogue whose fit must
         be cheaper sets it.
     """
