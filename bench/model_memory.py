@@ -7,8 +7,8 @@ this fresh process as the model holder loads it (``bundles.load_model`` through 
 ``DIR`` is a service's data folder (``tactile-zsl serve --data-dir``; ``bench.scale_service
 --keep`` keeps one). Printed: resident memory after the load and after the recognition,
 the peak (Linux's ``VmRSS`` / ``VmHWM``), the bytes of the model's arrays (what its bundle
-holds, decoded), of its forests' node records among them, and of the leaf redirects its
-forests make when loaded.
+holds, decoded), of its forests' node records among them, and of the leaf-redirect buffers
+its forests hold (none until a promotion grows a forest: ``app.methods.forest._Redirects``).
 """
 
 from __future__ import annotations
@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> None:
     print(f"load: {load_s:.1f} s; resident {loaded['VmRSS']:.2f} GB after it, {rss:.2f} GB")
     print(f"after one recognition, peak {peak:.2f} GB")
     print(f"model arrays {array_mb:.3f} MB, of which forest node records {records_mb:.3f} MB")
-    print(f"forest leaf redirects (made at load) {redirects_mb:.3f} MB")
+    print(f"forest leaf redirects (made by promotions) {redirects_mb:.3f} MB")
 
 
 if __name__ == "__main__":
