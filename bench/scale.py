@@ -91,7 +91,7 @@ def measure(
 ) -> dict:
     """Every figure of one size, in this process (``--one``); ``params``: ``best``'s
     hyper-parameters in place of its defaults."""
-    from app.data.procedures import block
+    from app.data.procedures import keep_only
     from app.data.simulator import simulate_dataset
     from app.framework import bundle
     from app.framework.registry import make_method
@@ -183,22 +183,16 @@ def measure(
             "zsl": float((np.asarray(chosen)[p.argmax(axis=1)] == y_novel[rows]).mean()),
         }
 
-    correct = 0
-    for lo in range(0, len(x_test), BLOCK):
-        p = model.known_proba(x_test[lo : lo + BLOCK])
-        correct += int((p.argmax(axis=1) == y_test[lo : lo + BLOCK]).sum())
-    out["known_acc"] = correct / len(x_test)
+    out["known_acc"] = _known_accuracy(model, x_test, y_test)
     if model.answers_from_some_procedures:
-        alone = []
-        for j in range(len(model.procedures)):
-            right = 0
-            for lo in range(0, len(x_test), BLOCK):
-                x = np.full_like(x_test[lo : lo + BLOCK], np.nan)
-                rows = block(model.procedures, x.shape[1:], j)
-                x[:, rows] = x_test[lo : lo + BLOCK][:, rows]
-                right += int((model.known_proba(x).argmax(axis=1) == y_test[lo : lo + BLOCK]).sum())
-            alone.append(right / len(x_test))
-        out["known_acc_one_procedure"] = float(np.mean(alone))
+        out["known_acc_one_procedure"] = float(
+            np.mean(
+                [
+                    _known_accuracy(model, keep_only(x_test, model.procedures, [j]), y_test)
+                    for j in range(len(model.procedures))
+                ]
+            )
+        )
     out["nn1_acc"] = _nearest_neighbour_accuracy(
         RobustInputScaler().fit(flatten(train.samples)), train, x_test, y_test
     )
@@ -217,6 +211,16 @@ def measure(
     per = (time.perf_counter() - t) / len(batch)
     out["batch_per_sample_us"], out["throughput_per_s"] = per * 1e6, 1.0 / per
     return out
+
+
+def _known_accuracy(model, x: np.ndarray, y: np.ndarray) -> float:
+    """Top-1 of ``model.known_proba`` on samples ``x`` of known classes ``y``, ``BLOCK``
+    samples at a time (a block's posteriors are BLOCK x K)."""
+    correct = 0
+    for lo in range(0, len(x), BLOCK):
+        p = model.known_proba(x[lo : lo + BLOCK])
+        correct += int((p.argmax(axis=1) == y[lo : lo + BLOCK]).sum())
+    return correct / len(x)
 
 
 def _nearest_neighbour_accuracy(scaler, train, x_test, y_test) -> float:

@@ -12,7 +12,7 @@ FIELDS = (
     "objects", "fit_s", "fit_peak_gb", "bundle_mb", "enrol_ms", "one_shot_ms", "promote_s",
     "recognise_1_us", "batch_per_sample_us", "throughput_per_s", "known_acc", "nn1_acc",
     "zsl_acc", "vectors_distinct", "novel_vectors_taken", "separation", "fit_timings",
-    "by_procedure_s",
+    "by_procedure_s", "known_acc_one_procedure",
 )  # fmt: skip
 
 
@@ -21,7 +21,8 @@ run = functools.partial(run_bench, "bench.scale")
 
 def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
     done = run("--sizes", "12,24,40", "--max", "24", "--novel", "12", "--trials", "4",
-               "--separation", "phac2", "--out", str(tmp_path))  # fmt: skip
+               "--separation", "phac2", "--param", "procedure_estimators=7",
+               "--out", str(tmp_path))  # fmt: skip
     assert done.returncode == 0, done.stderr[-3000:]
     report = json.loads((tmp_path / "scale.json").read_text())
     assert [r["objects"] for r in report["sizes"]] == [12, 24]  # --max stops before 40
@@ -32,7 +33,7 @@ def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
         assert r["separation"] == "phac2"
         assert 0 < r["fit_timings"]["total_s"] <= r["fit_s"]  # the model's own breakdown
         assert r["by_procedure_s"] == r["fit_timings"].get("by_procedure_s")
-        for acc in ("known_acc", "nn1_acc", "zsl_acc"):
+        for acc in ("known_acc", "nn1_acc", "zsl_acc", "known_acc_one_procedure"):
             assert 0.0 <= r[acc] <= 1.0
         assert r["vectors_distinct"] <= r["objects"]
         assert 0 < r["zsl_by_novel"]["10"]["enrolled"] <= 10  # 100 and 1,000: beyond --novel
@@ -40,6 +41,7 @@ def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
     assert set(report["exponents"]) >= {"fit_s", "fit_peak_gb", "recognise_1_us"}
     assert report["machine"]["cpus"] >= 1 and report["machine"]["commit"]
     assert report["separation"] == "phac2"
+    assert report["params"] == {"procedure_estimators": 7}  # the value read as JSON
     assert done.stdout.startswith("| objects | fit_s |") and "| exponent |" in done.stdout
     assert "| by_procedure_s |" in done.stdout.splitlines()[0]
     assert (tmp_path / "scale.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -52,6 +54,7 @@ def test_bad_arguments_exit_2_with_a_message(tmp_path):
         (("--sizes", "60,300", "--max", "10"), "below the smallest size"),
         (("--trials", "3"), "--trials at least 4"),
         (("--separation", "far"), "--separation takes none or phac2"),
+        (("--param", "trees"), "--param expects NAME=VALUE"),
     ):
         done = run(*args, "--out", str(tmp_path))
         assert done.returncode == 2 and words in done.stderr, (args, done.stderr)
