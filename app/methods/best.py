@@ -134,13 +134,21 @@ class BestRecognizer(TactileRecognizer):
         λ of the semantic autoencoder (Kodirov et al., 2017) that projects samples onto
         attribute space for zero-shot scores, beside DAP; 0 leaves DAP alone. A
         non-negative number.
+    forest_grower : {"gini", "sklearn"}, default "gini"
+        How the forests are grown (``FlatForest.grow``). "gini": extremely randomised
+        trees with the exact Gini criterion, compiled (``app.methods.gini_trees``), at a
+        cost that does not depend on the number of classes, each leaf then given the class
+        distribution of the training samples that reach it. "sklearn": scikit-learn's
+        extra trees, as ``best`` grew them before 2026-11-27 (``forest_codes``). At 3,000
+        simulated objects "gini" grows a per-procedure forest in about half the time
+        (docs/BENCHMARKS.md "Scale in objects").
     forest_codes : int, default 32
-        The forest is grown as scikit-learn's extra-trees regressor on a random Gaussian
-        code of this many dimensions per class, its leaves then given the class distribution
-        of the training samples that reach them (``FlatForest.grow``): time and memory grow
-        with the samples, not with samples x classes. 0 grows scikit-learn's extra-trees
-        classifier instead, which keeps a class distribution in every node (out of memory
-        near 2,000 objects on 24 GB). A non-negative integer.
+        With ``forest_grower`` "sklearn": the forest is grown as scikit-learn's extra-trees
+        regressor on a random Gaussian code of this many dimensions per class, its leaves
+        then given the class distribution of the training samples that reach them: time
+        and memory grow with the samples, not with samples x classes. 0 grows
+        scikit-learn's extra-trees classifier instead, which keeps a class distribution in
+        every node (out of memory near 2,000 objects on 24 GB). A non-negative integer.
     approximate_above : int, default 20000
         Above this many training samples the nearest-sample distances of the novelty score
         are found through an HNSW graph (``app.methods.neighbours``) instead of by
@@ -215,6 +223,7 @@ class BestRecognizer(TactileRecognizer):
         "top_weight": number(0, include_low=True, allow_bool=False),
         "tuning_rounds": integer(1),
         "tuning_objects": integer(0, "be a non-negative integer (0 = every round)"),
+        "forest_grower": one_of(("gini", "sklearn")),
         "forest_codes": integer(0, "be a non-negative integer (0 = classifier)"),
         "approximate_above": integer(0, "be a non-negative integer (0 = exact)"),
         "distance_components": integer(
@@ -245,6 +254,7 @@ class BestRecognizer(TactileRecognizer):
         tuning_rounds: int = 3,
         tuning_objects: int = 100,
         distance_components: int = 64,
+        forest_grower: str = "gini",
         forest_codes: int = 32,
         approximate_above: int = 20000,
         sae_lambda: float = 400.0,
@@ -269,6 +279,7 @@ class BestRecognizer(TactileRecognizer):
         self.tuning_rounds = tuning_rounds
         self.tuning_objects = tuning_objects
         self.distance_components = distance_components
+        self.forest_grower = forest_grower
         self.forest_codes = forest_codes
         self.approximate_above = approximate_above
         self.sae_lambda = sae_lambda
@@ -294,6 +305,7 @@ class BestRecognizer(TactileRecognizer):
             int(self.seed),
             self.n_jobs,
             int(self.distance_components),
+            str(self.forest_grower),
             int(self.forest_codes),
             int(self.approximate_above),
         )
@@ -576,6 +588,7 @@ class BestRecognizer(TactileRecognizer):
     def set_state(self, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
         ensure_threads_configured()  # the default thread limits, where no entry point chose them
         self.distance_components = 0  # bundles made before the parameter measure exact distances
+        self.forest_grower = "sklearn"  # and those made before it grew scikit-learn's trees
         self.forest_codes = 0  # and those made before it hold a classifier's forest
         self.approximate_above = 0  # and no neighbour index
         self.tuning_objects = 0

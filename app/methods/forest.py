@@ -31,6 +31,7 @@ import numpy as np
 from numba import njit
 
 from app.framework.growing import ByBuffer, appended, with_room
+from app.methods.gini_trees import grow_trees
 from app.methods.leaf_trees import LeafTree, grow_leaf
 
 _KEYS = ("nodes", "roots", "mixed_ptr", "mixed_class", "mixed_value", "leaf_count")
@@ -220,10 +221,17 @@ class FlatForest:
         max_features: Any,
         seed: int,
         n_jobs: int | None,
-        codes: int,
+        grower: str = "gini",
+        codes: int = 32,
         trees_at_once: int = 10,
     ) -> FlatForest:
         """Extremely randomised trees on samples ``x`` (N, D) of classes ``y`` in 0 … K-1.
+
+        ``grower`` "gini" (the default): ``gini_trees.grow_trees``, compiled, the exact Gini
+        criterion at a cost that does not depend on K, ``n_jobs`` trees at a time; each
+        leaf then gets the class distribution of the training samples that reach it, kept
+        sparsely, so memory is linear in N. ``codes`` and ``trees_at_once`` apply to
+        ``grower`` "sklearn" alone, scikit-learn's extra trees, as fitted before 2026-11-27.
 
         With ``codes`` = 0, scikit-learn's ``ExtraTreesClassifier``: its trees keep a K-wide
         class distribution in every node while they grow, so time and memory grow with N x K
@@ -238,6 +246,18 @@ class FlatForest:
         """
         from sklearn.ensemble import ExtraTreesClassifier, ExtraTreesRegressor
 
+        if grower not in ("gini", "sklearn"):
+            raise ValueError(f"grower must be 'gini' or 'sklearn', not {grower!r}")
+        if grower == "gini":
+            arrays = _ForestArrays()
+            y = np.asarray(y, np.int64)
+            for tree in grow_trees(x, y, n_classes, n_estimators, max_features, seed, n_jobs):
+                leaf_number = np.cumsum(tree.children_left < 0) - 1  # node -> leaf ordinal
+                reached_leaf = leaf_number[tree.leaf_of_sample]
+                rows, cols, values = _leaf_distributions(reached_leaf, y, n_classes)
+                n_leaves = int(leaf_number[-1]) + 1
+                arrays.add(tree, rows, cols, values, np.bincount(reached_leaf, minlength=n_leaves))
+            return cls(arrays.done(), n_classes, x.shape[1])
         if codes == 0:
             et = ExtraTreesClassifier(
                 n_estimators=n_estimators,

@@ -134,14 +134,16 @@ class ForestCues:
         seed: int,
         n_jobs: int | None,
         components: int = 0,
+        grower: str = "gini",
         codes: int = 0,
         approximate_above: int = 0,
     ) -> ForestCues:
-        """``codes``: ``FlatForest.grow``'s; ``approximate_above``: ``ReferenceDistances.fit``'s."""
+        """``grower``, ``codes``: ``FlatForest.grow``'s; ``approximate_above``:
+        ``ReferenceDistances.fit``'s."""
         scaler = RobustInputScaler().fit(x)
         z = scaler.transform(x)
         forest = FlatForest.grow(
-            z, y, n_classes, n_estimators, max_features, seed, n_jobs, codes=codes
+            z, y, n_classes, n_estimators, max_features, seed, n_jobs, grower, codes
         )
         w = fisher_weights(z, y, n_classes)
         distances = ReferenceDistances.fit(z * w, components, approximate_above)
@@ -753,6 +755,7 @@ class KnownModel:
         seed: int,
         n_jobs: int | None,
         components: int = 0,
+        grower: str = "gini",
         codes: int = 0,
         approximate_above: int = 0,
     ) -> KnownModel:
@@ -766,6 +769,7 @@ class KnownModel:
             seed,
             n_jobs,
             components,
+            grower,
             codes,
             approximate_above,
         )

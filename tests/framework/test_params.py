@@ -118,7 +118,7 @@ def test_bundles_carry_the_parameter_names_they_always_had():
         "seed", "n_estimators", "max_features", "attribute_C", "attribute_samples", "dap_clip",
         "shot_temperature", "knn_weight", "top_weight", "novelty_val_fraction",
         "novelty_holdout_trials",
-        "tuning_rounds", "tuning_objects", "distance_components", "forest_codes",
+        "tuning_rounds", "tuning_objects", "distance_components", "forest_grower", "forest_codes",
         "approximate_above", "sae_lambda", "sae_temperature", "n_jobs", "featurizer_params",
         "by_procedure", "procedure_estimators",
     ]  # fmt: skip
@@ -128,7 +128,8 @@ def test_bundles_carry_the_parameter_names_they_always_had():
     # tests/methods/test_scale_parts.py); by_procedure came with answers from some
     # procedures, and a bundle without it loads as one whole model (False);
     # procedure_estimators came later, and a bundle without it refits its per-procedure
-    # models with n_estimators trees, as it was made (None)
+    # models with n_estimators trees, as it was made (None); forest_grower came with the
+    # compiled Gini grower, and a bundle without it grows scikit-learn's trees ("sklearn")
 
 
 def test_a_constructor_with_kwargs_is_refused():

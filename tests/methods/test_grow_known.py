@@ -44,7 +44,7 @@ def _one_new_class():
     x = ds.samples.reshape(len(ds.samples), -1)[train]
     y = ds.labels[train]
     old = y < OBJECTS - 1
-    return x, y, old, FlatForest.grow(x[old], y[old], OBJECTS - 1, 20, "sqrt", 0, 1, codes=8)
+    return x, y, old, FlatForest.grow(x[old], y[old], OBJECTS - 1, 20, "sqrt", 0, 1)
 
 
 def test_grown_forest_keeps_what_it_knew_and_learns_the_new_class():

@@ -43,13 +43,15 @@ def test_leaf_distributions_are_each_leafs_class_shares():
 def test_code_forest_leaves_are_pure_and_it_classifies_like_the_classifier(sim):
     ds, z, test = sim
     y = ds.labels
-    grown = FlatForest.grow(z[~test], y[~test], 40, 60, "sqrt", 0, 1, codes=32, trees_at_once=7)
+    grown = FlatForest.grow(
+        z[~test], y[~test], 40, 60, "sqrt", 0, 1, "sklearn", codes=32, trees_at_once=7
+    )
     assert grown.n_trees == 60  # grown 7 at a time, the last chunk smaller
     # distinct samples end in leaves of one class: the training samples are recognised
     assert (grown.predict_proba(z[~test]).argmax(axis=1) == y[~test]).all()
     leaves = grown.nodes[:, 0] < 0
     assert (grown.nodes[leaves, 3] >= 0).all() and len(grown.mixed_class) == 0
-    classifier = FlatForest.grow(z[~test], y[~test], 40, 60, "sqrt", 0, 1, codes=0)
+    classifier = FlatForest.grow(z[~test], y[~test], 40, 60, "sqrt", 0, 1, "sklearn", codes=0)
     acc = {
         name: (f.predict_proba(z[test]).argmax(axis=1) == y[test]).mean()
         for name, f in (("codes", grown), ("classifier", classifier))
@@ -64,9 +66,9 @@ def test_code_forest_leaves_are_pure_and_it_classifies_like_the_classifier(sim):
 def test_code_forest_is_reproducible_from_its_seed(sim):
     ds, z, test = sim
     args = (z[~test], ds.labels[~test], 40, 12, "sqrt")
-    a = FlatForest.grow(*args, 5, 1, codes=16)
-    b = FlatForest.grow(*args, 5, 1, codes=16)
-    c = FlatForest.grow(*args, 6, 1, codes=16)
+    a = FlatForest.grow(*args, 5, 1, "sklearn", codes=16)
+    b = FlatForest.grow(*args, 5, 1, "sklearn", codes=16)
+    c = FlatForest.grow(*args, 6, 1, "sklearn", codes=16)
     assert a.predict_proba(z[test]).tobytes() == b.predict_proba(z[test]).tobytes()
     assert a.predict_proba(z[test]).tobytes() != c.predict_proba(z[test]).tobytes()
 
@@ -211,12 +213,14 @@ def test_a_bundle_without_the_new_parameters_loads_as_what_it_was_made_with(inde
     model, _ = indexed_model
     meta, arrays = model.get_state()
     names = ("forest_codes", "approximate_above", "tuning_objects", "attribute_samples")
-    for name in names:
+    for name in (*names, "forest_grower"):
         meta["params"].pop(name)
     fresh = make_method("best")
     fresh.registry, fresh.input_shape = model.registry, model.input_shape
     fresh.set_state(meta, arrays)
     assert [fresh.get_params()[name] for name in names] == [0, 0, 0, 0]
+    # grown by scikit-learn, as every bundle before the compiled grower: a refit grows so
+    assert fresh.get_params()["forest_grower"] == "sklearn"
 
 
 def test_enrolment_shares_the_fitted_parts_instead_of_copying_them(indexed_model):
