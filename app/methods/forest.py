@@ -1,7 +1,8 @@
-"""A fitted scikit-learn tree ensemble as plain int/float arrays, with its own inference.
+"""A tree ensemble as plain int/float arrays, with its own inference.
 
-Model bundles hold only JSON and numeric arrays (no pickle), so a fitted
-``ExtraTreesClassifier`` is flattened into one record per node, the trees one after
+Trees are grown by ``gini_trees`` (the default) or by scikit-learn (``FlatForest.grow``).
+Model bundles hold only JSON and numeric arrays (no pickle), so a grown forest is
+flattened into one record per node, the trees one after
 another (``_packed``: split feature, float32 threshold, children; 16 bytes). A leaf's
 record holds its answer: the class of a leaf whose samples are all of one class (every
 leaf of a fitted forest, grown until its leaves are pure), or the number of its class
