@@ -253,11 +253,7 @@ class FlatForest:
             arrays = _ForestArrays()
             y = np.asarray(y, np.int64)
             for tree in grow_trees(x, y, n_classes, n_estimators, max_features, seed, n_jobs):
-                leaf_number = np.cumsum(tree.children_left < 0) - 1  # node -> leaf ordinal
-                reached_leaf = leaf_number[tree.leaf_of_sample]
-                rows, cols, values = _leaf_distributions(reached_leaf, y, n_classes)
-                n_leaves = int(leaf_number[-1]) + 1
-                arrays.add(tree, rows, cols, values, np.bincount(reached_leaf, minlength=n_leaves))
+                arrays.add_reached(tree, tree.leaf_of_sample, y, n_classes)
             return cls(arrays.done(), n_classes, x.shape[1])
         if codes == 0:
             et = ExtraTreesClassifier(
@@ -284,12 +280,7 @@ class FlatForest:
             ).fit(x, target)
             reached = et.apply(x)  # (N, trees) node each training sample ends in
             for j, est in enumerate(et.estimators_):
-                t = est.tree_
-                leaf_number = np.cumsum(t.children_left < 0) - 1  # node -> its leaf's ordinal
-                reached_leaf = leaf_number[reached[:, j]]
-                rows, cols, values = _leaf_distributions(reached_leaf, y, n_classes)
-                n_leaves = int(leaf_number[-1]) + 1
-                arrays.add(t, rows, cols, values, np.bincount(reached_leaf, minlength=n_leaves))
+                arrays.add_reached(est.tree_, reached[:, j], y, n_classes)
             del et, reached
         return cls(arrays.done(), n_classes, x.shape[1])
 
@@ -479,6 +470,15 @@ class _ForestArrays:
         self.offset += n
         self.n_leaves += leaves
         self.n_mixed += len(sizes)
+
+    def add_reached(self, tree: Any, reached: np.ndarray, y: np.ndarray, n_classes: int) -> None:
+        """A grown tree whose training samples, of classes ``y``, ended in nodes
+        ``reached``: each leaf gets the class shares of the samples that reached it."""
+        leaf_number = np.cumsum(tree.children_left < 0) - 1  # node -> its leaf's ordinal
+        reached_leaf = leaf_number[reached]
+        rows, cols, values = _leaf_distributions(reached_leaf, y, n_classes)
+        n_leaves = int(leaf_number[-1]) + 1
+        self.add(tree, rows, cols, values, np.bincount(reached_leaf, minlength=n_leaves))
 
     def done(self) -> dict[str, np.ndarray]:
         # with room behind them: a promotion appends to them without copying (``_Grown``)

@@ -35,9 +35,8 @@ import numpy as np
 from joblib import Parallel, delayed
 from numba import njit
 
-from app.methods.leaf_trees import n_split_features
+from app.methods.leaf_trees import FEATURE_THRESHOLD, n_split_features
 
-_CONSTANT = 1e-7  # scikit-learn's FEATURE_THRESHOLD: a feature this flat does not split
 #: a node of at most this many samples grows its subtree from a block of its own (measured
 #: at 32, 64, 128, 256 and 1,024: 64 was fastest on 240 and on 960 features)
 _LOCAL = 64
@@ -193,7 +192,7 @@ def _split_nodes(rows, order, labels, ids, first, end, root, count, tries, small
                 v = row[order[i]]
                 values[i] = v
                 lo, hi = min(lo, v), max(hi, v)
-            if hi <= lo + _CONSTANT:
+            if hi <= lo + FEATURE_THRESHOLD:
                 continue  # constant here: does not count as tried
             found += 1
             t = np.float32(lo + np.random.random() * (hi - lo))

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-_CONSTANT = 1e-7  # scikit-learn's FEATURE_THRESHOLD: a feature this flat does not split
+FEATURE_THRESHOLD = 1e-7  # scikit-learn's: a feature this flat does not split
 
 
 @dataclass(frozen=True)
@@ -109,7 +109,7 @@ def _grow(x, y, k, tries, seed):
             for i in range(s, e):
                 v = x[order[i], f]
                 lo, hi = min(lo, v), max(hi, v)
-            if hi <= lo + _CONSTANT:
+            if hi <= lo + FEATURE_THRESHOLD:
                 continue  # constant here: does not count as tried
             found += 1
             t = lo + np.random.random() * (hi - lo)
