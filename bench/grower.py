@@ -17,21 +17,12 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
+from bench.featurize import median_ms
 from bench.scale import machine
-
-
-def _median_s(fn, rounds: int) -> float:
-    times = []
-    for _ in range(rounds):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return float(np.median(times))
 
 
 def measure(n_objects: int, trees: int, rounds: int) -> list[dict]:
@@ -55,13 +46,13 @@ def measure(n_objects: int, trees: int, rounds: int) -> list[dict]:
         train, labels = z[~test], y[~test]
         codes = np.random.default_rng(0).standard_normal((ds.n_classes, 32))[labels]
         record = {"objects": n_objects, "features": name, "dims": z.shape[1], "trees": trees}
-        record["gini_s"] = _median_s(
+        record["gini_s"] = 1e-3 * median_ms(
             lambda train=train, labels=labels: list(
                 grow_trees(train, labels, ds.n_classes, trees, "sqrt", 0, n_jobs=1)
             ),
             rounds,
         )
-        record["sklearn_s"] = _median_s(
+        record["sklearn_s"] = 1e-3 * median_ms(
             lambda train=train, codes=codes: ExtraTreesRegressor(
                 trees, max_features="sqrt", random_state=0, n_jobs=1
             ).fit(train, codes),
