@@ -72,7 +72,7 @@ from app.framework.results import (
     ranked,
     rows_batch,
 )
-from app.framework.runtime import ensure_threads_configured
+from app.framework.runtime import configure_heap, ensure_threads_configured
 from app.framework.some_procedures import (
     MIN_PROCEDURES,
     TARGET_CONFIDENCE,
@@ -199,6 +199,7 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
         if len(dataset) == 0:
             raise NotFittedError("cannot fit on an empty dataset")
         ensure_threads_configured()  # the default thread limits, where no entry point chose them
+        configure_heap()  # a fit's freed arrays go back to the system
         attributes = self._training_attributes(dataset)
         self.input_shape = dataset.input_shape
         self.featurizer_ = featurizer

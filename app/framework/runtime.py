@@ -27,6 +27,8 @@ import sys
 from threadpoolctl import threadpool_limits
 
 _threads: int | None = None  # what the process was configured with; None: not yet
+_heap: bool | None = None  # whether configure_heap took; None: not called yet
+_M_MMAP_THRESHOLD, _MMAP_FROM = -3, 1 << 20  # glibc's malloc.h: mallopt's parameter, 1 MiB
 
 
 def configure_threads(threads: int | None = None) -> int:
@@ -50,6 +52,27 @@ def ensure_threads_configured() -> None:
     and loading a recognizer call, for processes whose entry point did not."""
     if _threads is None:
         configure_threads()
+
+
+def configure_heap() -> bool:
+    """Arrays of 1 MiB and more get memory mappings of their own, given back to the
+    system when freed (glibc's ``mallopt``; elsewhere nothing). glibc raises its mapping
+    threshold as large blocks are freed, up to 32 MiB, so that a fit's arrays of a few MiB
+    (a tree's nodes, a block of scores) then come from the heap, whose freed pages stay
+    resident: the peak RSS of ``best``'s fit on 3,000 simulated objects was 1.63 GB with
+    glibc's default and 1.45 GB with this (2026-11-27). Fitting a recognizer calls it; once
+    a process has called it, later calls change nothing. Returns whether it took."""
+    global _heap
+    if _heap is None:
+        import ctypes
+
+        try:
+            mallopt = ctypes.CDLL(None).mallopt  # the C library this process runs on
+        except (OSError, TypeError, AttributeError):  # not glibc
+            _heap = False
+        else:
+            _heap = bool(mallopt(_M_MMAP_THRESHOLD, _MMAP_FROM))
+    return _heap
 
 
 def configure_torch() -> None:

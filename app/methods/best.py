@@ -180,8 +180,8 @@ class BestRecognizer(TactileRecognizer):
         None: ``n_estimators``. A per-procedure tree has about as many nodes as a
         whole-model tree (trees grow until their leaves are pure, whatever the features), so
         P per-procedure models of ``n_estimators`` trees make the bundle and a promotion
-        about 1 + P times the whole model's alone, and the fit 3.4 times (1,000
-        simulated objects). 50 halves what the per-procedure models cost; on PHAC-2's
+        about 1 + P times the whole model's alone. Measured with ``forest_grower``
+        "sklearn" (1feb499): 50 halves what the per-procedure models cost; on PHAC-2's
         development splits (seeds 1-2, 10 splits, the default stopping rule;
         ``bench/research/explore_stopping.py --params``) it answered as 100 did (known_acc
         -0.009 from all procedures with either; 25 trees: -0.017), but on the reported
@@ -189,9 +189,8 @@ class BestRecognizer(TactileRecognizer):
         from 0.977 to 0.973, beyond the 0.01 from all procedures the rule is held to. At
         3,000 simulated objects 50 trees took the fit from 165 to 120 s, and the known-object
         accuracy from one procedure alone from 0.052 to 0.038 (0.074 to 0.054 with objects
-        as far apart as PHAC-2's; ``bench.scale --param procedure_estimators=50``,
-        docs/BENCHMARKS.md). So the default keeps every tree, and a catalogue whose fit must
-        be cheaper sets it.
+        as far apart as PHAC-2's; ``bench.scale --param procedure_estimators=50``).
+        So the default keeps every tree, and a catalogue whose fit must be cheaper sets it.
     """
 
     method = "best"

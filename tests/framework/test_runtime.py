@@ -93,3 +93,38 @@ print(json.dumps(seen()))
 """
     )
     assert seen["chosen"] == 1 and seen["blas"] == [1], seen
+
+
+HEAP = """
+import json, numpy as np
+from app.framework import runtime
+def rss():
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * 4096
+took = runtime.configure_heap() if CONFIGURE else None
+large = np.ones(16 << 20, np.uint8)
+del large  # a large block freed: glibc raises its threshold past 2 MiB
+blocks = [np.ones(2 << 20, np.uint8) for _ in range(100)]  # 200 MiB, resident
+before = rss()
+del blocks[::2]  # every other one freed: none next to another, none at the heap's top
+print(json.dumps({"took": took, "given_back_mib": (before - rss()) / 2**20}))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's allocator")
+def test_a_fits_freed_arrays_go_back_to_the_system():
+    """glibc keeps freed 2 MiB blocks resident once a larger block was freed; with
+    configure_heap (what a fit calls) they have mappings of their own and go back."""
+    configured = _run("CONFIGURE = True\n" + HEAP)
+    default = _run("CONFIGURE = False\n" + HEAP)
+    assert configured["took"] is True
+    assert configured["given_back_mib"] > 80 and default["given_back_mib"] < 20, (
+        configured,
+        default,
+    )
+    seen = _run(
+        "import json\nfrom app.framework import runtime\n"
+        + FIT_A_SMALL_PAPER_MODEL
+        + "print(json.dumps({'heap': runtime._heap}))"
+    )
+    assert seen["heap"] is True  # a fit configured it
