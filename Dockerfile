@@ -23,9 +23,10 @@ RUN pip install . && python -c "import app.api.main, worker, migrations"
 
 RUN useradd --create-home --uid 10001 tactile && mkdir /data && chown tactile /data
 USER tactile
-# The forest walk, nearest-trial pass and small-batch kernels are compiled by numba on first
-# use and cached under the user's home (site-packages is read-only to this user); a small
-# training run and one recognition fill that cache now, so the first start does not compile.
+# The tree grower, forest walk, nearest-trial pass and small-batch kernels are compiled by
+# numba on first use and cached under the user's home (site-packages is read-only to this
+# user); a small training run and one recognition fill that cache now, so the first start
+# does not compile.
 ENV NUMBA_CACHE_DIR=/home/tactile/.cache/numba
 RUN tactile-zsl train --dataset simulated:6 --out /tmp/warm.bundle --quiet \
     && python -c "import numpy as np; np.save('/tmp/one.npy', np.zeros((1, 32, 30), np.float32))" \
