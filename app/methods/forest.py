@@ -245,8 +245,6 @@ class FlatForest:
         kept sparsely, so memory is linear in N. Trees are grown ``trees_at_once`` at a time
         and flattened, so scikit-learn's node values of only that many trees are held.
         """
-        from sklearn.ensemble import ExtraTreesClassifier, ExtraTreesRegressor
-
         if grower not in ("gini", "sklearn"):
             raise ValueError(f"grower must be 'gini' or 'sklearn', not {grower!r}")
         if grower == "gini":
@@ -255,6 +253,8 @@ class FlatForest:
             for tree in grow_trees(x, y, n_classes, n_estimators, max_features, seed, n_jobs):
                 arrays.add_reached(tree, tree.leaf_of_sample, y, n_classes)
             return cls(arrays.done(), n_classes, x.shape[1])
+        from sklearn.ensemble import ExtraTreesClassifier, ExtraTreesRegressor
+
         if codes == 0:
             et = ExtraTreesClassifier(
                 n_estimators=n_estimators,

@@ -78,7 +78,7 @@ def grow_trees(
     y = np.asarray(y)
     if x.ndim != 2 or len(x) == 0 or y.shape != (len(x),):
         raise ValueError(f"grow_trees needs (N, D) samples and N labels, N >= 1; got {x.shape}")
-    if not np.isfinite(x).all():
+    if not (np.isfinite(x.min()) and np.isfinite(x.max())):  # NaN or inf: no N x D mask
         raise ValueError("grow_trees needs finite samples")
     if not np.issubdtype(y.dtype, np.integer) or y.min() < 0 or y.max() >= n_classes:
         raise ValueError(f"sample classes must be integers in 0 … {n_classes - 1}")
@@ -86,7 +86,7 @@ def grow_trees(
         raise ValueError(f"n_trees must be at least 1, not {n_trees}")
     tries = n_split_features(max_features, x.shape[1])
     by_feature = np.ascontiguousarray(x.T)
-    labels = y.astype(np.int64)
+    labels = np.asarray(y, np.int64)  # _grow works on a copy of its own
     seeds = np.random.SeedSequence(seed).generate_state(n_trees)
 
     def one(tree_seed: int) -> GrownTree:
