@@ -17,13 +17,12 @@ tree differs from scikit-learn's with the same seed, but is grown by the same ru
 Where the time goes is memory, not arithmetic: a candidate gathers one feature of the
 node's samples, and once a node is small those reads land in a different cache line
 each. Features are kept feature-major (one row per feature, read forwards: a node's
-samples stay in index order, partitioned stably), and a node of at most ``_LOCAL``
+samples stay in index order, partitioned stably), and a node of at most ``small_node``
 samples has its samples' features copied into a block of their own, row-major reads,
 before its subtree is grown from the block, which stays in cache. On the 30,000
 training samples of 3,000 simulated objects, one thread (``bench.grower``, EPYC VM,
 2026-11-27): 67 ms a tree on one procedure's 240 features and 156 ms on all 960, against
-191 and 315 ms for scikit-learn's code regressor; without the blocks the grower took
-about 1.6 times as long.
+191 and 315 ms for scikit-learn's code regressor; BLOCKS_FIGURE
 """
 
 from __future__ import annotations
@@ -38,9 +37,9 @@ from numba import njit
 
 from app.methods.leaf_trees import FEATURE_THRESHOLD, n_split_features
 
-#: a node of at most this many samples grows its subtree from a block of its own (measured
-#: at 32, 64, 128, 256 and 1,024: 64 was fastest on 240 and on 960 features)
-_LOCAL = 64
+#: a node of at most this many samples grows its subtree from a block of its own
+#: (``bench.grower --small-nodes``: docs/BENCHMARKS.md)
+SMALL_NODE = 64
 
 
 @dataclass(frozen=True)
@@ -69,11 +68,14 @@ def grow_trees(
     max_features: Any,
     seed: int,
     n_jobs: int | None = 1,
+    small_node: int = SMALL_NODE,
 ) -> Iterator[GrownTree]:
     """``n_trees`` trees on samples ``x`` (N, D) of classes ``y`` in 0 … ``n_classes``-1,
     grown ``n_jobs`` at a time in threads (joblib's reading of ``n_jobs``) and yielded in
     order as they are done, so that a caller holds few at once; tree i is fixed by
-    ``seed`` and i alone, whatever ``n_jobs``."""
+    ``seed`` and i alone, whatever ``n_jobs``. ``small_node``: nodes of at most this many
+    samples are grown from a copy of their own (0: none); it changes the order in which
+    nodes draw their random numbers, so the trees, not the rule they are grown by."""
     x = np.ascontiguousarray(x, np.float32)
     y = np.asarray(y)
     if x.ndim != 2 or len(x) == 0 or y.shape != (len(x),):
@@ -84,20 +86,24 @@ def grow_trees(
         raise ValueError(f"sample classes must be integers in 0 … {n_classes - 1}")
     if n_trees < 1:
         raise ValueError(f"n_trees must be at least 1, not {n_trees}")
+    if small_node < 0:
+        raise ValueError(f"small_node must be 0 or more, not {small_node}")
     tries = n_split_features(max_features, x.shape[1])
     by_feature = np.ascontiguousarray(x.T)
     labels = np.asarray(y, np.int64)  # _grow works on a copy of its own
     seeds = np.random.SeedSequence(seed).generate_state(n_trees)
 
     def one(tree_seed: int) -> GrownTree:
-        return GrownTree(*_grow(x, by_feature, labels, int(n_classes), tries, tree_seed))
+        return GrownTree(
+            *_grow(x, by_feature, labels, int(n_classes), tries, tree_seed, int(small_node))
+        )
 
     parallel = Parallel(n_jobs=n_jobs, prefer="threads", return_as="generator")
     return parallel(delayed(one)(int(s)) for s in seeds)
 
 
 @njit(cache=True, nogil=True)
-def _grow(x, by_feature, y, k, tries, seed):
+def _grow(x, by_feature, y, k, tries, seed, local):
     np.random.seed(seed)  # numba's generator is per thread: this tree's draws are its own
     n, d = x.shape
     most = 2 * n - 1  # pure leaves: at most n of them
@@ -112,13 +118,13 @@ def _grow(x, by_feature, y, k, tries, seed):
     labels = y.copy()  # their classes, in the same order
     work = _scratch(n, k, d, most)
     count, n_small = _split_nodes(
-        by_feature, order, labels, order.copy(), 0, n, 0, 1, tries, _LOCAL, out, work
+        by_feature, order, labels, order.copy(), 0, n, 0, 1, tries, local, out, work
     )
     # each small node's samples copied together, then its subtree grown from the copy
-    block = np.empty((d, _LOCAL), np.float32)
-    local_order = np.arange(_LOCAL).astype(np.int32)
-    local_labels = np.empty(_LOCAL, np.int64)
-    local_ids = np.empty(_LOCAL, np.int32)
+    block = np.empty((d, local), np.float32)
+    local_order = np.arange(local).astype(np.int32)
+    local_labels = np.empty(local, np.int64)
+    local_ids = np.empty(local, np.int32)
     small = work[-1][:n_small].copy()
     for q in range(n_small):
         node, s, e = small[q, 0], small[q, 1], small[q, 2]

@@ -10,7 +10,7 @@ from sklearn.ensemble import ExtraTreesClassifier
 from app.data.simulator import simulate_dataset
 from app.framework.scaling import RobustInputScaler, flatten
 from app.methods.forest import FlatForest
-from app.methods.gini_trees import _LOCAL, grow_trees
+from app.methods.gini_trees import SMALL_NODE, grow_trees
 
 
 @pytest.fixture(scope="module")
@@ -19,7 +19,7 @@ def sim():
     ds = simulate_dataset(40, 8, seed=3)
     test = (ds.trials % 8) >= 6
     z = RobustInputScaler().fit(flatten(ds.samples[~test])).transform(flatten(ds.samples))
-    assert (~test).sum() > 2 * _LOCAL  # the small-node blocks are taken
+    assert (~test).sum() > 2 * SMALL_NODE  # the small-node blocks are taken
     return z.astype(np.float32), ds.labels, test
 
 
@@ -34,9 +34,10 @@ def _walk(tree, x):
         node[inner] = np.where(go_left, tree.children_left[at], tree.children_right[at])
 
 
-def test_trees_are_pure_and_say_where_each_training_sample_ends(sim):
+@pytest.mark.parametrize("small_node", [SMALL_NODE, 0, 7])
+def test_trees_are_pure_and_say_where_each_training_sample_ends(sim, small_node):
     z, y, test = sim
-    for tree in grow_trees(z[~test], y[~test], 40, 3, "sqrt", 0):
+    for tree in grow_trees(z[~test], y[~test], 40, 3, "sqrt", 0, small_node=small_node):
         leaf = tree.children_left < 0
         inner = np.flatnonzero(~leaf)
         # children after their parent, every node but the root a child once
@@ -120,6 +121,11 @@ def test_samples_no_feature_tells_apart_share_a_leaf():
 def test_bad_inputs_are_refused_with_what_is_wrong(x, y, message):
     with pytest.raises(ValueError, match=message):
         next(iter(grow_trees(x, y, 3, 1, "sqrt", 0)))
+
+
+def test_a_negative_small_node_is_refused():
+    with pytest.raises(ValueError, match="small_node must be 0 or more"):
+        grow_trees(np.zeros((3, 2)), np.array([0, 1, 2]), 3, 1, "sqrt", 0, small_node=-1)
 
 
 def test_an_unknown_grower_is_refused():
