@@ -59,9 +59,10 @@ def configure_heap() -> bool:
     system when freed (glibc's ``mallopt``; elsewhere nothing). glibc raises its mapping
     threshold as large blocks are freed, up to 32 MiB, so that a fit's arrays of a few MiB
     (a tree's nodes, a block of scores) then come from the heap, whose freed pages stay
-    resident: the peak RSS of ``best``'s fit on 3,000 simulated objects was 1.63 GB with
-    glibc's default and 1.45 GB with this (2026-11-27). Fitting a recognizer calls it; once
-    a process has called it, later calls change nothing. Returns whether it took."""
+    resident: the peak RSS of ``best``'s fit on 3,000 simulated objects was 1.57 GB with
+    glibc's default and 1.44 GB with this (``bench.scale --sizes 3000``, 2026-11-27).
+    Fitting a recognizer calls it; once a process has called it, later calls change
+    nothing. Returns whether it took."""
     global _heap
     if _heap is None:
         import ctypes
