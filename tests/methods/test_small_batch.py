@@ -291,16 +291,20 @@ def test_threads_keep_their_own_one_sample_arrays(models, data):
                 assert_same_bits(answer, want[i])
 
 
-def test_a_copied_model_scores_alike(models, data):
-    """The scorer, with its per-thread arrays, survives a deep copy (as the model is copied
-    for enrolment) and gives the same bits afterwards."""
+def test_a_copied_model_leaves_the_scorer_behind_and_scores_alike(models, data):
+    """A deep copy (as enrolment copies the model) leaves the scorer, a cache holding the
+    reference samples' index, behind: the copy builds its own on its first small batch
+    and gives the same bits."""
     model, x = small(models["zero-shot"]), queries(data[0], seed=6)[:3]
     first = model.recognize_batch(x[:1])
+    assert model._small_batch is not None
     twin = copy.deepcopy(model)
-    assert twin._small_batch is not None
+    assert getattr(twin, "_small_batch", None) is None
     for n in (1, 3):
         assert_same_bits(twin.recognize_batch(x[:n]), model.recognize_batch(x[:n]))
     assert_same_bits(twin.recognize_batch(x[:1]), first)
+    assert twin._small_batch is not None and twin._small_batch is not model._small_batch
+    assert model._small_batch is not None  # the original keeps its own
 
 
 def test_a_scaler_without_log_compression_matches(models, data):
