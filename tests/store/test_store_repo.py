@@ -13,7 +13,7 @@ from sqlalchemy.exc import IntegrityError, OperationalError
 
 from app.framework.errors import BundleError
 from app.store import db, leases, repo
-from app.store.enums import ClassKind, JobKind, JobStatus
+from app.store.enums import ClassKind, JobKind, JobStatus, Origin
 from app.store.models import Bundle, Job, ModelVersion
 from app.store.vocabulary import Vocabulary, describes, key_values, vector_key
 
@@ -303,6 +303,27 @@ def test_what_a_retrain_reads_of_the_jobs(store):
         assert [r.id for r in repo.samples_by_id(s, set(sample_ids[1:]))] == sample_ids[1:]
         assert repo.class_names_of_samples(s, sample_ids[:1]) == {"mug"}
         assert repo.class_names_of_samples(s, []) == set()
+
+
+def test_class_states_are_the_live_classes_columns_a_retrain_reads(store):
+    _, sessions = store
+    with sessions.begin() as s:
+        mug = repo.add_class(s, "mug", "10").id
+        cup = repo.add_class(s, "cup", "01", kind=ClassKind.KNOWN, origin=Origin.DATASET).id
+        gone = repo.add_class(s, "gone", "11").id
+        repo.withdraw_class(s, repo.get_class(s, gone))
+    with sessions() as s:
+        states = repo.class_states(s)
+        assert [tuple(r) for r in states[-2:]] == [
+            (mug, "mug", ClassKind.NOVEL, Origin.ENROLLED, "10"),
+            (cup, "cup", ClassKind.KNOWN, Origin.DATASET, "01"),
+        ]
+        columns = ("id", "name", "kind", "origin", "attribute_key")
+        assert [tuple(r) for r in states] == [
+            tuple(getattr(c, k) for k in columns) for c in repo.list_classes(s)
+        ]
+        assert gone not in {r.id for r in states}
+        assert states[-1].kind == ClassKind.KNOWN and states[-2].attribute_key == "10"
 
 
 def test_promotion_and_demotion(store):

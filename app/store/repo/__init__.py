@@ -17,6 +17,7 @@ from app.framework.jsonable import jsonable
 from app.store.repo.classes import (
     LIVE_CLASS,
     LIVE_SAMPLE,
+    ClassState,
     add_attribute,
     add_attributes,
     add_class,
@@ -28,6 +29,7 @@ from app.store.repo.classes import (
     class_by_name,
     class_ids_by_name,
     class_names_of_samples,
+    class_states,
     demote_classes,
     describe,
     get_class,
@@ -104,6 +106,7 @@ __all__ = [
     # classes
     "LIVE_CLASS",
     "LIVE_SAMPLE",
+    "ClassState",
     "add_attribute",
     "add_attributes",
     "attribute_by_name",
@@ -118,6 +121,7 @@ __all__ = [
     "class_by_key",
     "class_by_name",
     "class_ids_by_name",
+    "class_states",
     "class_names_of_samples",
     "demote_classes",
     "get_class",

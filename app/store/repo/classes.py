@@ -125,6 +125,24 @@ def list_classes(
     return list(session.scalars(stmt))
 
 
+#: a live class as a retrain plans with it: a row of (id, name, kind, origin, attribute_key)
+ClassState = Row[tuple[int, str, str, str, str]]
+
+
+def class_states(session: Session) -> list[ClassState]:
+    """Live classes by id, as the columns a retrain compares with its model: rows, not
+    ``ObjectClass`` objects, as each round reads them all (13 against 106 ms at 10,200
+    classes, which every enrolment paid)."""
+    stmt = select(
+        ObjectClass.id,
+        ObjectClass.name,
+        ObjectClass.kind,
+        ObjectClass.origin,
+        ObjectClass.attribute_key,
+    )
+    return list(session.execute(stmt.where(LIVE_CLASS).order_by(ObjectClass.id)))
+
+
 def sample_counts(session: Session, class_ids: Sequence[int] | None = None) -> dict[int, int]:
     """Live samples per class."""
     stmt = select(Sample.class_id, func.count()).where(LIVE_SAMPLE).group_by(Sample.class_id)
