@@ -114,4 +114,11 @@ class Renewer:
                     if not renew(s, name, holder, ttl):
                         log.warning("lease %s was taken over while %s held it", name, holder)
             except OperationalError as exc:  # a busy database must not kill the renewer
-                log.warning("could not renew lease %s: %s", name, exc)
+                # the driver's reason alone ("database is locked" while a bootstrap writes
+                # a large dataset), not the statement and its parameters
+                log.warning(
+                    "could not renew lease %s (%s); trying again in %g s",
+                    name,
+                    exc.orig if exc.orig is not None else exc,
+                    ttl / 3,
+                )

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import logging
+import sqlite3
 import time
 from collections.abc import Iterator
 
@@ -14,6 +16,7 @@ from sqlalchemy.exc import IntegrityError, OperationalError
 from app.framework.errors import BundleError
 from app.store import db, leases, repo
 from app.store.enums import ClassKind, JobKind, JobStatus, Origin
+from app.store.migrate import upgrade
 from app.store.models import Bundle, Job, ModelVersion
 from app.store.vocabulary import Vocabulary, describes, key_values, vector_key
 
@@ -252,6 +255,31 @@ def test_renewer_keeps_a_lease_alive(store):
         time.sleep(0.6)
         with sessions() as s:
             assert not leases.try_acquire(s, "z", "other:1:x", ttl=1)
+
+
+def test_a_renewal_the_database_refuses_is_logged_by_its_reason_alone(tmp_path, caplog):
+    """A renewal that finds SQLite locked by another writer (a bootstrap storing a large
+    dataset) warns with the driver's reason, not the statement, and the renewer goes on."""
+    engine = db.make_engine(f"sqlite:///{tmp_path / 'store.db'}", timeout=0.05)
+    upgrade(engine)
+    sessions = db.make_sessionmaker(engine)
+    with sessions() as s:
+        assert leases.try_acquire(s, "z", "me:1:x", ttl=0.3)
+    writer = sqlite3.connect(tmp_path / "store.db", isolation_level=None)
+    writer.execute("BEGIN IMMEDIATE")  # another writer holds the database
+    try:
+        with caplog.at_level(logging.WARNING, "app.store.leases"):
+            with leases.Renewer(sessions, "z", "me:1:x", ttl=0.3):
+                time.sleep(0.35)
+    finally:
+        writer.execute("ROLLBACK")
+        writer.close()
+    refused = [r.getMessage() for r in caplog.records if "could not renew" in r.getMessage()]
+    assert refused and refused[0] == (
+        "could not renew lease z (database is locked); trying again in 0.1 s"
+    )
+    assert "UPDATE" not in refused[0]
+    engine.dispose()
 
 
 def test_version_summaries_count_classes_without_reading_them(six_versions):
