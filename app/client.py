@@ -92,16 +92,21 @@ class TactileClient:
         samples: Any,
         same_object: bool = False,
         target_confidence: float | None = None,
+        min_model_version: int | None = None,
     ) -> dict[str, Any]:
         """Recognise one sample or a batch (N, *input shape); with ``same_object``, the
         samples are touches of one object and get one answer, their evidence fused. A
         procedure not done yet is NaN throughout its block; each result names the
         procedures it used and ``next_procedure``, null once its probability reaches
-        ``target_confidence`` (None: the model's default)."""
+        ``target_confidence`` (None: the model's default). ``min_model_version``: the
+        ``model_version`` of an enrolment job waited for, so that the answer includes it
+        whichever API process gives it (offline, the model file answers as it is)."""
         x = np.asarray(samples, dtype=np.float32)
         params: dict[str, Any] = {"same_object": same_object}
         if target_confidence is not None:
             params["target_confidence"] = target_confidence
+        if min_model_version is not None:
+            params["min_model_version"] = min_model_version
         try:
             r = self._send(
                 "POST",

@@ -101,6 +101,17 @@ class ModelHolder(Poller):
             self._handed.wait_for(lambda: not self._handing_over, HANDOVER_WAIT_SECONDS)
         return self._load_active()
 
+    def at_least(self, version: int) -> LoadedModel | None:
+        """The served model, once it is ``version`` or newer: a process serving an older
+        one loads the active version now, as a job's waiter makes it do, instead of at its
+        next poll. None when the active version is older than ``version`` (rolled back,
+        or not made yet) or cannot be loaded (``degraded`` says why)."""
+        current = self._current
+        if current is None or current.version < version:
+            self.refresh()
+            current = self._current
+        return current if current is not None and current.version >= version else None
+
     def _load_active(self) -> bool:
         with self._load_lock:
             with self._sessions() as s:

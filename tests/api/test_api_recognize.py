@@ -184,4 +184,58 @@ def test_touches_of_one_object_get_one_fused_answer(client, dataset):
     bad = problem(client.post("/v1/recognize?same_object=maybe", json={"samples": x}), 422)
     assert bad["errors"] == [{"field": "same_object", "reason": bad["detail"]}]
     spec = client.get("/openapi.json").json()["paths"]["/v1/recognize"]["post"]
-    assert [p["name"] for p in spec["parameters"]] == ["same_object", "target_confidence"]
+    assert [p["name"] for p in spec["parameters"]] == [
+        "same_object",
+        "target_confidence",
+        "min_model_version",
+    ]
+
+
+def test_min_model_version_answers_with_the_enrolment_a_job_waited_for(
+    settings, base_model, dataset
+):
+    """An API process learns of a version made elsewhere (another process's worker) at its
+    next poll; ``min_model_version`` makes it load that version first, so that a robot that
+    waited for its enrolment's job is answered by a model holding it, whichever process
+    answers. An older active version is a 409, a bad value a 422."""
+    from fastapi.testclient import TestClient
+
+    from app.api.main import create_app
+    from app.client import ServiceError, TactileClient
+    from app.store import repo
+    from app.testing.service import unused_vectors
+    from worker import Worker
+
+    slow = settings.model_copy(update={"model_poll_seconds": 3600})  # no poll in this test
+    app = create_app(slow, trainer=lambda: base_model)
+    with TestClient(app) as client:
+        sessions = app.state.service.sessions
+        elsewhere = Worker(slow, sessions)  # not this process's: it does not hand its model over
+        vector = unused_vectors(dataset, 1)[0]
+        created = client.post(
+            "/v1/classes", json={"name": "cup", "attribute_vector": vector}
+        ).json()
+        assert elsewhere.run_once() == 1
+        with sessions() as s:
+            made = repo.get_job(s, created["job"]["id"]).model_version
+            assert repo.active_version_number(s) == made == 2
+        x = npy(dataset.samples[:2])
+        assert client.post("/v1/recognize", content=x, headers=NPY).json()["model_version"] == 1
+
+        r = client.post("/v1/recognize?min_model_version=2", content=x, headers=NPY)
+        assert r.status_code == 200 and r.json()["model_version"] == 2
+        assert app.state.service.holder.current.class_ids["cup"] == created["class"]["id"]
+        assert client.get("/healthz").json()["model_version"] == 2  # served from now on
+        robot = TactileClient(http=client, retries=0, timeout=2)
+        assert robot.recognize(dataset.samples[:1], min_model_version=2)["model_version"] == 2
+        assert robot.recognize(dataset.samples[:1], min_model_version=1)["model_version"] == 2
+
+        r = client.post("/v1/recognize?min_model_version=3", content=x, headers=NPY)
+        body = problem(r, 409, "min_model_version")
+        assert "model version 3 is not active" in body["detail"]
+        assert "the active version is 2" in body["detail"]
+        with pytest.raises(ServiceError):
+            robot.recognize(dataset.samples[:1], min_model_version=3)
+        for bad in ("0", "-1", "1.5", "two", ""):
+            r = client.post(f"/v1/recognize?min_model_version={bad}", content=x, headers=NPY)
+            assert "min_model_version" in problem(r, 422, "min_model_version")["detail"]

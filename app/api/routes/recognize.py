@@ -12,11 +12,13 @@ from pydantic import TypeAdapter, ValidationError
 
 from app.api import problems, trials
 from app.api.deps import JSON, NPY, api_key_header, get_recognizing, media_type
+from app.api.deps import service as service_state
 from app.api.problems import Problem, blame
 from app.api.sample_input import sample_array
 from app.api.schemas import RecognizeRequest, RecognizeResponse
 from app.data.biotac import RawTrial
 from app.framework.recognizer import RAW_TRIALS, TARGET_CONFIDENCE, TactileRecognizer
+from app.service.holder import LoadedModel
 
 router = APIRouter(prefix="/v1", tags=["recognize"], responses=problems.responses(401, 403, 429))
 
@@ -65,6 +67,13 @@ SAME_OBJECT = (
     "The samples (or trials) are touches of one object: answer once for all of them, their "
     "evidence fused (the mean of their class probabilities and novelty scores)."
 )
+MIN_MODEL_VERSION = (
+    "Answer with this model version or a newer one: pass the `model_version` of the "
+    "enrolment job you waited for, and the answer includes that class or sample whichever "
+    "API process answers (one that still serves an older version loads the active one "
+    "first, instead of at its next poll). A 409 when the active version is older (it was "
+    "rolled back); a 503 when this process cannot load it."
+)
 # recognize reads its query by hand too: FastAPI's parameter machinery cost ~25 µs a request
 # (bench/side_by_side.py measures the route against the framework's floor)
 RECOGNIZE_EXTRA = {
@@ -92,10 +101,18 @@ RECOGNIZE_EXTRA = {
             "`next_procedure` names the one to do next. The default was chosen on PHAC-2's "
             "development splits (docs/RESULTS.md).",
         },
+        {
+            "name": "min_model_version",
+            "in": "query",
+            "required": False,
+            "schema": {"type": "integer", "minimum": 1},
+            "description": MIN_MODEL_VERSION,
+        },
     ],
 }
 _BOOL = TypeAdapter(bool)
 _CONFIDENCE = TypeAdapter(float)
+_VERSION = TypeAdapter(int)
 
 
 class Body(NamedTuple):
@@ -110,7 +127,7 @@ class Body(NamedTuple):
     "/recognize",
     response_model=RecognizeResponse,
     openapi_extra=RECOGNIZE_EXTRA,
-    responses=problems.responses(413, 415, 422, 503),
+    responses=problems.responses(409, 413, 415, 422, 503),
 )
 async def recognize(request: Request) -> Response:
     """Recognise a batch of samples as known or novel objects.
@@ -132,6 +149,9 @@ async def answer(request: Request) -> bytes:
     # called, not declared with Depends: FastAPI's dependency machinery cost ~15 µs a
     # request on the route robots call most (RECOGNIZE_EXTRA documents the key it checks)
     model, service = await get_recognizing(request)
+    wanted = _min_model_version(request)
+    if wanted is not None and model.version < wanted:
+        model = await _serving_at_least(request, wanted)
     same_object = _same_object(request)
     target = _target_confidence(request)
     rec = model.recognizer
@@ -157,6 +177,39 @@ def _same_object(request: Request) -> bool:
         return _BOOL.validate_python(raw)
     except ValidationError:
         raise Problem(422, f"same_object: not true or false (got {raw!r})", "same_object") from None
+
+
+def _min_model_version(request: Request) -> int | None:
+    raw = request.query_params.get("min_model_version") if request.scope["query_string"] else None
+    if raw is None:
+        return None
+    try:
+        value = _VERSION.validate_python(raw)
+    except ValidationError:
+        value = 0
+    if value < 1:
+        raise Problem(
+            422, f"min_model_version: a model version, 1 or more (got {raw!r})", "min_model_version"
+        )
+    return value
+
+
+async def _serving_at_least(request: Request, wanted: int) -> LoadedModel:
+    """This process's model once it is version ``wanted`` or newer (``ModelHolder.at_least``,
+    in the thread pool: a load reads the store); a 409 or 503 saying why it cannot be."""
+    holder = service_state(request).holder
+    model = await run_in_threadpool(holder.at_least, wanted)
+    if model is not None:
+        return model
+    if holder.degraded:
+        raise Problem(503, f"min_model_version: {holder.degraded}", "min_model_version")
+    served = holder.current.version if holder.current is not None else None
+    raise Problem(
+        409,
+        f"min_model_version: model version {wanted} is not active; the active version is "
+        f"{served} (a newer one was rolled back, or none has been made yet)",
+        "min_model_version",
+    )
 
 
 def _target_confidence(request: Request) -> float | None:
