@@ -106,6 +106,12 @@ def test_a_damaged_new_version_is_not_swapped_in(
     assert recognized_by(client, sample) == 1
     body = client.get("/readyz").json()
     assert body["model_version"] == 1 and "active version 2" in body["detail"], body
+    # an answer that must come from version 2 cannot: a 503 that says why
+    r = client.post("/v1/recognize?min_model_version=2", json={"samples": [sample]})
+    assert r.status_code == 503, r.text
+    problem = r.json()
+    assert problem["errors"][0]["field"] == "min_model_version", problem
+    assert "not the active version 2" in problem["detail"] and head[:12] in problem["detail"]
 
     # repaired: tried again (here at once, else every DAMAGED_RETRY_SECONDS) and swapped in
     put_back(worker.sessions, head, original)
