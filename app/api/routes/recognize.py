@@ -1,7 +1,7 @@
 import contextlib
 import io
 import json
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import orjson
@@ -169,8 +169,13 @@ async def answer(request: Request) -> bytes:
     return service.to_json(model, results)
 
 
+def _query(request: Request, name: str) -> str | None:
+    """The query parameter ``name`` (read by hand: RECOGNIZE_EXTRA), None when not given."""
+    return request.query_params.get(name) if request.scope["query_string"] else None
+
+
 def _same_object(request: Request) -> bool:
-    raw = request.query_params.get("same_object") if request.scope["query_string"] else None
+    raw = _query(request, "same_object")
     if raw is None:
         return False
     try:
@@ -180,13 +185,10 @@ def _same_object(request: Request) -> bool:
 
 
 def _min_model_version(request: Request) -> int | None:
-    raw = request.query_params.get("min_model_version") if request.scope["query_string"] else None
+    raw = _query(request, "min_model_version")
     if raw is None:
         return None
-    try:
-        value = _VERSION.validate_python(raw)
-    except ValidationError:
-        value = 0
+    value = _valid(_VERSION, raw, 0)
     if value < 1:
         raise Problem(
             422, f"min_model_version: a model version, 1 or more (got {raw!r})", "min_model_version"
@@ -214,13 +216,10 @@ async def _serving_at_least(request: Request, wanted: int) -> LoadedModel:
 
 def _target_confidence(request: Request) -> float | None:
     """The request's ``target_confidence``, None when it gives none (the model's default)."""
-    raw = request.query_params.get("target_confidence") if request.scope["query_string"] else None
+    raw = _query(request, "target_confidence")
     if raw is None:
         return None
-    try:
-        value = _CONFIDENCE.validate_python(raw)
-    except ValidationError:
-        value = float("nan")
+    value = _valid(_CONFIDENCE, raw, float("nan"))
     if not 0.0 < value <= 1.0:
         raise Problem(
             422,
@@ -228,6 +227,14 @@ def _target_confidence(request: Request) -> float | None:
             "target_confidence",
         )
     return value
+
+
+def _valid(adapter: TypeAdapter[Any], raw: str, otherwise: Any) -> Any:
+    """``raw`` as ``adapter`` reads it, ``otherwise`` when it cannot."""
+    try:
+        return adapter.validate_python(raw)
+    except ValidationError:
+        return otherwise
 
 
 def takes_kind(rec: TactileRecognizer, body: Body) -> None:
