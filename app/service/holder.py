@@ -103,9 +103,10 @@ class ModelHolder(Poller):
 
     def at_least(self, version: int) -> LoadedModel | None:
         """The served model, once it is ``version`` or newer: a process serving an older
-        one loads the active version now, as a job's waiter makes it do, instead of at its
-        next poll. None when the active version is older than ``version`` (rolled back,
-        or not made yet) or cannot be loaded (``degraded`` says why)."""
+        one loads the active version now instead of at its next poll (a job's waiter, a
+        recognition that names the version it needs). None when the active version is
+        older than ``version`` (rolled back, or not made yet) or cannot be loaded
+        (``degraded`` says why)."""
         current = self._current
         if current is None or current.version < version:
             self.refresh()

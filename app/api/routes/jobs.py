@@ -79,5 +79,5 @@ async def get_job(
     served = holder.current
     if job.model_version is not None and (served is None or served.version < job.model_version):
         # whoever sees "succeeded" here gets the new model from this process next
-        await run_in_threadpool(holder.refresh)
+        await run_in_threadpool(holder.at_least, job.model_version)
     return JobOut.model_validate(job)
