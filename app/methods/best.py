@@ -509,8 +509,8 @@ class BestRecognizer(TactileRecognizer):
     def __getstate__(self) -> dict[str, Any]:
         # The small-batch scorer is a cache of this model, built on its first small batch:
         # a copy (each enrolment's, which drops it anyway) leaves it behind. Copying it, with
-        # the reference samples' index, took 0.5-1 s an enrolment at 10,000 objects in a
-        # service, where every served model has one.
+        # the reference samples' index, took 0.2-0.5 s an enrolment at 10,000 objects, on
+        # every served model (bench.scale_service --in-process-only: docs/BENCHMARKS.md).
         state = self.__dict__.copy()
         state.pop("_small_batch", None)
         return state

@@ -131,8 +131,8 @@ ClassState = Row[tuple[int, str, str, str, str]]
 
 def class_states(session: Session) -> list[ClassState]:
     """Live classes by id, as the columns a retrain compares with its model: rows, not
-    ``ObjectClass`` objects, as each round reads them all (13 against 106 ms at 10,200
-    classes, which every enrolment paid)."""
+    ``ObjectClass`` objects, as each round reads them all (building the objects was about
+    90 ms of every round at 10,200 classes: docs/BENCHMARKS.md)."""
     stmt = select(
         ObjectClass.id,
         ObjectClass.name,
