@@ -97,6 +97,13 @@ _GAIN = 0.05  # per-trial, per-procedure contact gain
 # was fitted with that script (seed 0); between them a^2 is linear in ln N, beyond the last
 # it goes on along the last segment. 300, 1,000 and 10,000 objects check the fit.
 SEPARATIONS: tuple[str, ...] = ("phac2",)
+# modes > 1: each object is touched in one of several contact modes (grasp poses, contact
+# locations), trial i of an object in mode i % modes, so training and held-out trials share
+# them. Each object's modes are smooth signatures of its own (_in_modes), centred on it and
+# larger than the distances between objects: its trials gather in as many clusters, its
+# mean lies between them, where no trial is, and a model with one Gaussian per object loses
+# (bench/compare_known.py measures it).
+_MODE_SCALE = 0.3
 _SIGNATURE_BASIS = 6
 _SIGNATURE_FIT = {"phac2": ((60, 0.0), (3_000, 0.0153), (30_000, 0.0171))}  # (N, a)
 
@@ -108,6 +115,7 @@ def simulate_dataset(
     attribute_names: Sequence[str] = PAPER_ATTRIBUTES,
     noise: float = DEFAULT_NOISE,
     separation: str | None = None,
+    modes: int = 1,
 ) -> TactileDataset:
     """A deterministic PHAC-2-like dataset: samples (N, 32, 30), one sample per trial.
 
@@ -123,6 +131,11 @@ def simulate_dataset(
     objects, checked at 300, 1,000 and 10,000; up to 60 objects it adds nothing). The
     signature is drawn from a generator of its own, so every other value is the same as
     with None.
+
+    ``modes``: how many contact modes each object shows (1, the default, adds nothing).
+    Trial i of an object is touched in mode i % modes; each mode moves the object's trials by a
+    smooth signature of its own, the object's modes centred on it (drawn from a generator of
+    its own, so every other value is the same as with 1).
     """
     if separation is not None and separation not in SEPARATIONS:
         raise ValueError(f"separation must be None or one of {SEPARATIONS}, got {separation!r}")
@@ -134,6 +147,8 @@ def simulate_dataset(
         )
     if n_objects < 1 or trials_per_object < 1 or noise < 0:
         raise ValueError("n_objects and trials_per_object must be >= 1 and noise >= 0")
+    if not isinstance(modes, int | np.integer) or modes < 1:
+        raise ValueError(f"modes must be an integer >= 1, got {modes!r}")
     rng = np.random.default_rng(seed)
     full = sample_attributes(rng, n_objects, names)  # (K, 19) in PAPER_ATTRIBUTES order
     labels = np.repeat(np.arange(n_objects), trials_per_object)
@@ -142,6 +157,8 @@ def simulate_dataset(
         own = np.random.default_rng([seed, 0x5E9])  # leaves the main stream as it was
         signature = _signature(own, n_objects, signature_scale(separation, n_objects))
         samples.reshape(n_objects, trials_per_object, *samples.shape[1:])[:] += signature[:, None]
+    if modes > 1:
+        samples = _in_modes(samples, trials_per_object, modes, seed)
     width = max(2, len(str(n_objects - 1)))
     cols = [PAPER_ATTRIBUTES.index(a) for a in names]
     return TactileDataset(
@@ -291,6 +308,23 @@ def _signature(rng: np.random.Generator, k: int, scale: float) -> np.ndarray:
         weights = rng.normal(0.0, scale, (min(k, lo + 4096) - lo, 32, _SIGNATURE_BASIS))
         out[lo : lo + len(weights)] = weights @ basis
     return out
+
+
+def _in_modes(samples: np.ndarray, trials: int, modes: int, seed: int) -> np.ndarray:
+    """Each trial's sample moved to its contact mode (trial % modes): per object, ``modes``
+    smooth signatures (``_signature``) of amplitude _MODE_SCALE, centred on the object, so its
+    mean stays where it was and its trials gather around points as far from it as from other
+    objects."""
+    k = len(samples) // trials
+    rng = np.random.default_rng([seed, 0x30DE])
+    out = samples.reshape(k, trials, *samples.shape[1:])
+    mode = np.arange(trials) % modes
+    for lo in range(0, k, 1024):  # bounded memory at tens of thousands of objects
+        objects = min(k, lo + 1024) - lo
+        offsets = _signature(rng, objects * modes, _MODE_SCALE).reshape(objects, modes, 32, -1)
+        offsets -= offsets.mean(axis=1, keepdims=True)
+        out[lo : lo + objects] += offsets[:, mode]
+    return samples
 
 
 def _signals(rng: np.random.Generator, attrs: np.ndarray, labels: np.ndarray, noise: float):

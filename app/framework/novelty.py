@@ -140,6 +140,26 @@ def tune_threshold(
     )
 
 
+def threshold_at_kept(
+    known_scores: np.ndarray, novel_scores: np.ndarray, kept: float, n_thresholds: int = 200
+) -> NoveltyTuning:
+    """The threshold that keeps the share ``kept`` of held-out known samples known (their
+    scores' ``kept`` quantile): an operating point stated in advance rather than Sect. VI-B's
+    balanced choice, whose known share moves with the validation objects. ``novel_scores``
+    (validation-novel samples) only report what it detects there, and the AUROC."""
+    tuning = tune_threshold(known_scores, novel_scores, n_thresholds)
+    threshold = float(np.quantile(np.asarray(known_scores, np.float64), kept))
+    return NoveltyTuning(
+        thresholds=tuning.thresholds,
+        known_kept=tuning.known_kept,
+        val_novel=tuning.val_novel,
+        threshold=threshold,
+        known_kept_at_threshold=float((np.asarray(known_scores) <= threshold).mean()),
+        val_novel_at_threshold=float((np.asarray(novel_scores) > threshold).mean()),
+        auroc=tuning.auroc,
+    )
+
+
 def novelty_validation_split(
     dataset: TactileDataset, val_fraction: float = 0.1, holdout_trials: int = 1, seed: int = 0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -19,6 +19,8 @@ METHODS: dict[str, str] = {
     "eszsl": "app.baselines.eszsl:ESZSLRecognizer",
     # the method that measured best on PHAC-2 (docs/RESULTS.md; storable in bundles)
     "best": "app.methods.best:BestRecognizer",
+    # class prototypes in a discriminant space with contact modes (app/methods/prototypes.py)
+    "prototypes": "app.methods.prototypes:PrototypeRecognizer",
 }
 
 

@@ -33,6 +33,7 @@ FAST = {
     "extratrees": dict(n_estimators=30, attribute_estimators=20, n_jobs=1),
     "dap": dict(n_estimators=30, C=0.1, n_jobs=1),
     "eszsl": dict(n_estimators=30, n_jobs=1),
+    "prototypes": {},
 }
 
 

@@ -1,0 +1,108 @@
+"""Candidate prototypes of each sample through faiss (``PrototypeSearch``).
+
+The prototypes of a fit are indexed once: exactly (``IndexFlatL2`` over every coordinate)
+while there are at most ``exact_below`` of them, else by an HNSW graph over the leading
+``search_dims`` coordinates (the embedding puts the directions along which prototypes differ
+most first). Either way each candidate's squared distance is then computed exactly in every
+coordinate, so the approximate search can only miss a candidate, never mis-score one.
+Prototypes added later (promotions, one-shot classes) are kept beside the index and searched
+exactly: an enrolment never rebuilds or copies the index.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class PrototypeSearch:
+    """The ``k`` nearest prototypes of each sample (module docstring).
+
+    Parameters
+    ----------
+    points : (S, D) float32
+        the prototypes of the fit, in the embedding's coordinates.
+    exact_below : int
+        at most this many prototypes are searched exactly; more take the HNSW graph.
+    search_dims : int
+        coordinates the HNSW graph is built on (every one if fewer).
+    hnsw_links : int
+        links per node of the graph (faiss's ``M``).
+    ef_search : int
+        candidates the graph search keeps (faiss's ``efSearch``).
+    """
+
+    def __init__(
+        self,
+        points: np.ndarray,
+        exact_below: int = 4096,
+        search_dims: int = 64,
+        hnsw_links: int = 32,
+        ef_search: int = 128,
+    ) -> None:
+        import faiss
+
+        self.points = np.ascontiguousarray(points, np.float32)
+        self.exact = len(self.points) <= exact_below
+        d = self.points.shape[1]
+        self.dims = d if self.exact else min(d, search_dims)
+        if self.exact:
+            self.index = faiss.IndexFlatL2(d)
+        else:
+            self.index = faiss.IndexHNSWFlat(self.dims, hnsw_links)
+            self.index.hnsw.efConstruction = max(ef_search, 40)
+        self.index.add(np.ascontiguousarray(self.points[:, : self.dims]))
+        if not self.exact:
+            self.index.hnsw.efSearch = ef_search
+        self.extra = np.zeros((0, d), np.float32)  # added after the fit: searched exactly
+
+    def __deepcopy__(self, memo: dict) -> PrototypeSearch:
+        # the index and the fit's prototypes never change: copies share them
+        new = object.__new__(PrototypeSearch)
+        new.__dict__.update(self.__dict__)
+        new.extra = self.extra.copy()
+        return new
+
+    def __len__(self) -> int:
+        return len(self.points) + len(self.extra)
+
+    def with_points(self, points: np.ndarray) -> PrototypeSearch:
+        """A search that also finds ``points`` (ids after the existing ones)."""
+        new = self.__deepcopy__({})
+        new.extra = np.concatenate([self.extra, np.asarray(points, np.float32)])
+        return new
+
+    def nearest(self, e: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """(ids, squared distances), each (N, min(k, len(self))), nearest first; the
+        distances exact in every coordinate."""
+        e = np.ascontiguousarray(e, np.float32)
+        k = min(k, len(self))
+        fitted = min(k, len(self.points))
+        _, ids = self.index.search(np.ascontiguousarray(e[:, : self.dims]), fitted)
+        ids = ids.astype(np.int64)
+        if len(self.extra):
+            extra = np.broadcast_to(
+                np.arange(len(self.points), len(self)), (len(e), len(self.extra))
+            )
+            ids = np.concatenate([ids, extra], axis=1)
+        found = ids >= 0  # HNSW may return fewer than asked (-1)
+        safe = np.where(found, ids, 0)
+        dist = self.squared(e, safe)
+        dist[~found] = np.inf
+        order = np.argsort(dist, axis=1, kind="stable")[:, :k]
+        rows = np.arange(len(e))[:, None]
+        return safe[rows, order], dist[rows, order]
+
+    def squared(self, e: np.ndarray, ids: np.ndarray) -> np.ndarray:
+        """(N, k) float64 squared distances from each row of ``e`` to prototypes ``ids``."""
+        points = self._rows(ids.ravel()).reshape(*ids.shape, -1)
+        diff = points - e[:, None, :]
+        return np.einsum("nkd,nkd->nk", diff, diff, dtype=np.float64)
+
+    def _rows(self, ids: np.ndarray) -> np.ndarray:
+        if not len(self.extra):
+            return self.points[ids]
+        fitted = ids < len(self.points)
+        out = np.empty((len(ids), self.points.shape[1]), np.float32)
+        out[fitted] = self.points[ids[fitted]]
+        out[~fitted] = self.extra[ids[~fitted] - len(self.points)]
+        return out

@@ -1,0 +1,721 @@
+"""The ``prototypes`` method: class prototypes in a discriminant space, searched by faiss.
+
+Every sample is a flat vector scaled by ``RobustInputScaler`` (as ``best``), then mapped into
+``SubclassEmbedding``'s space: whitened by the shrunk within-class covariance, each class
+split into subclasses where its trials gather in several clusters (contact modes).
+
+- Known classes (FC_Y): each subclass's mean is a prototype. A sample's class probabilities
+  are the posterior of a mixture of isotropic Gaussians, one per prototype, with a variance
+  ``tau (1 + 1/n)`` that counts the prototype's own uncertainty from its ``n`` samples, over
+  the ``search_k`` nearest prototypes (``PrototypeSearch``: exact, or an HNSW graph at scale;
+  the rest get probability 0). ``tau`` is chosen at fit by leave-one-trial-out: each
+  calibration sample is scored against prototypes from which its own trial is removed,
+  which costs one subtraction per sample, not a refit.
+- Novelty ND(x): ``1 - max p`` plus ``distance_weight`` x the log squared distance to the
+  nearest prototype per coordinate; the weight, unless given, is the one of
+  ``DISTANCE_WEIGHTS`` that separates the probe's held-out known samples from its
+  pseudo-novel ones best (AUROC). The threshold is an operating
+  point: the ``known_kept`` quantile of the leave-one-trial-out scores of known samples, so
+  about that share of known touches is kept known. The same pass scores every calibration
+  sample without *any* prototype of its class (leave-one-class-out): those pseudo-novel
+  scores give ``metrics["nd_val_auroc"]`` and what the threshold detects.
+- Zero-shot: DAP and the semantic autoencoder on the scaled inputs, exactly as ``best``
+  (``app.methods.attributes``).
+- One-shot and samples-only classes: a novel class's samples give it a prototype, their
+  mean in the same space, scored by the same Gaussian; classes without samples keep their
+  zero-shot probability and those with samples share the rest.
+- Promotion (``with_known_samples``): the class's samples become a prototype of their own
+  beside the index, at no refit. The space, ``tau`` and the threshold stay as fitted.
+- Missing procedures: the same Gaussian model's marginal over the features a sample holds
+  (``SubclassEmbedding.marginal``), computed once per set of procedures and kept; the
+  attribute parts read the missing features' conditional mean given the present ones.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from app.data.dataset import DatasetError, TactileDataset
+from app.data.procedures import block, seconds_of
+from app.framework.errors import FrameworkError
+from app.framework.params import either, integer, number, one_of
+from app.framework.recognizer import TactileRecognizer
+from app.framework.runtime import ensure_threads_configured
+from app.framework.scaling import RobustInputScaler, flatten
+from app.methods.attributes import (
+    LinearAttributeModel,
+    attribute_prior,
+    cosine_scores,
+    dap_log_scores,
+    impute,
+    semantic_autoencoder,
+    softmax,
+)
+from app.methods.embedding import SubclassEmbedding
+from app.methods.prototype_search import PrototypeSearch
+
+#: the weights of the distance cue the probe chooses among (``distance_weight=None``)
+DISTANCE_WEIGHTS = (0.0, 0.03, 0.1, 0.3, 1.0, 3.0, 100.0)
+#: the temperatures tried at fit (times the whitened space's unit variance)
+_TAUS = np.geomspace(0.05, 20.0, 49)
+#: shrinkages of the within-class correlations tried at fit, beside Ledoit-Wolf's own
+_SHRINKAGES = (0.1, 0.3, 0.5, 0.7, 0.9)
+
+
+class PrototypeRecognizer(TactileRecognizer):
+    """The ``prototypes`` method; the module docstring describes its parts.
+
+    Parameters
+    ----------
+    seed : int, default 0
+        Seeds the calibration samples, the rows Ledoit-Wolf's shrinkage reads and the
+        attribute classifiers' sample.
+    max_modes : int, default 3
+        The most subclasses (contact modes) a class is split into; 1 never splits, which is
+        shrinkage LDA's space with nearest-class-mean prototypes. A positive integer.
+    split_ratio : float, default 0.7
+        A class is split in two where the halves keep at most this share of its squared
+        spread (``SubclassEmbedding``; one Gaussian cluster of 8 simulated samples keeps
+        about 0.84, three modes about 0.49). In (0, 1).
+    known_kept : float, default 0.9
+        The novelty threshold's operating point: the share of known touches (held-out
+        trials of the training objects) it keeps known. In (0, 1).
+    distance_weight : float or None, default None
+        Weight of the distance cue in the novelty score (0: ``1 - max p`` alone); None
+        lets the fit choose it by its probe. Non-negative.
+    search_k : int, default 32
+        Prototypes each sample is scored against (its nearest). A positive integer.
+    exact_below : int, default 4096
+        Prototypes searched exactly up to this many; more take an HNSW graph.
+    search_dims : int, default 64
+        Leading coordinates the HNSW graph is built on. A positive integer.
+    calibration_samples : int, default 20000
+        Training samples the leave-one-out calibration of ``tau`` and the threshold reads
+        (every one where there are fewer). A positive integer.
+    attribute_C : float, default 0.1
+        As ``best``'s: the L2 penalty's inverse of DAP's attribute classifiers.
+    attribute_samples : int, default 50000
+        As ``best``'s: the most training samples the attribute parts learn from.
+    dap_clip : float, default 0.02
+        As ``best``'s: DAP's clip of each attribute probability.
+    sae_lambda : float, default 400.0
+        As ``best``'s: the semantic autoencoder's regularisation (0: DAP alone).
+    sae_temperature : float, default 10.0
+        As ``best``'s: the autoencoder's cosine weight in the zero-shot scores.
+    n_jobs : int or None, default 1
+        Threads of the attribute classifiers (joblib's convention).
+    featurizer_params : dict or None, default None
+        The raw-trial featurizer's options, as ``best``'s.
+    """
+
+    method = "prototypes"
+    novel_part_separable = True  # enrolments never touch the space or the known prototypes
+    graded_attributes = True
+    attributes_separable = True
+    learns_known_incrementally = True  # a promoted class is a new prototype
+    learns_classes_from_samples = True
+    _featurizer_defaults = {"n_offsets": 1}
+
+    _parameter_constraints = {
+        "max_modes": integer(1),
+        "split_ratio": number(0, 1),
+        "known_kept": number(0, 1),
+        "distance_weight": either(
+            one_of((None,)),
+            number(0, include_low=True, allow_bool=False, finite=True),
+            must="be None or a non-negative number",
+        ),
+        "search_k": integer(1),
+        "exact_below": integer(0),
+        "search_dims": integer(1),
+        "calibration_samples": integer(1),
+        "attribute_C": number(0),
+        "attribute_samples": integer(0, "be a non-negative integer (0 = every sample)"),
+        "dap_clip": number(0, 0.5),
+        "sae_lambda": number(0, include_low=True, allow_bool=False, finite=True),
+        "sae_temperature": number(0, include_low=True, allow_bool=False, finite=True),
+    }
+
+    def __init__(
+        self,
+        seed: int = 0,
+        max_modes: int = 3,
+        split_ratio: float = 0.7,
+        known_kept: float = 0.9,
+        distance_weight: float | None = None,
+        search_k: int = 32,
+        exact_below: int = 4096,
+        search_dims: int = 64,
+        calibration_samples: int = 20000,
+        attribute_C: float = 0.1,
+        attribute_samples: int = 50000,
+        dap_clip: float = 0.02,
+        sae_lambda: float = 400.0,
+        sae_temperature: float = 10.0,
+        n_jobs: int | None = 1,
+        featurizer_params: dict[str, Any] | None = None,
+    ) -> None:
+        super().__init__()
+        self.seed = seed
+        self.max_modes = max_modes
+        self.split_ratio = split_ratio
+        self.known_kept = known_kept
+        self.distance_weight = distance_weight
+        self.search_k = search_k
+        self.exact_below = exact_below
+        self.search_dims = search_dims
+        self.calibration_samples = calibration_samples
+        self.attribute_C = attribute_C
+        self.attribute_samples = attribute_samples
+        self.dap_clip = dap_clip
+        self.sae_lambda = sae_lambda
+        self.sae_temperature = sae_temperature
+        self.n_jobs = n_jobs
+        self.featurizer_params = featurizer_params
+
+    # ----------------------------------------------------------------- fitting
+    def _fit(self, dataset: TactileDataset, progress: bool) -> None:
+        from app.framework.novelty import threshold_at_kept
+
+        if dataset.n_classes < 2:
+            raise DatasetError("the prototypes method needs at least 2 known classes")
+        present = np.unique(dataset.labels)
+        if len(present) != dataset.n_classes:
+            missing = sorted(set(range(dataset.n_classes)) - set(present.tolist()))
+            raise DatasetError(f"every known class needs samples; none for classes {missing[:5]}")
+        t0 = time.perf_counter()
+        timings: dict[str, float] = {}
+        x = flatten(dataset.samples)
+        y = np.asarray(dataset.labels, np.int64)
+        self.scaler_ = RobustInputScaler().fit(x)
+        z = self.scaler_.transform(x)
+        del x
+        k = dataset.n_classes
+        bar = tqdm(
+            total=2, desc=f"prototypes on {dataset.name}: probe, model", disable=not progress
+        )
+        probe = self._probe(z, y, np.asarray(dataset.trials), k)
+        if probe is None:
+            raise DatasetError(
+                "calibration needs held-out trials: give at least 2 known classes 2 trials"
+            )
+        self.tau_ = probe["tau"]
+        self.distance_weight_ = probe["distance_weight"]
+        self.novelty_tuning = threshold_at_kept(
+            probe["known_scores"], probe["novel_scores"], float(self.known_kept)
+        )
+        self.novelty_threshold = float(self.novelty_tuning.threshold)
+        timings["probe_s"] = time.perf_counter() - t0
+        bar.update()
+
+        t = time.perf_counter()
+        embedding = self._embedding().fit(z, y, k)
+        self.embedding_ = embedding.shrunk(probe["shrinkage"]).release()
+        self.proto_class_ = embedding.subclass_class_
+        self.proto_count_ = np.bincount(
+            embedding.subclass_, minlength=len(self.proto_class_)
+        ).astype(np.float64)
+        self.search_ = PrototypeSearch(
+            self.embedding_.transform(embedding._means),
+            int(self.exact_below),
+            int(self.search_dims),
+        )
+        del embedding
+        timings["embedding_s"] = time.perf_counter() - t
+        bar.update()
+        bar.close()
+
+        t = time.perf_counter()
+        self._fit_attributes(z, y)
+        timings["attributes_s"] = time.perf_counter() - t
+        self._marginals: dict[tuple[int, ...], tuple] = {}
+        self._reset_novel()
+        rows = np.random.default_rng(int(self.seed)).permutation(len(z))
+        self.procedure_order_ = self._procedure_order(z, y, rows[: int(self.calibration_samples)])
+        timings["total_s"] = time.perf_counter() - t0
+        self.metrics = {
+            "n_train_samples": int(len(dataset)),
+            "n_known_classes": int(k),
+            "n_prototypes": int(len(self.proto_class_)),
+            "shrinkage": float(self.embedding_.shrinkage_),
+            "tau": float(self.tau_),
+            "distance_weight": float(self.distance_weight_),
+            "probe_known_acc": probe["accuracy"],
+            "nd_known_kept": self.novelty_tuning.known_kept_at_threshold,
+            "nd_val_novel": self.novelty_tuning.val_novel_at_threshold,
+            "nd_val_auroc": self.novelty_tuning.auroc,
+            "exact_search": bool(self.search_.exact),
+            "timings": timings,
+            "params": self.get_params(),
+        }
+
+    def _embedding(self) -> SubclassEmbedding:
+        return SubclassEmbedding(int(self.max_modes), float(self.split_ratio), seed=int(self.seed))
+
+    def _probe(
+        self, z: np.ndarray, y: np.ndarray, trials: np.ndarray, k: int
+    ) -> dict[str, Any] | None:
+        """A probe fitted without one whole trial of each class that has two or more, scoring
+        them: the shrinkage (best held-out accuracy among Ledoit-Wolf's and ``_SHRINKAGES``),
+        ``tau`` (best held-out log-likelihood), and the novelty scores of the held-out
+        samples with their class's prototypes (known) and without (pseudo-novel)."""
+        held = _held_out_trials(y, trials, np.random.default_rng(int(self.seed)))
+        if held.sum() == 0 or len(np.unique(y[held])) < 2:
+            return None
+        fit = ~held
+        rows = np.flatnonzero(held)
+        if len(rows) > int(self.calibration_samples):
+            rng = np.random.default_rng(int(self.seed) + 1)
+            rows = np.sort(rng.choice(rows, int(self.calibration_samples), replace=False))
+        yh = y[rows]
+        base = self._embedding().fit(z[fit], y[fit], k)
+        owner = base.subclass_class_
+        count_all = np.bincount(base.subclass_, minlength=len(owner)).astype(np.float64)
+        class_total = _class_totals(owner, count_all, k)
+        k_search = int(self.search_k) + int(self.max_modes)
+        best: dict[str, Any] | None = None
+        for shrink in (base.ledoit_wolf_, *_SHRINKAGES):
+            emb = base.shrunk(shrink)
+            search = PrototypeSearch(
+                emb.transform(base._means), int(self.exact_below), int(self.search_dims)
+            )
+            e = emb.transform(z[rows])
+            ids, dist = search.nearest(e, k_search)
+            cls = owner[ids]
+            acc = float((cls[:, 0] == yh).mean())
+            if best is None or acc > best["accuracy"] + 1e-9:
+                best = {"accuracy": acc, "shrinkage": float(shrink), "dist": dist, "ids": ids}
+        dist, ids = best["dist"], best["ids"]
+        cls, count = owner[ids], count_all[ids]
+        class_n = class_total[cls]
+        dims = z.shape[1]
+        mine = cls == yh[:, None]
+        tau, best_ll = 1.0, -np.inf
+        for t in _TAUS:
+            logp = class_log_posterior(dist, count, class_n, cls, t, dims)
+            ll = np.where(mine, logp, -np.inf).max(axis=1)
+            mean_ll = float(np.maximum(ll, -50.0).mean())
+            if mean_ll > best_ll:
+                tau, best_ll = float(t), mean_ll
+        from sklearn.metrics import roc_auc_score
+
+        logp = class_log_posterior(dist, count, class_n, cls, tau, dims)
+        logp_n = class_log_posterior(dist, count, class_n, cls, tau, dims, mine)
+        alone = mine.all(axis=1)  # no other class among the candidates: nothing to score
+        weights = DISTANCE_WEIGHTS if self.distance_weight is None else (self.distance_weight,)
+        chosen: dict[str, Any] = {"auroc": -1.0}
+        for w in weights:
+            known = novelty_scores(logp, dist, count, tau, dims, float(w))
+            novel = novelty_scores(logp_n, dist, count, tau, dims, float(w), mine)[~alone]
+            truth = np.r_[np.zeros(len(known)), np.ones(len(novel))]
+            auroc = float(roc_auc_score(truth, np.r_[known, novel])) if len(novel) else 0.0
+            if auroc > chosen["auroc"] + 1e-9:
+                chosen = {"auroc": auroc, "weight": float(w), "known": known, "novel": novel}
+        return {
+            "shrinkage": best["shrinkage"],
+            "tau": tau,
+            "distance_weight": chosen["weight"],
+            "accuracy": best["accuracy"],
+            "known_scores": chosen["known"],
+            "novel_scores": chosen["novel"],
+        }
+
+    def _procedure_order(self, z: np.ndarray, y: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Procedures by known accuracy alone per robot second (on the calibration samples,
+        their own trial still in the prototypes), best first; empty for one procedure."""
+        if len(self.procedures) < 2:
+            return np.zeros(0, np.int64)
+        gains = []
+        for j in range(len(self.procedures)):
+            p = self._marginal_posterior(z[rows], (j,))
+            gains.append(float((p.argmax(axis=1) == y[rows]).mean()))
+        per_second = np.asarray(gains) / seconds_of(self.procedures)
+        return np.argsort(-per_second, kind="stable")
+
+    def _fit_attributes(self, z: np.ndarray, y: np.ndarray) -> None:
+        """DAP's attribute classifiers, the prior and the autoencoder, as ``best``'s."""
+        attrs = self.registry.known_attributes
+        if 0 < self.attribute_samples < len(z):
+            rng = np.random.default_rng(int(self.seed))
+            keep = np.sort(rng.choice(len(z), int(self.attribute_samples), replace=False))
+            z, y = z[keep], y[keep]
+        self.attributes_ = LinearAttributeModel.fit(
+            z, attrs[y], float(self.attribute_C), n_jobs=self.n_jobs
+        )
+        self.prior_ = attribute_prior(attrs)
+        self.sae_ = (
+            semantic_autoencoder(z, impute(attrs, self.prior_)[y], float(self.sae_lambda)).astype(
+                np.float32
+            )
+            if self.sae_lambda > 0 and self.has_attributes
+            else None
+        )
+
+    def _refit_attributes(self, dataset: TactileDataset) -> None:
+        self._fit_attributes(self.scaler_.transform(flatten(dataset.samples)), dataset.labels)
+        self.metrics = {**self.metrics, "n_attributes": len(self.registry.attribute_names)}
+
+    # --------------------------------------------------------------- scoring
+    def _candidates(self, e: np.ndarray) -> tuple[np.ndarray, ...]:
+        ids, dist = self.search_.nearest(e, int(self.search_k))
+        cls = self.proto_class_[ids]
+        count = self.proto_count_[ids]
+        return ids, dist, cls, count, self._class_n[cls]
+
+    def _scores_e(self, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(known probabilities (N, K), novelty scores (N,)) of embedded samples."""
+        _, dist, cls, count, class_n = self._candidates(e)
+        dims = e.shape[1]
+        logp = class_log_posterior(dist, count, class_n, cls, self.tau_, dims)
+        known = _dense(np.exp(logp), cls, len(self.registry.known_names))
+        weight = self.distance_weight_
+        return known, novelty_scores(logp, dist, count, self.tau_, dims, weight)
+
+    def _embedded(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        z = self.scaler_.transform(flatten(samples))
+        return z, self.embedding_.transform(z)
+
+    def _known_proba(self, samples: np.ndarray) -> np.ndarray:
+        return self._scores_e(self._embedded(samples)[1])[0]
+
+    def _novelty_score(self, samples: np.ndarray) -> np.ndarray:
+        return self._scores_e(self._embedded(samples)[1])[1]
+
+    def _novel_proba(self, samples: np.ndarray) -> np.ndarray:
+        z, e = self._embedded(samples)
+        return self._novel_from(z, e)
+
+    def _all_scores(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        z, e = self._embedded(samples)
+        known, novelty = self._scores_e(e)
+        novel = self._novel_from(z, e) if self.registry.novel_names else None
+        return novelty, known, novel
+
+    def _novel_from(self, z: np.ndarray, e: np.ndarray | None) -> np.ndarray:
+        reg = self.registry
+        has = self.shot_has_
+        if self.has_attributes:
+            scores = dap_log_scores(
+                self.attributes_.predict_proba(z),
+                reg.novel_attributes,
+                self.prior_,
+                float(self.dap_clip),
+            )
+            if self.sae_ is not None:
+                scores = scores + float(self.sae_temperature) * cosine_scores(
+                    z, self.sae_, impute(reg.novel_attributes, self.prior_)
+                )
+            p_zsl = softmax(scores)
+        else:
+            p_zsl = np.zeros((len(z), len(reg.novel_names)))
+        if not has.any() or e is None:
+            return p_zsl
+        p_shot = self._shot_posterior(e, self.shot_points_[has], self.shot_counts_[has])
+        out = p_zsl.copy()
+        rest = 1.0 - p_zsl[:, ~has].sum(axis=1, keepdims=True) if self.has_attributes else 1.0
+        out[:, has] = rest * p_shot
+        return out
+
+    def _shot_posterior(self, e: np.ndarray, points: np.ndarray, counts: np.ndarray) -> np.ndarray:
+        """Softmax over the novel classes with samples, by the known part's Gaussian."""
+        dist = ((e[:, None, :] - points[None]) ** 2).sum(axis=2, dtype=np.float64)
+        v = 1.0 + 1.0 / counts
+        logd = -dist / (2.0 * self.tau_ * v) - 0.5 * e.shape[1] * np.log(v)
+        return softmax(logd)
+
+    def _attribute_proba(self, samples: np.ndarray) -> np.ndarray:
+        return self.attributes_.predict_proba(self.scaler_.transform(flatten(samples)))
+
+    def __getstate__(self) -> dict[str, Any]:
+        # the marginal models are a cache of this model: a copy (each enrolment's) builds its
+        # own on first use rather than copying prototypes for every set of procedures
+        return {**self.__dict__, "_marginals": {}}
+
+    # --------------------------------------------------------------- enrolment
+    @property
+    def _class_n(self) -> np.ndarray:
+        return _class_totals(self.proto_class_, self.proto_count_, len(self.registry.known_names))
+
+    def _grow_known(self, samples: np.ndarray, labels: np.ndarray) -> None:
+        """Each class's new samples become one prototype of their own, beside the index; the
+        space, ``tau`` and the threshold stay as fitted, and the attribute parts never see a
+        promoted class's samples until the next full fit."""
+        e = self.embedding_.transform(self.scaler_.transform(flatten(samples)))
+        classes = np.unique(labels)
+        points = np.stack([e[labels == c].mean(axis=0) for c in classes])
+        counts = np.array([(labels == c).sum() for c in classes], np.float64)
+        self.search_ = self.search_.with_points(points)
+        self.proto_class_ = np.concatenate([self.proto_class_, classes])
+        self.proto_count_ = np.concatenate([self.proto_count_, counts])
+        grown = int(self.metrics.get("n_grown_samples", 0))
+        self.metrics = {
+            **self.metrics,
+            "n_known_classes": len(self.registry.known_names),
+            "n_grown_samples": grown + len(samples),
+        }
+        self._marginals = {}
+
+    def _reset_novel(self) -> None:
+        d = self.search_.points.shape[1]
+        self.shot_points_ = np.zeros((0, d), np.float32)
+        self.shot_counts_ = np.zeros(0, np.float64)
+        self.shot_has_ = np.zeros(0, bool)
+
+    def _refit_novel(self, **options: Any) -> None:
+        if options:
+            raise FrameworkError(
+                f"method '{self.method}' takes no enrolment options, got {sorted(options)}"
+            )
+        reg = self.registry
+        d = self.search_.points.shape[1]
+        points = np.zeros((len(reg.novel_names), d), np.float32)
+        counts = np.ones(len(reg.novel_names), np.float64)
+        has = np.zeros(len(reg.novel_names), bool)
+        for i, name in enumerate(reg.novel_names):
+            samples = reg.novel_samples.get(name)
+            if samples is not None and len(samples):
+                points[i] = self._embedded(samples)[1].mean(axis=0)
+                counts[i], has[i] = len(samples), True
+        self.shot_points_, self.shot_counts_, self.shot_has_ = points, counts, has
+
+    # ------------------------------------------------------- missing procedures
+    @property
+    def answers_from_some_procedures(self) -> bool:
+        return len(self.procedures) >= 2
+
+    @property
+    def first_procedure(self) -> str | None:
+        if not self.answers_from_some_procedures:
+            return None
+        return self.procedures[int(self.procedure_order_[0])]
+
+    def _features(self, keep: tuple[int, ...]) -> np.ndarray:
+        cols = np.zeros(self.input_shape, bool)
+        for j in keep:
+            cols[block(self.procedures, self.input_shape, j)] = True
+        return np.flatnonzero(cols.ravel())
+
+    def _marginal(self, keep: tuple[int, ...]) -> tuple:
+        """(features, the others, centre, projection, prototypes, the map from the full
+        space's coordinates, imputation) of the marginal model on procedures ``keep``,
+        built on first use and kept."""
+        got = self._marginals.get(keep)
+        if got is None:
+            feats = self._features(keep)
+            center, proj = self.embedding_.marginal(feats)
+            # prototypes in the scaled inputs' space: centre + point @ inverse projection
+            inverse = np.linalg.pinv(self.embedding_.projection_.astype(np.float64))
+            mapping = (inverse[:, feats] @ proj).astype(np.float32)
+            protos = np.concatenate([self.search_.points, self.search_.extra]) @ mapping
+            cov = self.embedding_.covariance_.astype(np.float64)
+            rest = np.setdiff1d(np.arange(cov.shape[0]), feats)
+            impute_m = np.linalg.solve(
+                cov[np.ix_(feats, feats)] + 1e-6 * np.eye(len(feats)), cov[np.ix_(feats, rest)]
+            ).astype(np.float32)
+            got = (feats, rest, center, proj, protos, mapping, impute_m)
+            self._marginals[keep] = got
+        return got
+
+    def _marginal_posterior(self, z: np.ndarray, keep: tuple[int, ...]) -> np.ndarray:
+        return self._marginal_scores(z, keep)[0]
+
+    def _marginal_scores(
+        self, z: np.ndarray, keep: tuple[int, ...]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(known probabilities, novelty scores, embedded rows) from procedures ``keep``."""
+        feats, _, center, proj, protos, _, _ = self._marginal(keep)
+        e = (z[:, feats] - center) @ proj
+        dist = (
+            (e**2).sum(axis=1, keepdims=True) - 2.0 * e @ protos.T + (protos**2).sum(axis=1)
+        ).astype(np.float64)
+        dist = np.maximum(dist, 0.0)
+        k = min(int(self.search_k), protos.shape[0])
+        near = np.argpartition(dist, k - 1, axis=1)[:, :k]
+        dist = np.take_along_axis(dist, near, axis=1)
+        cls, count = self.proto_class_[near], self.proto_count_[near]
+        dims = e.shape[1]
+        logp = class_log_posterior(dist, count, self._class_n[cls], cls, self.tau_, dims)
+        known = _dense(np.exp(logp), cls, len(self.registry.known_names))
+        weight = self.distance_weight_
+        return known, novelty_scores(logp, dist, count, self.tau_, dims, weight), e
+
+    def _imputed(self, x: np.ndarray, keep: tuple[int, ...]) -> np.ndarray:
+        """Scaled inputs with the missing features at their conditional mean given the rest."""
+        feats, rest, *_, impute_m = self._marginal(keep)
+        z = self.scaler_.transform(np.nan_to_num(flatten(x)))
+        mean = self.embedding_.center_
+        z[:, rest] = mean[rest] + (z[:, feats] - mean[feats]) @ impute_m
+        return z
+
+    def _subset_scores(
+        self, x: np.ndarray, keep: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        keep = tuple(int(j) for j in keep)
+        z = self._imputed(x, keep)
+        known, novelty, e = self._marginal_scores(z, keep)
+        novel = None
+        if self.registry.novel_names:
+            novel = self._novel_from(z, None)
+            has = self.shot_has_
+            if has.any():
+                shot = self.shot_points_[has] @ self._marginal(keep)[5]
+                p_shot = self._shot_posterior(e, shot, self.shot_counts_[has])
+                rest = 1.0 - novel[:, ~has].sum(axis=1, keepdims=True) if self.has_attributes else 1
+                novel[:, has] = rest * p_shot
+        return novelty, known, novel
+
+    def _subset_attribute_proba(self, x: np.ndarray, keep: np.ndarray) -> np.ndarray:
+        return self.attributes_.predict_proba(self._imputed(x, tuple(int(j) for j in keep)))
+
+    def _next_procedures(
+        self, known_p: np.ndarray, used: np.ndarray, ask: np.ndarray
+    ) -> np.ndarray:
+        out = np.full(len(known_p), -1, np.int64)
+        for i in np.flatnonzero(ask):
+            left = [j for j in self.procedure_order_ if not used[i, j]]
+            if left:
+                out[i] = int(left[0])
+        return out
+
+    # ------------------------------------------------------------ persistence
+    def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        arrays: dict[str, np.ndarray] = {
+            "prior": self.prior_,
+            "points": np.concatenate([self.search_.points, self.search_.extra]),
+            "n_fitted_points": np.asarray(len(self.search_.points), np.int64),
+            "proto_class": self.proto_class_,
+            "proto_count": self.proto_count_,
+            "procedure_order": np.asarray(self.procedure_order_, np.int64),
+        }
+        if self.sae_ is not None:
+            arrays["sae"] = self.sae_
+        for key, value in self.scaler_.get_state().items():
+            arrays[f"scaler/{key}"] = value
+        for key, value in self.embedding_.get_state().items():
+            arrays[f"embedding/{key}"] = value
+        for key, value in self.attributes_.get_state().items():
+            arrays[f"attributes/{key}"] = value
+        meta = {
+            "params": self.get_params(),
+            "tau": float(self.tau_),
+            "distance_weight": float(self.distance_weight_),
+        }
+        return meta, arrays
+
+    def set_state(self, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        ensure_threads_configured()
+        names = self._get_param_names()
+        for key, value in meta["params"].items():
+            if key not in names:
+                raise KeyError(f"unknown parameter {key!r} in the bundle")
+            setattr(self, key, value)
+        self._validate_params()
+
+        def part(prefix: str) -> dict[str, np.ndarray]:
+            return {k[len(prefix) :]: v for k, v in arrays.items() if k.startswith(prefix)}
+
+        self.scaler_ = RobustInputScaler()
+        self.scaler_.set_state(part("scaler/"))
+        self.embedding_ = SubclassEmbedding.from_state(part("embedding/"))
+        n_features = int(np.prod(self.input_shape))
+        if self.embedding_.projection_.shape[0] != n_features:
+            raise ValueError(
+                f"the embedding expects {self.embedding_.projection_.shape[0]} features, "
+                f"inputs have {n_features}"
+            )
+        points = np.asarray(arrays["points"], np.float32)
+        fitted = int(arrays["n_fitted_points"])
+        self.search_ = PrototypeSearch(
+            points[:fitted], int(self.exact_below), int(self.search_dims)
+        )
+        if fitted < len(points):
+            self.search_ = self.search_.with_points(points[fitted:])
+        self.proto_class_ = np.asarray(arrays["proto_class"], np.int64)
+        self.proto_count_ = np.asarray(arrays["proto_count"], np.float64)
+        if len(self.proto_class_) != len(points) or (
+            len(points) and self.proto_class_.max() >= len(self.registry.known_names)
+        ):
+            raise ValueError("the prototypes do not match the bundle's known classes")
+        self.procedure_order_ = np.asarray(arrays["procedure_order"], np.int64)
+        self.tau_ = float(meta["tau"])
+        self.distance_weight_ = float(meta["distance_weight"])
+        self.attributes_ = LinearAttributeModel.from_state(part("attributes/"))
+        self.prior_ = np.asarray(arrays["prior"], np.float64)
+        self.sae_ = np.asarray(arrays["sae"], np.float32) if "sae" in arrays else None
+        self._marginals = {}
+        self._reset_novel()
+        if self.registry.novel_names:
+            self._refit_novel()
+
+
+def class_log_posterior(
+    dist: np.ndarray,
+    count: np.ndarray,
+    class_n: np.ndarray,
+    cls: np.ndarray,
+    tau: float,
+    dims: int,
+    gone: np.ndarray | None = None,
+) -> np.ndarray:
+    """(N, k) log posterior of each candidate prototype's class, given the squared distances
+    ``dist`` to the candidates, their sample counts, their classes' sample counts and their
+    classes ``cls``: each prototype an isotropic Gaussian of variance ``tau (1 + 1/count)``
+    in ``dims`` coordinates weighted by its share of its class; every candidate of a class
+    carries the class's summed value. Candidates marked ``gone`` count for nothing."""
+    v = 1.0 + 1.0 / count
+    logd = -dist / (2.0 * tau * v) - 0.5 * dims * np.log(v) + np.log(count / class_n)
+    if gone is not None:
+        logd = np.where(gone, -np.inf, logd)
+    top = logd.max(axis=1, keepdims=True)
+    w = np.exp(logd - np.where(np.isfinite(top), top, 0.0))
+    same = cls[:, :, None] == cls[:, None, :]
+    class_w = (w[:, None, :] * same).sum(axis=2)
+    total = np.maximum(w.sum(axis=1, keepdims=True), 1e-300)
+    return np.log(np.maximum(class_w, 1e-300)) - np.log(total)
+
+
+def novelty_scores(
+    logp: np.ndarray,
+    dist: np.ndarray,
+    count: np.ndarray,
+    tau: float,
+    dims: int,
+    weight: float,
+    gone: np.ndarray | None = None,
+) -> np.ndarray:
+    """(N,) novelty: ``1 - max p`` plus ``weight`` x the log squared distance to the nearest
+    candidate, per coordinate and in units of its variance (100: nearly the distance alone)."""
+    per = dist / (1.0 + 1.0 / count)
+    if gone is not None:
+        per = np.where(gone, np.inf, per)
+    log_d = np.log(per.min(axis=1) / (dims * tau) + 1e-12)
+    return 1.0 - np.exp(logp.max(axis=1)) + (weight * log_d if weight else 0.0)
+
+
+def _held_out_trials(y: np.ndarray, trials: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(N,) bool: one whole trial, drawn at random, of each class that has two or more."""
+    held = np.zeros(len(y), bool)
+    pairs = np.unique(np.stack([y, trials], axis=1), axis=0)
+    classes, first, n_trials = np.unique(pairs[:, 0], return_index=True, return_counts=True)
+    for c, lo, n in zip(classes, first, n_trials, strict=True):
+        if n >= 2:
+            t = pairs[lo + rng.integers(n), 1]
+            held |= (y == c) & (trials == t)
+    return held
+
+
+def _class_totals(owner: np.ndarray, counts: np.ndarray, n: int | None = None) -> np.ndarray:
+    return np.bincount(owner, weights=counts, minlength=n or 0)
+
+
+def _dense(p: np.ndarray, cls: np.ndarray, n_classes: int) -> np.ndarray:
+    """(N, K) probabilities from each row's candidates' class values (a class's candidates
+    all carry its value: it is set, not added)."""
+    out = np.zeros((len(p), n_classes))
+    rows = np.repeat(np.arange(len(p)), cls.shape[1])
+    out[rows, cls.ravel()] = p.ravel()
+    return out
