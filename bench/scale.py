@@ -1,24 +1,29 @@
-"""Scale in objects: what the default method costs, and how well it recognises, from 60 to
-30,000 known objects of the built-in simulator.
+"""Scale in objects: what a method costs, and how well it recognises, from 60 to 30,000
+known objects of the built-in simulator, beside a shrinkage-LDA reference.
 
     .venv/bin/python -m bench.scale [--sizes 60,300,1000,3000,10000,30000] [--max N]
                                     [--novel 20] [--trials 10] [--seed 0]
-                                    [--separation none|phac2] [--out results/scale/]
-                                    [--param NAME=VALUE ...]
+                                    [--separation none|phac2] [--modes K]
+                                    [--method NAME] [--no-reference]
+                                    [--out results/scale/] [--param NAME=VALUE ...]
 
 For each size N (up to ``--max``) a child process of its own (so each peak RSS is that
-size's alone) simulates ``simulate_dataset(N + novel, trials, seed, separation)``: the
-first N objects are known, the last ``--novel`` are novel. ``--separation phac2`` keeps
+size's alone) simulates ``simulate_dataset(N + novel, trials, seed, separation, modes)``:
+the first N objects are known, the last ``--novel`` are novel. ``--separation phac2`` keeps
 the simulator's objects as far apart as PHAC-2's at every size (``bench/separation.py``
 measures it); ``none``, the default, is the simulator as it is, whose objects crowd together
-as N grows. Two whole trials per known object are held out.
-The child fits ``best`` (its defaults, ``n_jobs`` = the cores, each ``--param`` in place of
-a default, its value read as JSON where it parses) on the rest and measures:
+as N grows; ``--modes K`` gives each object K contact modes. Two whole trials per known
+object are held out.
+The child fits ``--method`` (the service's default method unless named; its defaults,
+``n_jobs`` = the cores, each ``--param`` in place of a default, its value read as JSON where
+it parses) on the rest and measures:
 
-- ``fit_s`` and ``fit_peak_gb``: the fit's wall time and the process's peak RSS while it
-  ran (read every 0.1 s; the dataset is in memory already), ``bundle_mb``; ``fit_timings``:
-  the fitted model's own breakdown (``metrics["timings"]``: novelty tuning, known model,
-  attributes, ``by_procedure_s`` for the per-procedure models, total), whose
+- ``fit_s`` and ``fit_peak_gb``: the fit's wall time and the process's peak RSS from the
+  start of the fit, the kernel's high-water mark (VmHWM, reset before the fit; the dataset
+  is in memory already; ``simulator_peak_gb`` is the mark before it), ``bundle_mb``;
+  ``fit_timings``: the fitted model's own breakdown (``metrics["timings"]``: novelty
+  tuning, known model, attributes, ``by_procedure_s`` for the per-procedure models, total),
+  whose
   ``by_procedure_s`` is a column of the table;
 - ``enrol_ms``: ``add_novel_classes`` of one class by attribute vector (median of up to 5:
   as many as novel vectors are free), and ``one_shot_ms``: ``add_one_shot`` of one sample
@@ -37,6 +42,11 @@ a default, its value read as JSON where it parses) on the rest and measures:
   novel objects' samples among the novel classes enrolled by their attribute vectors, and
   ``zsl_by_novel``: the same for the first 10, 100 and 1,000 novel objects (as many as
   ``--novel`` gives), with how many of them could be enrolled (a vector not yet taken);
+- ``nd_auroc``: the method's novelty score, held-out known trials against the novel
+  objects' samples, and ``nd_known_kept`` / ``nd_novel_detected`` at its threshold;
+- ``lda_acc`` and ``lda_auroc`` (unless ``--no-reference``): scikit-learn's
+  ``LinearDiscriminantAnalysis(solver="lsqr", shrinkage="auto")`` on the same scaled,
+  flattened samples, its novelty score 1 - its largest posterior;
 - ``vectors_distinct`` (distinct attribute vectors among the N known objects) and
   ``novel_vectors_taken`` (novel objects whose vector a known object has: the service
   answers such an enrolment with a 409).
@@ -54,7 +64,6 @@ import os
 import platform
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -76,9 +85,18 @@ BLOCK = 1024
 NOVEL_COUNTS = (10, 100, 1000)  # zsl_by_novel: the first this many novel objects
 
 
-def _rss_gb() -> float:
+def _peak_gb() -> float:
+    """The process's peak resident memory since start or the last ``_reset_peak``: the
+    kernel's high-water mark (VmHWM), not a sample."""
     with open("/proc/self/status") as f:
-        return int(f.read().split("VmRSS:")[1].split()[0]) / 1e6
+        return int(f.read().split("VmHWM:")[1].split()[0]) / 1e6
+
+
+def _reset_peak() -> None:
+    """Start the high-water mark again from the current resident memory (Linux's
+    clear_refs 5)."""
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")
 
 
 def measure(
@@ -88,9 +106,13 @@ def measure(
     seed: int,
     separation: str = "none",
     params: dict | None = None,
+    method: str = "best",
+    modes: int = 1,
+    reference: bool = True,
 ) -> dict:
-    """Every figure of one size, in this process (``--one``); ``params``: ``best``'s
-    hyper-parameters in place of its defaults."""
+    """Every figure of one size, in this process (``--one``); ``params``: ``method``'s
+    hyper-parameters in place of its defaults; ``reference``: fit the shrinkage-LDA
+    reference too."""
     from app.data.procedures import keep_only
     from app.data.simulator import simulate_dataset
     from app.framework import bundle
@@ -98,7 +120,11 @@ def measure(
     from app.framework.scaling import RobustInputScaler, flatten
 
     ds = simulate_dataset(
-        n + novel, trials, seed=seed, separation=None if separation == "none" else separation
+        n + novel,
+        trials,
+        seed=seed,
+        separation=None if separation == "none" else separation,
+        modes=modes,
     )
     held = (ds.trials % trials) >= trials - 2
     known = ds.labels < n
@@ -109,23 +135,18 @@ def measure(
     known_vectors = {tuple(v) for v in vectors[:n].astype(int).tolist()}
     del ds
 
-    peak = [_rss_gb()]
-    done = threading.Event()
-
-    def watch() -> None:
-        while not done.wait(0.1):
-            peak[0] = max(peak[0], _rss_gb())
-
-    threading.Thread(target=watch, daemon=True).start()
+    sim_peak = _peak_gb()
+    _reset_peak()  # the kernel's high-water mark from here on is the fit's
     t = time.perf_counter()
-    model = make_method("best", **{"seed": seed, "n_jobs": os.cpu_count(), **(params or {})})
+    model = make_method(method, **{"seed": seed, "n_jobs": os.cpu_count(), **(params or {})})
     model.fit(train, progress=True)
     out: dict = {"objects": n, "separation": separation, "fit_s": time.perf_counter() - t}
+    out["method"], out["modes"] = method, modes
     out["params"] = params or {}
-    done.set()
+    out["fit_peak_gb"] = _peak_gb()
+    out["simulator_peak_gb"] = sim_peak
     out["fit_timings"] = dict(model.metrics.get("timings", {}))
     out["by_procedure_s"] = out["fit_timings"].get("by_procedure_s")
-    out["fit_peak_gb"] = max(peak[0], _rss_gb())
     out["bundle_mb"] = len(bundle.to_bytes(model)) / 1e6
 
     novel_names = [f"novel-{i}" for i in range(novel)]
@@ -196,6 +217,9 @@ def measure(
     out["nn1_acc"] = _nearest_neighbour_accuracy(
         RobustInputScaler().fit(flatten(train.samples)), train, x_test, y_test
     )
+    out.update(_novelty_figures(model, x_test, x_novel))
+    if reference:
+        out.update(_lda_reference(train, x_test, y_test, x_novel))
 
     times = []
     for i in range(300):
@@ -221,6 +245,55 @@ def _known_accuracy(model, x: np.ndarray, y: np.ndarray) -> float:
         p = model.known_proba(x[lo : lo + BLOCK])
         correct += int((p.argmax(axis=1) == y[lo : lo + BLOCK]).sum())
     return correct / len(x)
+
+
+def _novelty_figures(model, x_test: np.ndarray, x_novel: np.ndarray) -> dict:
+    """The method's own novelty score on held-out known trials against the novel objects'
+    samples: AUROC, and the shares kept known and detected at its threshold."""
+    from sklearn.metrics import roc_auc_score
+
+    known = np.concatenate(
+        [model.novelty_score(x_test[lo : lo + BLOCK]) for lo in range(0, len(x_test), BLOCK)]
+    )
+    novel = model.novelty_score(x_novel)
+    truth = np.r_[np.zeros(len(known)), np.ones(len(novel))]
+    return {
+        "nd_auroc": float(roc_auc_score(truth, np.r_[known, novel])),
+        "nd_known_kept": float((known <= model.novelty_threshold).mean()),
+        "nd_novel_detected": float((novel > model.novelty_threshold).mean()),
+    }
+
+
+def _lda_reference(train, x_test: np.ndarray, y_test: np.ndarray, x_novel: np.ndarray) -> dict:
+    """scikit-learn's ``LinearDiscriminantAnalysis(solver="lsqr", shrinkage="auto")`` on the
+    same scaled, flattened samples: its known accuracy, and its novelty AUROC scoring a
+    sample by 1 - its largest posterior."""
+    from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
+    from sklearn.metrics import roc_auc_score
+
+    from app.framework.scaling import RobustInputScaler, flatten
+
+    t = time.perf_counter()
+    scaler = RobustInputScaler().fit(flatten(train.samples))
+    lda = LinearDiscriminantAnalysis(solver="lsqr", shrinkage="auto")
+    lda.fit(scaler.transform(flatten(train.samples)), train.labels)
+
+    def proba(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        top, conf = [], []
+        for lo in range(0, len(x), BLOCK):
+            p = lda.predict_proba(scaler.transform(flatten(x[lo : lo + BLOCK])))
+            top.append(p.argmax(axis=1))
+            conf.append(p.max(axis=1))
+        return np.concatenate(top), np.concatenate(conf)
+
+    top, known = proba(x_test)
+    _, novel = proba(x_novel)
+    truth = np.r_[np.zeros(len(known)), np.ones(len(novel))]
+    return {
+        "lda_acc": float((lda.classes_[top] == y_test).mean()),
+        "lda_auroc": float(roc_auc_score(truth, np.r_[1.0 - known, 1.0 - novel])),
+        "lda_s": time.perf_counter() - t,
+    }
 
 
 def _nearest_neighbour_accuracy(scaler, train, x_test, y_test) -> float:
@@ -270,6 +343,7 @@ def markdown_rows(records: list[dict], cols: tuple[str, ...], digits: str) -> li
 
 def table(records: list[dict], slopes: dict) -> str:
     cols = ("objects", *COSTS, "by_procedure_s", "throughput_per_s", "known_acc", "nn1_acc")
+    cols += ("lda_acc", "nd_auroc", "lda_auroc", "nd_known_kept", "nd_novel_detected")
     cols += ("known_acc_one_procedure",)
     cols += ("zsl_acc",)
     cols += ("vectors_distinct", "novel_vectors_taken")
@@ -356,13 +430,18 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
         default="none",
         help="none (the simulator as it is) or phac2 (objects as far apart as PHAC-2's)",
     )
+    p.add_argument("--method", default=None, help="the method to fit (default: the service's)")
+    p.add_argument("--modes", type=int, default=1, help="contact modes of each object")
+    p.add_argument(
+        "--no-reference", action="store_true", help="leave out the shrinkage-LDA reference"
+    )
     p.add_argument("--out", default="results/scale")
     p.add_argument(
         "--param",
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="a hyper-parameter of best in place of its default (repeatable), "
+        help="a hyper-parameter of the method in place of its default (repeatable), "
         "e.g. --param procedure_estimators=100",
     )
     p.add_argument("--one", type=int, help=argparse.SUPPRESS)  # a child's own size
@@ -380,6 +459,13 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
 
     if args.separation != "none" and args.separation not in SEPARATIONS:
         p.error(f"--separation takes none or {', '.join(SEPARATIONS)}, got {args.separation!r}")
+    from app.framework.registry import DEFAULT_METHOD, METHODS
+
+    args.method = args.method or DEFAULT_METHOD
+    if args.method not in METHODS:
+        p.error(f"--method takes one of {', '.join(sorted(METHODS))}, got {args.method!r}")
+    if args.modes < 1:
+        p.error(f"--modes must be at least 1, got {args.modes}")
     if args.novel < 1 or args.trials < 4:
         p.error("--novel must be at least 1 and --trials at least 4 (2 are held out)")
     return args
@@ -388,7 +474,17 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     if args.one is not None:
-        record = measure(args.one, args.novel, args.trials, args.seed, args.separation, args.params)
+        record = measure(
+            args.one,
+            args.novel,
+            args.trials,
+            args.seed,
+            args.separation,
+            args.params,
+            args.method,
+            args.modes,
+            not args.no_reference,
+        )
         print(json.dumps(record))
         return 0
     out = Path(args.out)
@@ -398,7 +494,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"scale: {n} known objects ...", file=sys.stderr, flush=True)
         cmd = [sys.executable, "-m", "bench.scale", "--one", str(n)]
         cmd += ["--novel", str(args.novel), "--trials", str(args.trials), "--seed", str(args.seed)]
-        cmd += ["--separation", args.separation]
+        cmd += ["--separation", args.separation, "--method", args.method]
+        cmd += ["--modes", str(args.modes)] + (["--no-reference"] if args.no_reference else [])
         cmd += [f"--param={item}" for item in args.param]
         done = subprocess.run(cmd, stdout=subprocess.PIPE, text=True)
         if done.returncode != 0:
@@ -409,6 +506,8 @@ def main(argv: list[str] | None = None) -> int:
         report = {
             "machine": machine(),
             "separation": args.separation,
+            "method": args.method,
+            "modes": args.modes,
             "params": args.params,
             "sizes": records,
             "exponents": slopes,

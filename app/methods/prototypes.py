@@ -260,9 +260,10 @@ class PrototypeRecognizer(TactileRecognizer):
         self, z: np.ndarray, y: np.ndarray, trials: np.ndarray, k: int
     ) -> dict[str, Any] | None:
         """A probe fitted without one whole trial of each class that has two or more, scoring
-        them: the shrinkage (best held-out accuracy among Ledoit-Wolf's and ``_SHRINKAGES``),
-        ``tau`` (best held-out log-likelihood), and the novelty scores of the held-out
-        samples with their class's prototypes (known) and without (pseudo-novel)."""
+        them: the shrinkage (Ledoit-Wolf's or one of ``_SHRINKAGES``) and ``tau`` whose
+        posterior gives the held-out samples' own classes the highest mean log-probability,
+        and the novelty scores of the held-out samples with their class's prototypes (known)
+        and without (pseudo-novel)."""
         held = _held_out_trials(y, trials, np.random.default_rng(int(self.seed)))
         if held.sum() == 0 or len(np.unique(y[held])) < 2:
             return None
@@ -277,30 +278,26 @@ class PrototypeRecognizer(TactileRecognizer):
         count_all = np.bincount(base.subclass_, minlength=len(owner)).astype(np.float64)
         class_total = _class_totals(owner, count_all, k)
         k_search = int(self.search_k) + int(self.max_modes)
-        best: dict[str, Any] | None = None
+        dims = z.shape[1]
+        best: dict[str, Any] = {"ll": -np.inf}
         for shrink in (base.ledoit_wolf_, *_SHRINKAGES):
             emb = base.shrunk(shrink)
             search = PrototypeSearch(
                 emb.transform(base._means), int(self.exact_below), int(self.search_dims)
             )
-            e = emb.transform(z[rows])
-            ids, dist = search.nearest(e, k_search)
-            cls = owner[ids]
-            acc = float((cls[:, 0] == yh).mean())
-            if best is None or acc > best["accuracy"] + 1e-9:
-                best = {"accuracy": acc, "shrinkage": float(shrink), "dist": dist, "ids": ids}
-        dist, ids = best["dist"], best["ids"]
+            ids, dist = search.nearest(emb.transform(z[rows]), k_search)
+            cls, count = owner[ids], count_all[ids]
+            mine = cls == yh[:, None]
+            for tau in _TAUS:
+                logp = class_log_posterior(dist, count, class_total[cls], cls, tau, dims)
+                ll = float(np.maximum(np.where(mine, logp, -np.inf).max(axis=1), -50.0).mean())
+                if ll > best["ll"] + 1e-9:
+                    best = {"ll": ll, "shrinkage": float(shrink), "tau": float(tau), "ids": ids}
+                    best["dist"], best["accuracy"] = dist, float((cls[:, 0] == yh).mean())
+        dist, ids, tau = best["dist"], best["ids"], best["tau"]
         cls, count = owner[ids], count_all[ids]
         class_n = class_total[cls]
-        dims = z.shape[1]
         mine = cls == yh[:, None]
-        tau, best_ll = 1.0, -np.inf
-        for t in _TAUS:
-            logp = class_log_posterior(dist, count, class_n, cls, t, dims)
-            ll = np.where(mine, logp, -np.inf).max(axis=1)
-            mean_ll = float(np.maximum(ll, -50.0).mean())
-            if mean_ll > best_ll:
-                tau, best_ll = float(t), mean_ll
         from sklearn.metrics import roc_auc_score
 
         logp = class_log_posterior(dist, count, class_n, cls, tau, dims)
