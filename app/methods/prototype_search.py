@@ -3,8 +3,8 @@
 The prototypes of a fit are indexed once: exactly (``IndexFlatL2`` over every coordinate)
 while there are at most ``exact_below`` of them, else by an HNSW graph over the leading
 ``search_dims`` coordinates (the embedding puts the directions along which prototypes differ
-most first). Either way each candidate's squared distance is then computed exactly in every
-coordinate, so the approximate search can only miss a candidate, never mis-score one.
+most first), which hands ``RERANK`` x k candidates on. Either way each candidate's squared
+distance is then computed exactly in every coordinate and the k nearest are kept, so the approximate search can only miss a candidate, never mis-score one.
 Prototypes added later (promotions, one-shot classes) are kept beside the index and searched
 exactly: an enrolment never rebuilds or copies the index.
 """
@@ -12,6 +12,10 @@ exactly: an enrolment never rebuilds or copies the index.
 from __future__ import annotations
 
 import numpy as np
+
+#: the approximate search hands this many times ``k`` candidates to the exact re-ranking:
+#: its leading coordinates alone rank the true k nearest lower than k now and then
+RERANK = 4
 
 
 class PrototypeSearch:
@@ -76,7 +80,7 @@ class PrototypeSearch:
         distances exact in every coordinate."""
         e = np.ascontiguousarray(e, np.float32)
         k = min(k, len(self))
-        fitted = min(k, len(self.points))
+        fitted = min(k if self.exact else k * RERANK, len(self.points))
         _, ids = self.index.search(np.ascontiguousarray(e[:, : self.dims]), fitted)
         ids = ids.astype(np.int64)
         if len(self.extra):
