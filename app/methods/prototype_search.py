@@ -4,9 +4,10 @@ The prototypes of a fit are indexed once: exactly (``IndexFlatL2`` over every co
 while there are at most ``exact_below`` of them, else by an HNSW graph over the leading
 ``search_dims`` coordinates (the embedding puts the directions along which prototypes differ
 most first), which hands ``RERANK`` x k candidates on. Either way each candidate's squared
-distance is then computed exactly in every coordinate and the k nearest are kept, so the approximate search can only miss a candidate, never mis-score one.
-Prototypes added later (promotions, one-shot classes) are kept beside the index and searched
-exactly: an enrolment never rebuilds or copies the index.
+distance is then computed exactly in every coordinate and the k nearest are kept, so the
+approximate search can only miss a candidate, never mis-score one. Prototypes added later
+(promotions, one-shot classes) are kept beside the index and searched exactly: an enrolment
+never rebuilds or copies the index.
 """
 
 from __future__ import annotations
