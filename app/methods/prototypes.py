@@ -62,6 +62,10 @@ from app.methods.prototype_search import PrototypeSearch
 DISTANCE_WEIGHTS = (0.0, 0.03, 0.1, 0.3, 1.0, 3.0, 100.0)
 #: the temperatures tried at fit (times the whitened space's unit variance)
 _TAUS = np.geomspace(0.05, 20.0, 49)
+#: samples scored at a time where each is scored against every prototype (memory: rows x
+#: prototypes x 8 bytes), and the samples the order of the procedures is measured on
+_BLOCK = 1024
+_ORDER_SAMPLES = 4096
 #: shrinkages of the within-class correlations tried at fit, beside Ledoit-Wolf's own
 _SHRINKAGES = (0.1, 0.3, 0.5, 0.7, 0.9)
 
@@ -326,10 +330,15 @@ class PrototypeRecognizer(TactileRecognizer):
         their own trial still in the prototypes), best first; empty for one procedure."""
         if len(self.procedures) < 2:
             return np.zeros(0, np.int64)
+        rows = rows[:_ORDER_SAMPLES]
         gains = []
         for j in range(len(self.procedures)):
-            p = self._marginal_posterior(z[rows], (j,))
-            gains.append(float((p.argmax(axis=1) == y[rows]).mean()))
+            right = 0
+            for lo in range(0, len(rows), _BLOCK):
+                block = rows[lo : lo + _BLOCK]
+                p = self._marginal_scores(z[block], (j,))[0]
+                right += int((p.argmax(axis=1) == y[block]).sum())
+            gains.append(right / len(rows))
         per_second = np.asarray(gains) / seconds_of(self.procedures)
         return np.argsort(-per_second, kind="stable")
 
@@ -497,9 +506,9 @@ class PrototypeRecognizer(TactileRecognizer):
         return np.flatnonzero(cols.ravel())
 
     def _marginal(self, keep: tuple[int, ...]) -> tuple:
-        """(features, the others, centre, projection, prototypes, the map from the full
-        space's coordinates, imputation) of the marginal model on procedures ``keep``,
-        built on first use and kept."""
+        """(features, the others, centre, projection, the prototypes' exact search, the map
+        from the full space's coordinates, imputation) of the marginal model on procedures
+        ``keep``, built on first use and kept."""
         got = self._marginals.get(keep)
         if got is None:
             feats = self._features(keep)
@@ -508,31 +517,24 @@ class PrototypeRecognizer(TactileRecognizer):
             inverse = np.linalg.pinv(self.embedding_.projection_.astype(np.float64))
             mapping = (inverse[:, feats] @ proj).astype(np.float32)
             protos = np.concatenate([self.search_.points, self.search_.extra]) @ mapping
+            # exact: the marginal's coordinates are not ordered for a graph over the leading ones
+            search = PrototypeSearch(protos, exact_below=len(protos))
             cov = self.embedding_.covariance_.astype(np.float64)
             rest = np.setdiff1d(np.arange(cov.shape[0]), feats)
             impute_m = np.linalg.solve(
                 cov[np.ix_(feats, feats)] + 1e-6 * np.eye(len(feats)), cov[np.ix_(feats, rest)]
             ).astype(np.float32)
-            got = (feats, rest, center, proj, protos, mapping, impute_m)
+            got = (feats, rest, center, proj, search, mapping, impute_m)
             self._marginals[keep] = got
         return got
-
-    def _marginal_posterior(self, z: np.ndarray, keep: tuple[int, ...]) -> np.ndarray:
-        return self._marginal_scores(z, keep)[0]
 
     def _marginal_scores(
         self, z: np.ndarray, keep: tuple[int, ...]
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(known probabilities, novelty scores, embedded rows) from procedures ``keep``."""
-        feats, _, center, proj, protos, _, _ = self._marginal(keep)
+        feats, _, center, proj, search, _, _ = self._marginal(keep)
         e = (z[:, feats] - center) @ proj
-        dist = (
-            (e**2).sum(axis=1, keepdims=True) - 2.0 * e @ protos.T + (protos**2).sum(axis=1)
-        ).astype(np.float64)
-        dist = np.maximum(dist, 0.0)
-        k = min(int(self.search_k), protos.shape[0])
-        near = np.argpartition(dist, k - 1, axis=1)[:, :k]
-        dist = np.take_along_axis(dist, near, axis=1)
+        near, dist = search.nearest(e, int(self.search_k))
         cls, count = self.proto_class_[near], self.proto_count_[near]
         dims = e.shape[1]
         logp = class_log_posterior(dist, count, self._class_n[cls], cls, self.tau_, dims)
