@@ -47,6 +47,21 @@ def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
     assert (tmp_path / "scale.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_another_method_with_contact_modes_beside_the_lda_reference(tmp_path):
+    done = run("--sizes", "16", "--novel", "6", "--trials", "4", "--modes", "2",
+               "--method", "prototypes", "--out", str(tmp_path))  # fmt: skip
+    assert done.returncode == 0, done.stderr[-3000:]
+    report = json.loads((tmp_path / "scale.json").read_text())
+    assert report["method"] == "prototypes" and report["modes"] == 2
+    (r,) = report["sizes"]
+    assert r["method"] == "prototypes" and r["modes"] == 2
+    for key in ("known_acc", "lda_acc", "nd_auroc", "lda_auroc", "nd_known_kept"):
+        assert 0.0 <= r[key] <= 1.0, key
+    # the kernel's high-water mark of the fit, apart from the simulator's before it
+    assert 0 < r["fit_peak_gb"] and 0 < r["simulator_peak_gb"]
+    assert "| lda_acc |" in done.stdout.splitlines()[0]
+
+
 def test_bad_arguments_exit_2_with_a_message(tmp_path):
     for args, words in (
         (("--sizes", "1,10"), "at least 2 objects"),
@@ -55,6 +70,8 @@ def test_bad_arguments_exit_2_with_a_message(tmp_path):
         (("--trials", "3"), "--trials at least 4"),
         (("--separation", "far"), "--separation takes none or phac2"),
         (("--param", "trees"), "--param expects NAME=VALUE"),
+        (("--method", "forest"), "--method takes one of"),
+        (("--modes", "0"), "--modes must be at least 1"),
     ):
         done = run(*args, "--out", str(tmp_path))
         assert done.returncode == 2 and words in done.stderr, (args, done.stderr)
