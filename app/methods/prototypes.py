@@ -586,6 +586,7 @@ class PrototypeRecognizer(TactileRecognizer):
             "prior": self.prior_,
             "points": np.concatenate([self.search_.points, self.search_.extra]),
             "n_fitted_points": np.asarray(len(self.search_.points), np.int64),
+            "index": self.search_.index_bytes(),
             "proto_class": self.proto_class_,
             "proto_count": self.proto_count_,
             "procedure_order": np.asarray(self.procedure_order_, np.int64),
@@ -628,9 +629,7 @@ class PrototypeRecognizer(TactileRecognizer):
             )
         points = np.asarray(arrays["points"], np.float32)
         fitted = int(arrays["n_fitted_points"])
-        self.search_ = PrototypeSearch(
-            points[:fitted], int(self.exact_below), int(self.search_dims)
-        )
+        self.search_ = PrototypeSearch(points[:fitted], index=arrays["index"])
         if fitted < len(points):
             self.search_ = self.search_.with_points(points[fitted:])
         self.proto_class_ = np.asarray(arrays["proto_class"], np.int64)
