@@ -173,3 +173,49 @@ def cosine_scores(z: np.ndarray, projection: np.ndarray, vectors: np.ndarray) ->
 
     projected = np.asarray(z, np.float32) @ np.asarray(projection, np.float32).T
     return unit(projected.astype(np.float64)) @ unit(np.asarray(vectors, np.float64)).T
+
+
+def fit_zero_shot(
+    z: np.ndarray,
+    y: np.ndarray,
+    class_attributes: np.ndarray,
+    C: float,
+    max_samples: int,
+    sae_lambda: float,
+    seed: int,
+    n_jobs: int | None,
+) -> tuple[LinearAttributeModel, np.ndarray, np.ndarray | None]:
+    """(attribute classifiers, prior, autoencoder or None) learnt from inputs ``z`` of known
+    classes ``y`` whose vectors are ``class_attributes`` (K, M): DAP's classifiers on at
+    most ``max_samples`` samples (a random share of every class, seeded; 0: all), the prior,
+    and the semantic autoencoder where ``sae_lambda`` > 0 and there are attributes."""
+    if 0 < max_samples < len(z):
+        rng = np.random.default_rng(int(seed))
+        keep = np.sort(rng.choice(len(z), int(max_samples), replace=False))
+        z, y = z[keep], y[keep]
+    attributes = LinearAttributeModel.fit(z, class_attributes[y], float(C), n_jobs=n_jobs)
+    prior = attribute_prior(class_attributes)
+    sae = None
+    if sae_lambda > 0 and class_attributes.shape[1] > 0:
+        targets = impute(class_attributes, prior)[y]
+        sae = semantic_autoencoder(z, targets, float(sae_lambda)).astype(np.float32)
+    return attributes, prior, sae
+
+
+def zero_shot_proba(
+    z: np.ndarray,
+    attributes: LinearAttributeModel,
+    prior: np.ndarray,
+    sae: np.ndarray | None,
+    novel_attributes: np.ndarray,
+    clip: float,
+    sae_temperature: float,
+) -> np.ndarray:
+    """(N, L) zero-shot posterior over L described classes: DAP's log scores plus
+    ``sae_temperature`` x the autoencoder's cosines, a softmax."""
+    scores = dap_log_scores(attributes.predict_proba(z), novel_attributes, prior, float(clip))
+    if sae is not None:
+        scores = scores + float(sae_temperature) * cosine_scores(
+            z, sae, impute(novel_attributes, prior)
+        )
+    return softmax(scores)

@@ -48,12 +48,9 @@ from app.framework.runtime import ensure_threads_configured
 from app.framework.scaling import RobustInputScaler, flatten
 from app.methods.attributes import (
     LinearAttributeModel,
-    attribute_prior,
-    cosine_scores,
-    dap_log_scores,
-    impute,
-    semantic_autoencoder,
+    fit_zero_shot,
     softmax,
+    zero_shot_proba,
 )
 from app.methods.embedding import SubclassEmbedding
 from app.methods.prototype_search import PrototypeSearch
@@ -344,21 +341,15 @@ class PrototypeRecognizer(TactileRecognizer):
 
     def _fit_attributes(self, z: np.ndarray, y: np.ndarray) -> None:
         """DAP's attribute classifiers, the prior and the autoencoder, as ``best``'s."""
-        attrs = self.registry.known_attributes
-        if 0 < self.attribute_samples < len(z):
-            rng = np.random.default_rng(int(self.seed))
-            keep = np.sort(rng.choice(len(z), int(self.attribute_samples), replace=False))
-            z, y = z[keep], y[keep]
-        self.attributes_ = LinearAttributeModel.fit(
-            z, attrs[y], float(self.attribute_C), n_jobs=self.n_jobs
-        )
-        self.prior_ = attribute_prior(attrs)
-        self.sae_ = (
-            semantic_autoencoder(z, impute(attrs, self.prior_)[y], float(self.sae_lambda)).astype(
-                np.float32
-            )
-            if self.sae_lambda > 0 and self.has_attributes
-            else None
+        self.attributes_, self.prior_, self.sae_ = fit_zero_shot(
+            z,
+            y,
+            self.registry.known_attributes,
+            self.attribute_C,
+            self.attribute_samples,
+            self.sae_lambda,
+            self.seed,
+            self.n_jobs,
         )
 
     def _refit_attributes(self, dataset: TactileDataset) -> None:
@@ -405,17 +396,15 @@ class PrototypeRecognizer(TactileRecognizer):
         reg = self.registry
         has = self.shot_has_
         if self.has_attributes:
-            scores = dap_log_scores(
-                self.attributes_.predict_proba(z),
-                reg.novel_attributes,
+            p_zsl = zero_shot_proba(
+                z,
+                self.attributes_,
                 self.prior_,
-                float(self.dap_clip),
+                self.sae_,
+                reg.novel_attributes,
+                self.dap_clip,
+                self.sae_temperature,
             )
-            if self.sae_ is not None:
-                scores = scores + float(self.sae_temperature) * cosine_scores(
-                    z, self.sae_, impute(reg.novel_attributes, self.prior_)
-                )
-            p_zsl = softmax(scores)
         else:
             p_zsl = np.zeros((len(z), len(reg.novel_names)))
         if not has.any() or e is None:
