@@ -54,11 +54,10 @@ from app.framework.runtime import ensure_threads_configured
 from app.framework.scaling import flatten
 from app.methods.attributes import (
     LinearAttributeModel,
-    fit_zero_shot,
     softmax,
-    zero_shot_proba,
 )
 from app.methods.by_procedure import ProcedureModels
+from app.methods.described import DescribedClasses, check_known_classes
 from app.methods.known import CUES, KnownModel, relabelled
 from app.methods.small_batch import ScoringConstants, SmallBatchScorer
 
@@ -69,7 +68,7 @@ def signatures(known_proba: np.ndarray) -> np.ndarray:
     return p / np.maximum(np.linalg.norm(p, axis=1, keepdims=True), 1e-12)
 
 
-class BestRecognizer(TactileRecognizer):
+class BestRecognizer(DescribedClasses, TactileRecognizer):
     """The ``best`` method; the module docstring describes its parts.
 
     Parameters
@@ -311,12 +310,7 @@ class BestRecognizer(TactileRecognizer):
         # fitting's own imports (scikit-learn): recognising from a bundle never needs them
         from app.framework.novelty import novelty_validation_split, tune_threshold
 
-        if dataset.n_classes < 2:
-            raise DatasetError("the best method needs at least 2 known classes")
-        present = np.unique(dataset.labels)
-        if len(present) != dataset.n_classes:
-            missing = sorted(set(range(dataset.n_classes)) - set(present.tolist()))
-            raise DatasetError(f"every known class needs samples; none for classes {missing[:5]}")
+        check_known_classes(dataset, "best")
         t0 = time.perf_counter()
         timings: dict[str, float] = {}
         y = dataset.labels
@@ -397,22 +391,6 @@ class BestRecognizer(TactileRecognizer):
             "params": self.get_params(),
         }
 
-    def _fit_attributes(self, z: np.ndarray, y: np.ndarray) -> None:
-        """The parts that learn attributes, from the scaled training inputs ``z`` and their
-        class indices ``y``: the attribute classifiers, the prior and the autoencoder."""
-        # (K, M) values in [0, 1] or NaN (not known), or (K, 0) without any attribute: then
-        # the attribute model predicts nothing and zero-shot enrolment is refused
-        self.attributes_, self.prior_, self.sae_ = fit_zero_shot(
-            z,
-            y,
-            self.registry.known_attributes,
-            self.attribute_C,
-            self.attribute_samples,
-            self.sae_lambda,
-            self.seed,
-            self.n_jobs,
-        )
-
     def _refit_attributes(self, dataset: TactileDataset) -> None:
         self._fit_attributes(
             self.known_.cues_model.scaled(flatten(dataset.samples)), dataset.labels
@@ -467,21 +445,12 @@ class BestRecognizer(TactileRecognizer):
         return self._novel_from(z, cues.proba(z) if self.shot_has_.any() else None)
 
     def _novel_from(self, z: np.ndarray, known_p: np.ndarray | None) -> np.ndarray:
-        reg = self.registry
         if not self.has_attributes:
             # every novel class came from samples (add_novel_classes_from_samples): the
             # one-shot softmax over the signature prototypes is the whole answer
             sim = signatures(known_p) @ self.shot_prototypes_.T
             return softmax(sim / float(self.shot_temperature))
-        p_zsl = zero_shot_proba(
-            z,
-            self.attributes_,
-            self.prior_,
-            self.sae_,
-            reg.novel_attributes,
-            self.dap_clip,
-            self.sae_temperature,
-        )
+        p_zsl = self._zero_shot(z)
         has = self.shot_has_
         if not has.any():
             return p_zsl

@@ -48,10 +48,9 @@ from app.framework.runtime import ensure_threads_configured
 from app.framework.scaling import RobustInputScaler, flatten
 from app.methods.attributes import (
     LinearAttributeModel,
-    fit_zero_shot,
     softmax,
-    zero_shot_proba,
 )
+from app.methods.described import DescribedClasses, check_known_classes
 from app.methods.embedding import SubclassEmbedding
 from app.methods.prototype_search import PrototypeSearch
 
@@ -67,7 +66,7 @@ _ORDER_SAMPLES = 4096
 _SHRINKAGES = (0.1, 0.3, 0.5, 0.7, 0.9)
 
 
-class PrototypeRecognizer(TactileRecognizer):
+class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
     """The ``prototypes`` method; the module docstring describes its parts.
 
     Parameters
@@ -182,12 +181,7 @@ class PrototypeRecognizer(TactileRecognizer):
     def _fit(self, dataset: TactileDataset, progress: bool) -> None:
         from app.framework.novelty import threshold_at_kept
 
-        if dataset.n_classes < 2:
-            raise DatasetError("the prototypes method needs at least 2 known classes")
-        present = np.unique(dataset.labels)
-        if len(present) != dataset.n_classes:
-            missing = sorted(set(range(dataset.n_classes)) - set(present.tolist()))
-            raise DatasetError(f"every known class needs samples; none for classes {missing[:5]}")
+        check_known_classes(dataset, "prototypes")
         t0 = time.perf_counter()
         timings: dict[str, float] = {}
         x = flatten(dataset.samples)
@@ -339,19 +333,6 @@ class PrototypeRecognizer(TactileRecognizer):
         per_second = np.asarray(gains) / seconds_of(self.procedures)
         return np.argsort(-per_second, kind="stable")
 
-    def _fit_attributes(self, z: np.ndarray, y: np.ndarray) -> None:
-        """DAP's attribute classifiers, the prior and the autoencoder, as ``best``'s."""
-        self.attributes_, self.prior_, self.sae_ = fit_zero_shot(
-            z,
-            y,
-            self.registry.known_attributes,
-            self.attribute_C,
-            self.attribute_samples,
-            self.sae_lambda,
-            self.seed,
-            self.n_jobs,
-        )
-
     def _refit_attributes(self, dataset: TactileDataset) -> None:
         self._fit_attributes(self.scaler_.transform(flatten(dataset.samples)), dataset.labels)
         self.metrics = {**self.metrics, "n_attributes": len(self.registry.attribute_names)}
@@ -396,15 +377,7 @@ class PrototypeRecognizer(TactileRecognizer):
         reg = self.registry
         has = self.shot_has_
         if self.has_attributes:
-            p_zsl = zero_shot_proba(
-                z,
-                self.attributes_,
-                self.prior_,
-                self.sae_,
-                reg.novel_attributes,
-                self.dap_clip,
-                self.sae_temperature,
-            )
+            p_zsl = self._zero_shot(z)
         else:
             p_zsl = np.zeros((len(z), len(reg.novel_names)))
         if not has.any() or e is None:
