@@ -72,7 +72,7 @@ class SubclassEmbedding:
 
     def release(self) -> SubclassEmbedding:
         """Drop what only ``shrunk`` needs (the fit's correlations and subclass means)."""
-        for name in ("_corr", "_std", "_means"):
+        for name in ("_corr", "_std", "_means", "_between"):
             self.__dict__.pop(name, None)
         return self
 
@@ -128,7 +128,9 @@ class SubclassEmbedding:
         rows = rng.choice(len(z), min(len(z), _SHRINKAGE_ROWS), replace=False)
         resid = (z[rows] - means[sub[rows]]) / std
         self.ledoit_wolf_ = float(ledoit_wolf_shrinkage(resid, assume_centered=True))
+        spread = means - means.mean(axis=0)
         self._corr, self._std, self._means = cov / np.outer(std, std), std, means
+        self._between = spread.T @ spread  # (D, D): the prototypes' scatter, once
         self._project(self.ledoit_wolf_)
 
     def shrunk(self, shrinkage: float) -> SubclassEmbedding:
@@ -144,8 +146,8 @@ class SubclassEmbedding:
         white = (vecs / np.sqrt(np.maximum(vals, 1e-12))) / self._std[:, None]
         center = self._means.mean(axis=0)
         # rotate: the prototypes' own principal directions first (distances unchanged)
-        _, _, vt = np.linalg.svd((self._means - center) @ white, full_matrices=False)
-        rotation = vt.T if vt.shape[0] == d else _orthonormal_completion(vt.T, d)
+        _, vecs = np.linalg.eigh(white.T @ self._between @ white)
+        rotation = vecs[:, ::-1]
         self.center_ = center.astype(np.float32)
         self.projection_ = (white @ rotation).astype(np.float32)
         self.covariance_ = (corr * np.outer(self._std, self._std)).astype(np.float32)
@@ -199,11 +201,3 @@ def _two_means(x: np.ndarray, rounds: int = 10) -> tuple[np.ndarray, np.ndarray]
             return None
         centres = np.stack([x[~side].mean(axis=0), x[side].mean(axis=0)])
     return ~side, side
-
-
-def _orthonormal_completion(basis: np.ndarray, d: int) -> np.ndarray:
-    """An orthonormal (d, d) basis whose first columns are ``basis``'s (d, r)."""
-    r = basis.shape[1]
-    rest = np.eye(d) - basis @ basis.T  # projector onto the complement
-    _, vecs = np.linalg.eigh(rest)
-    return np.concatenate([basis, vecs[:, -(d - r) :]], axis=1)

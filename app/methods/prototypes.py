@@ -658,14 +658,12 @@ def novelty_scores(
 
 def _held_out_trials(y: np.ndarray, trials: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """(N,) bool: one whole trial, drawn at random, of each class that has two or more."""
-    held = np.zeros(len(y), bool)
-    pairs = np.unique(np.stack([y, trials], axis=1), axis=0)
+    pairs = np.unique(np.stack([y, trials], axis=1), axis=0)  # sorted by class, then trial
     classes, first, n_trials = np.unique(pairs[:, 0], return_index=True, return_counts=True)
-    for c, lo, n in zip(classes, first, n_trials, strict=True):
-        if n >= 2:
-            t = pairs[lo + rng.integers(n), 1]
-            held |= (y == c) & (trials == t)
-    return held
+    chosen = np.full(int(y.max()) + 1, -1, pairs.dtype)
+    pick = first + (rng.random(len(classes)) * n_trials).astype(np.int64)
+    chosen[classes] = np.where(n_trials >= 2, pairs[pick, 1], -1)
+    return (chosen[y] == trials) & (chosen[y] != -1)
 
 
 def _class_totals(owner: np.ndarray, counts: np.ndarray, n: int | None = None) -> np.ndarray:
