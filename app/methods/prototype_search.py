@@ -17,6 +17,7 @@ import numpy as np
 #: the approximate search hands this many times ``k`` candidates to the exact re-ranking:
 #: its leading coordinates alone rank the true k nearest lower than k now and then
 RERANK = 4
+_ROWS = 256  # query rows scored at a time
 
 
 class PrototypeSearch:
@@ -94,9 +95,16 @@ class PrototypeSearch:
 
     def nearest(self, e: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         """(ids, squared distances), each (N, min(k, len(self))), nearest first; the
-        distances exact in every coordinate."""
+        distances exact in every coordinate. Rows go ``_ROWS`` at a time: the candidates'
+        coordinates of a block are rows x candidates x D floats."""
         e = np.ascontiguousarray(e, np.float32)
         k = min(k, len(self))
+        parts = [self._nearest(e[lo : lo + _ROWS], k) for lo in range(0, len(e), _ROWS)]
+        if len(parts) == 1:
+            return parts[0]
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+    def _nearest(self, e: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         fitted = min(k if self.exact else k * RERANK, len(self.points))
         _, ids = self.index.search(np.ascontiguousarray(e[:, : self.dims]), fitted)
         ids = ids.astype(np.int64)
