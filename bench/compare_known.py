@@ -54,7 +54,8 @@ def simulated(n: int, modes: int, seed: int):
 
 def phac2_folds(folds: int, seed: int):
     """PHAC-2 split into ``folds`` folds of whole trials, each object's trials shuffled."""
-    from app.data.phac2 import default_phac2_path, load_phac2
+    from app.data.phac2 import load_phac2
+    from app.data.sources import default_phac2_path
 
     ds = load_phac2(default_phac2_path())
     rng = np.random.default_rng(seed)

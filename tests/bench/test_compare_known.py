@@ -6,6 +6,8 @@ from __future__ import annotations
 import functools
 import json
 
+import pytest
+
 from tests.bench import run_bench
 
 run = functools.partial(run_bench, "bench.compare_known")
@@ -24,6 +26,16 @@ def test_tiny_sizes_score_every_candidate_on_the_same_splits(tmp_path):
     assert report["machine"]["commit"]
     assert done.stdout.startswith("| data set | prototypes | lda | nn1 | cosface |")
     assert (tmp_path / "compare_known.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.phac2
+def test_phac2s_trial_folds_hold_out_each_trial_once(phac2_path, tmp_path):
+    done = run("--sizes", "12", "--folds", "2", "--candidates", "lda,nn1",
+               "--out", str(tmp_path))  # fmt: skip
+    assert done.returncode == 0, done.stderr[-3000:]
+    report = json.loads((tmp_path / "compare_known.json").read_text())
+    for figures in report["results"]["phac2"].values():
+        assert len(figures["folds"]) == 2 and 0.5 <= figures["acc"] <= 1.0
 
 
 def test_bad_arguments_exit_2_with_a_message(tmp_path):
