@@ -35,7 +35,7 @@ def test_phac2s_trial_folds_hold_out_each_trial_once(phac2_path, tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     report = json.loads((tmp_path / "compare_known.json").read_text())
     for figures in report["results"]["phac2"].values():
-        assert len(figures["folds"]) == 2 and 0.5 <= figures["acc"] <= 1.0
+        assert len(figures["folds"]) == 2 and 0.1 <= figures["acc"] <= 1.0  # chance: 1/60
 
 
 def test_bad_arguments_exit_2_with_a_message(tmp_path):
