@@ -217,8 +217,11 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         embedding = self._embedding().fit(z, y, k)
         # the probe saw one trial a class fewer: its shrinkage, scaled as Ledoit-Wolf's own
         # estimate moves from the probe's samples to all of them (on the simulator at 300
-        # objects the probe's 0.9 was 0.7 with all trials, 0.918 against 0.950 accuracy)
-        shrink = probe["shrinkage"] * embedding.ledoit_wolf_ / probe["ledoit_wolf"]
+        # objects the probe's 0.9 was 0.7 with all trials, 0.918 against 0.950 accuracy);
+        # unscaled where either is 0 (classes of one trial have no spread)
+        shrink = probe["shrinkage"]
+        if probe["ledoit_wolf"] > 0 and embedding.ledoit_wolf_ > 0:
+            shrink *= embedding.ledoit_wolf_ / probe["ledoit_wolf"]
         self.embedding_ = embedding.shrunk(float(np.clip(shrink, 0.0, 1.0))).release()
         self.proto_class_ = embedding.subclass_class_
         self.proto_count_ = np.bincount(
