@@ -161,7 +161,7 @@ def plot(results: dict, candidates: list[str], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     names = list(results)
-    fig, ax = plt.subplots(figsize=(1.6 + 1.4 * len(names), 4.2))
+    fig, ax = plt.subplots(figsize=(1.6 + 1.4 * len(names), 4.8))
     width = 0.8 / len(candidates)
     for i, cand in enumerate(candidates):
         xs = np.arange(len(names)) + (i - (len(candidates) - 1) / 2) * width
@@ -170,7 +170,7 @@ def plot(results: dict, candidates: list[str], path: Path) -> None:
     ax.set_ylabel("known-object accuracy, held-out trials")
     ax.set_ylim(0, 1.02)
     ax.set_title("Candidate representations on the same splits")
-    ax.legend(fontsize=8, ncol=2)
+    ax.legend(fontsize=8, ncol=len(candidates), loc="upper center", bbox_to_anchor=(0.5, -0.22))
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
