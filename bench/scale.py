@@ -371,7 +371,8 @@ def plot(records: list[dict], slopes: dict, path: Path) -> None:
         path,
         "known objects N",
         "cost (units in the name)",
-        "best on the simulator: cost against the number of known objects",
+        f"{records[0].get('method', 'best')} on the simulator: cost against the number of "
+        "known objects",
         legend_size=8,
     )
 
