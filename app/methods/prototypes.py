@@ -223,10 +223,10 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         if probe["ledoit_wolf"] > 0 and embedding.ledoit_wolf_ > 0:
             shrink *= embedding.ledoit_wolf_ / probe["ledoit_wolf"]
         self.embedding_ = embedding.shrunk(float(np.clip(shrink, 0.0, 1.0))).release()
-        self.proto_class_ = embedding.subclass_class_
-        self.proto_count_ = np.bincount(
-            embedding.subclass_, minlength=len(self.proto_class_)
-        ).astype(np.float64)
+        owner = embedding.subclass_class_
+        self._set_prototypes(
+            owner, np.bincount(embedding.subclass_, minlength=len(owner)).astype(np.float64)
+        )
         self.search_ = PrototypeSearch(
             self.embedding_.transform(embedding._means),
             int(self.exact_below),
@@ -356,7 +356,7 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         ids, dist = self.search_.nearest(e, int(self.search_k))
         cls = self.proto_class_[ids]
         count = self.proto_count_[ids]
-        return ids, dist, cls, count, self._class_n[cls]
+        return ids, dist, cls, count, self.class_n_[cls]
 
     def _scores_e(self, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(known probabilities (N, K), novelty scores (N,)) of embedded samples."""
@@ -387,16 +387,22 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         novel = self._novel_from(z, e) if self.registry.novel_names else None
         return novelty, known, novel
 
-    def _novel_from(self, z: np.ndarray, e: np.ndarray | None) -> np.ndarray:
+    def _novel_from(
+        self, z: np.ndarray, e: np.ndarray, shot_points: np.ndarray | None = None
+    ) -> np.ndarray:
+        """The novel classes' probabilities from scaled inputs ``z`` and their coordinates
+        ``e``, in which the one-shot prototypes are ``shot_points`` (the fitted space's,
+        ``shot_points_``, unless given: a marginal's)."""
         reg = self.registry
         has = self.shot_has_
         if self.has_attributes:
             p_zsl = self._zero_shot(z)
         else:
             p_zsl = np.zeros((len(z), len(reg.novel_names)))
-        if not has.any() or e is None:
+        if not has.any():
             return p_zsl
-        p_shot = self._shot_posterior(e, self.shot_points_[has], self.shot_counts_[has])
+        points = self.shot_points_ if shot_points is None else shot_points
+        p_shot = self._shot_posterior(e, points[has], self.shot_counts_[has])
         out = p_zsl.copy()
         rest = 1.0 - p_zsl[:, ~has].sum(axis=1, keepdims=True) if self.has_attributes else 1.0
         out[:, has] = rest * p_shot
@@ -420,9 +426,14 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         return {**self.__dict__, "_marginals": {}}
 
     # --------------------------------------------------------------- enrolment
-    @property
-    def _class_n(self) -> np.ndarray:
-        return _class_totals(self.proto_class_, self.proto_count_, len(self.registry.known_names))
+    def _set_prototypes(self, owner: np.ndarray, counts: np.ndarray) -> None:
+        """Each prototype's class and sample count, and each class's samples (``class_n_``,
+        read by every answer: kept, not summed again per call)."""
+        self.proto_class_ = np.asarray(owner, np.int64)
+        self.proto_count_ = np.asarray(counts, np.float64)
+        self.class_n_ = _class_totals(
+            self.proto_class_, self.proto_count_, len(self.registry.known_names)
+        )
 
     def _grow_known(self, samples: np.ndarray, labels: np.ndarray) -> None:
         """Each class's new samples become one prototype of their own, beside the index; the
@@ -433,8 +444,10 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         points = np.stack([e[labels == c].mean(axis=0) for c in classes])
         counts = np.array([(labels == c).sum() for c in classes], np.float64)
         self.search_ = self.search_.with_points(points)
-        self.proto_class_ = np.concatenate([self.proto_class_, classes])
-        self.proto_count_ = np.concatenate([self.proto_count_, counts])
+        self._set_prototypes(
+            np.concatenate([self.proto_class_, classes]),
+            np.concatenate([self.proto_count_, counts]),
+        )
         grown = int(self.metrics.get("n_grown_samples", 0))
         self.metrics = {
             **self.metrics,
@@ -515,7 +528,7 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         near, dist = search.nearest(e, int(self.search_k))
         cls, count = self.proto_class_[near], self.proto_count_[near]
         dims = e.shape[1]
-        logp = class_log_posterior(dist, count, self._class_n[cls], cls, self.tau_, dims)
+        logp = class_log_posterior(dist, count, self.class_n_[cls], cls, self.tau_, dims)
         known = _dense(np.exp(logp), cls, len(self.registry.known_names))
         weight = self.distance_weight_
         return known, novelty_scores(logp, dist, count, self.tau_, dims, weight), e
@@ -536,13 +549,7 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         known, novelty, e = self._marginal_scores(z, keep)
         novel = None
         if self.registry.novel_names:
-            novel = self._novel_from(z, None)
-            has = self.shot_has_
-            if has.any():
-                shot = self.shot_points_[has] @ self._marginal(keep)[5]
-                p_shot = self._shot_posterior(e, shot, self.shot_counts_[has])
-                rest = 1.0 - novel[:, ~has].sum(axis=1, keepdims=True) if self.has_attributes else 1
-                novel[:, has] = rest * p_shot
+            novel = self._novel_from(z, e, self.shot_points_ @ self._marginal(keep)[5])
         return novelty, known, novel
 
     def _subset_attribute_proba(self, x: np.ndarray, keep: np.ndarray) -> np.ndarray:
@@ -610,8 +617,7 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         self.search_ = PrototypeSearch(points[:fitted], index=arrays["index"])
         if fitted < len(points):
             self.search_ = self.search_.with_points(points[fitted:])
-        self.proto_class_ = np.asarray(arrays["proto_class"], np.int64)
-        self.proto_count_ = np.asarray(arrays["proto_count"], np.float64)
+        self._set_prototypes(arrays["proto_class"], arrays["proto_count"])
         if len(self.proto_class_) != len(points) or (
             len(points) and self.proto_class_.max() >= len(self.registry.known_names)
         ):
