@@ -59,7 +59,9 @@ class SubclassEmbedding:
 
     def fit(self, z: np.ndarray, y: np.ndarray, n_classes: int) -> SubclassEmbedding:
         """Learn the space from scaled inputs ``z`` (N, D) of classes ``y`` (N,); sets
-        ``subclass_`` (N,), each sample's subclass, and ``subclass_class_`` (S,)."""
+        ``subclass_`` (N,), each sample's subclass, ``subclass_class_`` (S,), and
+        ``subclass_means_`` (S, D), the subclasses' means in the inputs' space (until
+        ``release``)."""
         z = np.asarray(z, np.float32)
         y = np.asarray(y, np.int64)
         sub, owner = y, np.arange(n_classes)
@@ -71,8 +73,8 @@ class SubclassEmbedding:
         return self
 
     def release(self) -> SubclassEmbedding:
-        """Drop what only ``shrunk`` needs (the fit's correlations and subclass means)."""
-        for name in ("_corr", "_std", "_means", "_between"):
+        """Drop what only the fit needs (its correlations and subclass means)."""
+        for name in ("_corr", "_std", "subclass_means_", "_between"):
             self.__dict__.pop(name, None)
         return self
 
@@ -129,7 +131,7 @@ class SubclassEmbedding:
         resid = (z[rows] - means[sub[rows]]) / std
         self.ledoit_wolf_ = float(ledoit_wolf_shrinkage(resid, assume_centered=True))
         spread = means - means.mean(axis=0)
-        self._corr, self._std, self._means = cov / np.outer(std, std), std, means
+        self._corr, self._std, self.subclass_means_ = cov / np.outer(std, std), std, means
         self._between = spread.T @ spread  # (D, D): the prototypes' scatter, once
         self._project(self.ledoit_wolf_)
 
@@ -144,7 +146,7 @@ class SubclassEmbedding:
         corr = (1.0 - shrink) * self._corr + shrink * np.eye(d)
         vals, vecs = np.linalg.eigh(corr)
         white = (vecs / np.sqrt(np.maximum(vals, 1e-12))) / self._std[:, None]
-        center = self._means.mean(axis=0)
+        center = self.subclass_means_.mean(axis=0)
         # rotate: the prototypes' own principal directions first (distances unchanged)
         _, vecs = np.linalg.eigh(white.T @ self._between @ white)
         rotation = vecs[:, ::-1]

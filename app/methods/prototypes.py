@@ -228,7 +228,7 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
             owner, np.bincount(embedding.subclass_, minlength=len(owner)).astype(np.float64)
         )
         self.search_ = PrototypeSearch(
-            self.embedding_.transform(embedding._means),
+            self.embedding_.transform(embedding.subclass_means_),
             int(self.exact_below),
             int(self.search_dims),
         )
@@ -291,7 +291,7 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         for shrink in (base.ledoit_wolf_, *_SHRINKAGES):
             emb = base.shrunk(shrink)
             search = PrototypeSearch(
-                emb.transform(base._means), int(self.exact_below), int(self.search_dims)
+                emb.transform(base.subclass_means_), int(self.exact_below), int(self.search_dims)
             )
             ids, dist = search.nearest(emb.transform(z[rows]), k_search)
             cls, count = owner[ids], count_all[ids]
