@@ -123,19 +123,34 @@ class ProcedureModels:
     ) -> np.ndarray:
         """(N,) index of the procedure to do next for the rows of ``ask`` (-1 elsewhere):
         the largest expected gain per second of robot time, each procedure taking
-        ``seconds`` ((P,); default ``seconds_of`` its name)."""
+        ``seconds`` ((P,); default ``seconds_of`` its name). Where no procedure left is
+        expected to gain (a confident answer held for ``MIN_PROCEDURES``), the smallest
+        expected loss times seconds: loss divided by seconds made the slowest procedure
+        look the least bad."""
         out = np.full(len(known_p), -1, np.int64)
         rows = np.flatnonzero(ask)
         if not len(rows):
             return out
+        gain = self.expected_gains(known_p[rows], used[rows])
+        if seconds is None:
+            seconds = seconds_of(self.procedures)
+        s = np.asarray(seconds, np.float64)[None, :]
+        with np.errstate(invalid="ignore"):  # -inf (done) stays -inf either way
+            score = np.where(gain > 0, gain / s, gain * s)
+        out[rows] = score.argmax(axis=1)
+        return out
+
+    def expected_gains(self, known_p: np.ndarray, used: np.ndarray) -> np.ndarray:
+        """(N, P) the expected change of the probability of each row's likely classes
+        (weighted by it) after each procedure it has not done; -inf for those it did."""
         m = min(CANDIDATES, known_p.shape[1])
-        cands = np.argpartition(-known_p[rows], m - 1, axis=1)[:, :m]  # (R, m)
-        p_c = np.take_along_axis(known_p[rows], cands, axis=1)
+        cands = np.argpartition(-known_p, m - 1, axis=1)[:, :m]  # (N, m)
+        p_c = np.take_along_axis(known_p, cands, axis=1)
         w = p_c / np.maximum(p_c.sum(axis=1, keepdims=True), 1e-12)
-        n_used = used[rows].sum(axis=1, keepdims=True).astype(np.float64)
-        gain = np.full((len(rows), len(self.procedures)), -np.inf)
+        n_used = used.sum(axis=1, keepdims=True).astype(np.float64)
+        gain = np.full((len(known_p), len(self.procedures)), -np.inf)
         for j in range(len(self.procedures)):
-            todo = ~used[rows, j]
+            todo = ~used[:, j]
             if not todo.any():
                 continue
             flat = cands[todo].ravel()
@@ -143,10 +158,7 @@ class ProcedureModels:
             q_true = q[np.arange(len(flat)), flat].reshape(-1, m)  # what j gives class c
             after = (n_used[todo] * p_c[todo] + q_true) / (n_used[todo] + 1.0)
             gain[todo, j] = (w[todo] * (after - p_c[todo])).sum(axis=1)
-        if seconds is None:
-            seconds = seconds_of(self.procedures)
-        out[rows] = (gain / np.asarray(seconds, np.float64)[None, :]).argmax(axis=1)
-        return out
+        return gain
 
     def _first_procedure(self) -> int:
         """The procedure with the largest expected gain per second before any touch: the

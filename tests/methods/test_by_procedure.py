@@ -121,6 +121,42 @@ def test_the_next_procedure_has_the_largest_expected_gain_per_second(data, model
     assert share > 0 and (dearer == test.procedures.index(cheap)).mean() < share
 
 
+def test_a_confident_answer_held_for_a_second_procedure_gets_a_quick_one_not_the_slowest(
+    data, model
+):
+    """Where every procedure left is expected to lower a confident answer's probability
+    (it is held only by MIN_PROCEDURES), dividing that loss by seconds made the slowest
+    procedure the least negative; it must be the one no other beats in both loss and time."""
+    _, test, _ = data
+    x = keep_only(test.samples, test.procedures, [0])
+    unsure = model.known_proba(x)
+    k = unsure.shape[1]
+    sure = np.full_like(unsure, 0.01 / (k - 1))  # answers as sure as the target allows
+    sure[np.arange(len(x)), test.labels] = 0.99
+    known_p = np.concatenate([unsure, sure])
+    used = np.zeros((len(known_p), 4), bool)
+    used[:, 0] = True
+    parts = model.procedures_
+    gains = parts.expected_gains(known_p, used)
+    losing = (gains[:, 1:] < 0).all(axis=1)
+    winning = (gains[:, 1:] > 0).any(axis=1)
+    assert losing.sum() >= 3 and winning.sum() >= 1
+    seconds = np.array([2.0, 3.0, 4.0, 5.0])
+    for slowest in (1, 2, 3):
+        s = seconds.copy()
+        s[slowest] = 100.0
+        chosen = parts.next_procedures(known_p, used, np.ones(len(known_p), bool), s)
+        assert (chosen[losing] != slowest).all()
+        for i in np.flatnonzero(losing):
+            c = chosen[i]
+            others = [j for j in (1, 2, 3) if j != c]
+            # nobody both loses less and takes no longer
+            assert not any(gains[i, j] >= gains[i, c] and s[j] <= s[c] for j in others)
+        # where a procedure gains, the largest gain per second, as before
+        best = (gains[winning] / s).argmax(axis=1)
+        np.testing.assert_array_equal(chosen[winning], best)
+
+
 def test_a_sample_missing_part_of_a_procedure_or_all_of_them_is_refused(data, model):
     _, test, _ = data
     x = test.samples[:1].copy()
