@@ -325,12 +325,13 @@ def summary_table(results: dict) -> str:
     plain-text table; with several methods, a second table of each method's paired
     difference from the first one (its 95 % interval, splits won / lost)."""
     from app.evaluation.raw import PROTOCOL
-    from app.evaluation.report import ORDER
+    from app.evaluation.report import ORDER, measured_figures
 
     if results.get("protocol") == PROTOCOL:
         return raw_summary_table(results)
     methods = list(results["methods"])
-    present = {f for m in methods for f in results["methods"][m]["mean"]}
+    # only what was measured: a figure no method has a finite mean of gets no row of "—"
+    present = set(measured_figures(results))
     rows = [f for f in ORDER if f in present] + sorted(
         present - set(ORDER), key=lambda f: (f.startswith("ceil_"), f)
     )
@@ -356,23 +357,26 @@ def summary_table(results: dict) -> str:
 
 
 def rerun_lines(results: dict, rows: list[str], width: int) -> list[str]:
-    """Where a re-run's mean lands, a row per figure (none in results that predate it)."""
+    """Where a re-run's mean lands, a row per figure that has the range (none in results that
+    predate it, or of one split)."""
     methods = list(results["methods"])
-    if not any("rerun95" in results["methods"][m] for m in methods):
-        return []
-    lines = [
-        "",
-        f"where a re-run of {results.get('rerun_splits')} splits on another seed lands (95%)",
-        "figure".ljust(24) + "".join(m.rjust(width) for m in methods),
-    ]
+    body = []
     for f in rows:
         cells = []
         for m in methods:
             lo, hi = (results["methods"][m].get("rerun95") or {}).get(f) or (None, None)
             ok = lo is not None and hi is not None and not (math.isnan(lo) or math.isnan(hi))
-            cells.append((f"[{lo:.3f}, {hi:.3f}]" if ok else "—").rjust(width))
-        lines.append(f.ljust(24) + "".join(cells))
-    return lines
+            cells.append(f"[{lo:.3f}, {hi:.3f}]" if ok else "—")
+        if any(c != "—" for c in cells):
+            body.append(f.ljust(24) + "".join(c.rjust(width) for c in cells))
+    if not body:
+        return []
+    return [
+        "",
+        f"where a re-run of {results.get('rerun_splits')} splits on another seed lands (95%)",
+        "figure".ljust(24) + "".join(m.rjust(width) for m in methods),
+        *body,
+    ]
 
 
 def paired_lines(results: dict, rows: list[str]) -> list[str]:
@@ -390,12 +394,12 @@ def paired_lines(results: dict, rows: list[str]) -> list[str]:
         "figure".ljust(24) + "".join(f"{m} - {ref}".rjust(pw) for m in others),
     ]
     for f in rows:
-        if not any(f in paired["methods"][m]["mean"] for m in others):
+        if all(_cell(paired["methods"][m]["mean"].get(f)) == "—" for m in others):
             continue
         cells = []
         for m in others:
             p = paired["methods"][m]
-            if f not in p["mean"]:
+            if _cell(p["mean"].get(f)) == "—":
                 cells.append("—".rjust(pw))
                 continue
             cell = _cell(p["mean"][f], p["ci95"].get(f), signed=True)
@@ -423,22 +427,16 @@ def raw_summary_table(results: dict) -> str:
     methods = list(results["methods"])
     width = 26
     lines = ["figure".ljust(18) + "".join(m.rjust(width) for m in methods)]
-    for f in raw_figures(results):
+    figures = raw_figures(results)
+    for f in figures:
         cells = []
         for m in methods:
             e = results["methods"][m]
-            mean = e["mean"].get(f)
-            lo, hi = e.get("ci95", {}).get(f) or (None, None)
-            if mean is None:
-                cells.append("—".rjust(width))
-            elif lo is None or hi is None:
-                cells.append(f"{mean:.3f}".rjust(width))
-            else:
-                cells.append(f"{mean:.3f} [{lo:.3f}, {hi:.3f}]".rjust(width))
+            cells.append(_cell(e["mean"].get(f), e.get("ci95", {}).get(f)).rjust(width))
         lines.append(f.ljust(18) + "".join(cells))
     lines.append(
         "seconds".ljust(18)
         + "".join(f"{results['methods'][m]['elapsed_s']:.0f}".rjust(width) for m in methods)
     )
-    lines += paired_lines(results, raw_figures(results))
+    lines += paired_lines(results, figures)
     return "\n".join(lines)

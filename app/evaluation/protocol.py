@@ -471,13 +471,14 @@ def evaluate(
     finally:
         bar.close()
     for split in splits:
-        for m, (figures, details, seconds) in zip(methods, per_split[split.index], strict=True):
+        for m, (figures, details, elapsed) in zip(methods, per_split[split.index], strict=True):
             entry = results["methods"][m]
-            entry["elapsed_s"] += seconds
+            entry["elapsed_s"] += elapsed
             entry["splits"].append(figures)
             entry["details"].append(details)
+    # the figures against the procedures only when they were measured (``seconds``)
+    n_procedures = len(dataset.procedures) if seconds is not None else 0
     for m in methods:
-        n_procedures = len(dataset.procedures) if seconds is not None else 0
         summarize_entry(
             results["methods"][m],
             method_figures(m, ceilings, touches, n_procedures),

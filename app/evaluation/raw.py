@@ -43,6 +43,7 @@ and method seeds), with their mean, t interval and the splits won and lost
 
 from __future__ import annotations
 
+import math
 import platform
 import time
 from collections.abc import Mapping, Sequence
@@ -424,14 +425,18 @@ def _summarise(entry: dict[str, Any], pressures: list[float], n_repeats: int) ->
 
 
 def raw_figures(results: dict[str, Any]) -> list[str]:
-    """The figures of raw-trial results, in report order; those against the phases used
-    (``procs…``, ``adaptive…``) have a section of their own."""
+    """The measured figures of raw-trial results (a finite mean for some method), in report
+    order; those against the phases used (``procs…``, ``adaptive…``) have a section of their
+    own."""
     present: list[str] = []
     for entry in results["methods"].values():
         present += [
             f
-            for f in entry.get("mean", {})
-            if f not in present and not f.startswith(("procs", "adaptive"))
+            for f, v in entry.get("mean", {}).items()
+            if f not in present
+            and not f.startswith(("procs", "adaptive"))
+            and v is not None
+            and math.isfinite(v)
         ]
     order = [*TRIAL_FIGURES, *(pressure_figure(p) for p in results.get("pressures", []))]
     order.append("pressure_mean")

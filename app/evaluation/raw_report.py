@@ -37,7 +37,7 @@ def _raw_description(figure: str) -> str:
             f"trained on the other grip pressures, trial accuracy on the trials gripped at "
             f"{figure.removeprefix('pressure_')} (held out)"
         )
-    return ""
+    return f"a figure of the method's own ({figure}); results.json holds its value per split"
 
 
 def raw_markdown(results: dict[str, Any], images: dict[str, list[str]] | None = None) -> str:

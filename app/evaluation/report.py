@@ -22,6 +22,8 @@ Results of the raw-trial protocol (``results["protocol"] == "raw-trials"``) are 
 from __future__ import annotations
 
 import json
+import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +44,9 @@ __all__ = [
     "PAPER_FIG8_PANELS",
     "PAPER_SOURCE",
     "confusion_title",
+    "describe",
     "markdown",
+    "measured_figures",
     "paper_figures",
     "plot_confusions",
     "plot_jaccard",
@@ -118,15 +122,88 @@ ORDER: tuple[str, ...] = (
 )  # fmt: skip
 
 
+#: families of figures that have a section of their own (touches, procedures), by prefix:
+#: kept out of the tables of means and of the per-split tables, whose rows they would bury
+SECTIONED: tuple[str, ...] = ("touches", "osl_gzsl_", "procs", "adaptive")
+
+
 def paper_figures(n_novel: int) -> dict[str, float]:
     return PAPER_6 if n_novel == 6 else PAPER_12 if n_novel == 12 else {}
 
 
-def _figures_present(results: dict[str, Any]) -> list[str]:
-    present = set()
+def _finite(value: Any) -> bool:
+    return isinstance(value, int | float) and math.isfinite(value)
+
+
+def measured_figures(results: dict[str, Any]) -> list[str]:
+    """The figures with a finite mean for at least one method, ``ORDER`` first: a figure that
+    no method measured (all NaN, as in results that summarised figures never asked for) gets
+    no row of ``—``."""
+    present: set[str] = set()
     for entry in results["methods"].values():
-        present |= set(entry.get("mean", {}))
+        present |= {f for f, v in entry.get("mean", {}).items() if _finite(v)}
     return [f for f in ORDER if f in present] + sorted(present - set(ORDER))
+
+
+def _figures_present(results: dict[str, Any]) -> list[str]:
+    """The measured figures of the report's tables: those of touches and procedures have
+    their own sections."""
+    return [f for f in measured_figures(results) if not f.startswith(SECTIONED)]
+
+
+def describe(figure: str) -> str:
+    """What ``figure`` is, in a sentence; never empty."""
+    if figure in DESCRIPTIONS:
+        return DESCRIPTIONS[figure]
+    if match := re.fullmatch(r"touches(\d+)_(.+)", figure):
+        k, base = match.groups()
+        return f"{describe(base)}, after {k} touches of each test object answered as one"
+    if figure.startswith("osl_gzsl_"):
+        return f"{describe(figure.removeprefix('osl_'))}, after one enrolled touch per novel object"
+    if match := re.fullmatch(r"procs([01]+)_(.+)", figure):
+        used, base = match.groups()
+        return f"{describe(base)}, with only procedures {used} kept (1: kept, in their order)"
+    if match := re.fullmatch(r"adaptive(\d+)_(.+)", figure):
+        target, base = match.groups()
+        return f"{ADAPTIVE.get(base) or describe(base)}, by the adaptive rule at target {target} %"
+    if figure.startswith("zsl_"):
+        return f"zero-shot accuracy among the novel objects, by the method's variant {figure}"
+    return f"a figure of the method's own ({figure}); results.json holds its value per split"
+
+
+ADAPTIVE: dict[str, str] = {
+    "time": "mean share of the whole exploration's robot time used",
+    "time_known": "mean share of robot time used on known objects' samples",
+    "time_novel": "mean share of robot time used on novel objects' samples",
+    "procedures": "mean number of procedures used",
+}
+
+
+def _family_lines(results: dict[str, Any]) -> list[str]:
+    """One line per family of figures that has a section of its own, if measured."""
+    measured = measured_figures(results)
+    lines = []
+    if touches := results.get("touches"):
+        if any(f.startswith("touches") for f in measured):
+            ks = ", ".join(str(k) for k in touches)
+            lines.append(
+                f"- `touches<k>_<figure>` (k = {ks}): the figure after k touches of each test "
+                "object answered as one (section Touches)"
+            )
+        if any(f.startswith("osl_gzsl_") for f in measured):
+            lines.append(
+                "- `osl_gzsl_seen` / `_unseen` / `_h`: the mixed known + novel figures after "
+                "one enrolled touch per novel object"
+            )
+    if any(f.startswith(("procs", "adaptive")) for f in measured):
+        names = ", ".join(results.get("procedures") or [])
+        lines += [
+            f"- `procs<bits>_<figure>`: the figure with only the procedures whose bit is 1 "
+            f"kept, bits in the order {names} (section Figures against the procedures used)",
+            "- `adaptive<t>_<figure>`: the figure by the adaptive rule at target confidence "
+            "t %; `_time`: its mean share of robot time, `_procedures`: procedures used",
+        ]
+    return lines
 
 
 def markdown(results: dict[str, Any], images: dict[str, list[str]] | None = None) -> str:
@@ -138,25 +215,24 @@ def markdown(results: dict[str, Any], images: dict[str, list[str]] | None = None
         f"# Evaluation on {results['dataset']}: {n_novel} novel objects, "
         f"{results['splits']} splits, seed {results['seed']}",
         "",
-        f"Known objects' test data: {results.get('test_trials', '?')} held-out trials per object; "
-        "novel objects: one trial gives the one-shot sample, the others are the test set "
-        "(shared by ZSL, OSL and the mixed known/novel test). "
+        "## Mean figures" + (" beside the paper" if paper else ""),
+        "",
         "Means over splits ± standard deviation.",
         "",
-        "## Mean figures beside the paper",
-        "",
-        "| figure | published paper | " + " | ".join(methods) + " |",
-        "| --- | --- | " + " | ".join("---" for _ in methods) + " |",
+        # the paper's column only where it has figures for this number of novel objects
+        "| figure | " + ("published paper | " if paper else "") + " | ".join(methods) + " |",
+        "| --- | " + ("--- | " if paper else "") + " | ".join("---" for _ in methods) + " |",
     ]
     for f in figures:
-        cells = [
+        cells = [fmt(paper.get(f))] if paper else []
+        cells += [
             fmt(
                 results["methods"][m].get("mean", {}).get(f),
                 results["methods"][m].get("std", {}).get(f),
             )
             for m in methods
         ]
-        lines.append(f"| `{f}` | {fmt(paper.get(f))} | " + " | ".join(cells) + " |")
+        lines.append(f"| `{f}` | " + " | ".join(cells) + " |")
     lines += [
         "",
         "Published paper: the averages of its tables, on its own protocol (6000 augmented "
@@ -165,6 +241,10 @@ def markdown(results: dict[str, Any], images: dict[str, list[str]] | None = None
         + ". The paper's reference [38] (attribute-based haptic ZSL) averages 0.36 (Table VII)."
         if paper
         else "The paper reports no figures for this number of novel objects.",
+        "",
+        f"Known objects' test data: {results.get('test_trials', '?')} held-out trials per object; "
+        "novel objects: one trial gives the one-shot sample, the others are the test set "
+        "(shared by ZSL, OSL and the mixed known/novel test).",
     ]
     lines += _interval_sections(results, figures)
     lines += touch_markdown(results)
@@ -183,12 +263,12 @@ def markdown(results: dict[str, Any], images: dict[str, list[str]] | None = None
         mean_fit = f"{np.mean(fits):.1f}" if fits else "—"
         lines.append(f"| {m} | {entry.get('elapsed_s', float('nan')):.1f} | {mean_fit} |")
     lines += ["", "## Figures", ""]
-    for f in figures:
-        lines.append(f"- `{f}`: {DESCRIPTIONS.get(f, '')}")
+    lines += [f"- `{f}`: {describe(f)}" for f in figures]
+    lines += _family_lines(results)
     lines += ["", "## Per split", ""]
     for m in methods:
         splits = results["methods"][m]["splits"]
-        method_figs = [f for f in figures if f in results["methods"][m].get("mean", {})]
+        method_figs = [f for f in figures if any(_finite(s.get(f)) for s in splits)]
         lines += [
             f"### {m}",
             "",
@@ -239,7 +319,12 @@ def _interval_sections(results: dict[str, Any], figures: list[str]) -> list[str]
             for m in methods
         ]
         lines.append(f"| `{f}` | " + " | ".join(cells) + " |")
-    if any("rerun95" in results["methods"][m] for m in methods):
+    rerun = {
+        f: [fmt_interval(results["methods"][m].get("rerun95", {}).get(f)) for m in methods]
+        for f in figures
+    }
+    rerun = {f: cells for f, cells in rerun.items() if any(c != "—" for c in cells)}
+    if rerun:  # none with one split, or in results that predate it
         lines += [
             "",
             "## Where a re-run lands",
@@ -252,9 +337,7 @@ def _interval_sections(results: dict[str, Any], figures: list[str]) -> list[str]
             "| figure | " + " | ".join(methods) + " |",
             "| --- | " + " | ".join("---" for _ in methods) + " |",
         ]
-        for f in figures:
-            cells = [fmt_interval(results["methods"][m].get("rerun95", {}).get(f)) for m in methods]
-            lines.append(f"| `{f}` | " + " | ".join(cells) + " |")
+        lines += [f"| `{f}` | " + " | ".join(cells) + " |" for f, cells in rerun.items()]
     paired = results.get("paired") or {}
     others = list(paired.get("methods", {}))
     if others:
@@ -270,12 +353,12 @@ def _interval_sections(results: dict[str, Any], figures: list[str]) -> list[str]
             "| --- | " + " | ".join("---" for _ in others) + " |",
         ]
         for f in figures:
-            if not any(f in paired["methods"][m]["mean"] for m in others):
+            if not any(_finite(paired["methods"][m]["mean"].get(f)) for m in others):
                 continue
             cells = []
             for m in others:
                 p = paired["methods"][m]
-                if f not in p["mean"]:
+                if not _finite(p["mean"].get(f)):
                     cells.append("—")
                     continue
                 cells.append(

@@ -3,12 +3,20 @@
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 
 import pytest
 
 from app.cli import main
+from app.cli.evaluate import summary_table
+from tests.evaluation.tables import (
+    empty_definitions,
+    empty_markdown_columns,
+    empty_markdown_rows,
+    empty_printed_rows,
+)
 
 OPTIONS = [
     "--dataset",
@@ -81,6 +89,46 @@ def test_small_run_writes_results_and_report(tmp_path, capsys):
     assert (tmp_path / "rep" / "report.md").stat().st_size > 0
     printed = capsys.readouterr().out
     assert "known_acc" in printed and "eszsl" in printed
+    # only what was measured: no procedure figures without --procedures (the simulator names
+    # four procedures), and of one split no re-run range, so no table of "—"
+    assert not [f for f in res["methods"]["eszsl"]["mean"] if f.startswith(("procs", "adapt"))]
+    assert empty_printed_rows(printed) == [] and "re-run" not in printed
+    md = (tmp_path / "rep" / "report.md").read_text()
+    assert empty_markdown_rows(md) == [] and empty_markdown_columns(md) == []
+    assert empty_definitions(md) == [] and "- `gzsl_h`: harmonic mean" in md
+    # the report opens with the figures: the first table after the title is the means
+    assert md.split("\n")[2] == "## Mean figures" and "| `known_acc` |" in md.split("## ")[1]
+
+
+def test_figures_never_measured_get_no_rows(tmp_path, capsys):
+    """A results.json with figures of NaN only (as runs before 2026-11-28 summarised the
+    procedure figures without --procedures): table and report leave them out."""
+    from app.evaluation.report import write_report_from_file
+
+    out = tmp_path / "r.json"
+    args = ["evaluate", "--dataset", "simulated:14", "--novel", "3", "--splits", "2"]
+    args += ["--seed", "1", "--methods", "eszsl,dap", "--out", str(out), "--no-progress"]
+    assert main(args) == 0
+    printed = capsys.readouterr().out
+    assert empty_printed_rows(printed) == [] and "dap - eszsl" in printed
+    res = json.loads(out.read_text())
+    for entry in res["methods"].values():
+        for key in ("mean", "std"):
+            entry[key]["procs1000_known_acc"] = math.nan
+        entry["ci95"]["procs1000_known_acc"] = entry["rerun95"]["procs1000_known_acc"] = [
+            math.nan,
+            math.nan,
+        ]
+        for split in entry["splits"]:
+            split["procs1000_known_acc"] = math.nan
+    assert "procs1000" not in summary_table(res)
+    assert empty_printed_rows(summary_table(res)) == []
+    saved = tmp_path / "old.json"
+    saved.write_text(json.dumps(res))
+    md = write_report_from_file(saved, tmp_path / "rep")[0].read_text()
+    assert "procs1000" not in md and empty_markdown_rows(md) == []
+    assert empty_markdown_columns(md) == [] and empty_definitions(md) == []
+    assert "| `gzsl_h` |" in md and "## Paired differences from `eszsl`" in md
 
 
 def test_errors_are_clear(tmp_path, capsys):

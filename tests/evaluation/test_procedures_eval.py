@@ -22,6 +22,7 @@ from app.evaluation.protocol import evaluate
 from app.evaluation.report import write_report
 from app.framework.recognizer import MIN_PROCEDURES
 from app.framework.registry import make_method
+from tests.evaluation.tables import empty_definitions, empty_markdown_rows
 
 FAST = {"n_estimators": 20, "tuning_rounds": 1, "distance_components": 8}
 
@@ -85,6 +86,12 @@ def test_the_report_tabulates_and_draws_the_procedures(results, tmp_path):
     text = files[0].read_text()
     assert "## Figures against the procedures used" in text
     assert text.count("\n| 1 + 2 + 3 + 4 |") == 1
+    # the 342 procedure figures stay in their section: not rows of the tables of means, nor
+    # columns of the per-split table; the figure list names their families once
+    assert "| `procs" not in text and "`procs1111_known_acc` |" not in text
+    assert "- `procs<bits>_<figure>`: the figure with only the procedures" in text
+    assert empty_markdown_rows(text) == [] and empty_definitions(text) == []
+    assert "| `ceil_gzsl_h` |" in text  # the --ceilings asked for are there
     png = tmp_path / "procedures.png"
     assert png in files and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
