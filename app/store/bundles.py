@@ -33,9 +33,15 @@ def store_model(session: Session, split: Split) -> str:
 
 class PartCache:
     """The decoded parts of the model a process serves, by SHA-256, read-only so that
-    models sharing them cannot change each other's arrays."""
+    models sharing them cannot change each other's arrays.
+
+    Threads share it (the API process's model poller and its embedded worker): each
+    method holds ``lock``, and ``load_model`` holds it for a whole load, so that one
+    thread's ``keep_only`` cannot drop what another's load has just read, nor a load see
+    the dicts change under it."""
 
     def __init__(self) -> None:
+        self.lock = threading.RLock()
         self._arrays: dict[str, np.ndarray] = {}
         # arrays stored in row blocks, by their blocks' SHA-256s: the same array object for
         # every version that lists the same blocks, as a part is (the models built from it
@@ -43,12 +49,13 @@ class PartCache:
         self._joined: dict[tuple[str, ...], np.ndarray] = {}
 
     def get(self, session: Session, sha256: str) -> np.ndarray:
-        array = self._arrays.get(sha256)
-        if array is None:
-            array = read_part(session, sha256)
-            bundle.freeze(array)  # the array it views too: nothing can change it then
-            self._arrays[sha256] = array
-        return array
+        with self.lock:
+            array = self._arrays.get(sha256)
+            if array is None:
+                array = read_part(session, sha256)
+                bundle.freeze(array)  # the array it views too: nothing can change it then
+                self._arrays[sha256] = array
+            return array
 
     def joined(self, session: Session, shas: list[str]) -> np.ndarray:
         """The array stored as the row blocks ``shas``, read-only; the blocks are held
@@ -56,6 +63,10 @@ class PartCache:
         begins with the rows of one held already (a promotion appended to it) is that
         array with the new rows appended behind it (``growing.appended``), so only they are
         read and held anew; any other is read block by block into one with room."""
+        with self.lock:
+            return self._joined_locked(session, shas)
+
+    def _joined_locked(self, session: Session, shas: list[str]) -> np.ndarray:
         array = self._joined.get(tuple(shas))
         if array is not None:
             return array
@@ -96,16 +107,18 @@ class PartCache:
         return None
 
     def keep_only(self, shas: set[str]) -> None:
-        self._arrays = {sha: a for sha, a in self._arrays.items() if sha in shas}
-        self._joined = {k: a for k, a in self._joined.items() if shas.issuperset(k)}
+        with self.lock:
+            self._arrays = {sha: a for sha, a in self._arrays.items() if sha in shas}
+            self._joined = {k: a for k, a in self._joined.items() if shas.issuperset(k)}
 
     def adopt(self, encoder: bundle.PartEncoder) -> None:
         """Hold exactly the parts of the version this process has just split with
         ``encoder``, as the arrays (or row blocks) of its model: the parts it shares with
         the version before are not read again, and that version's arrays are not kept
         alive by views of them."""
-        self._arrays = dict(encoder.views)
-        self._joined = dict(encoder.joined)
+        with self.lock:
+            self._arrays = dict(encoder.views)
+            self._joined = dict(encoder.joined)
 
     def __len__(self) -> int:
         return len(self._arrays)
@@ -172,6 +185,7 @@ def load_model(session: Session, sha256: str, cache: PartCache | None = None) ->
         used.update(shas)
         return cache.joined(session, shas)
 
-    model = bundle.from_bytes(data, part=part, join=join)
-    cache.keep_only(used)
+    with cache.lock:  # another thread's load neither changes nor trims it meanwhile
+        model = bundle.from_bytes(data, part=part, join=join)
+        cache.keep_only(used)
     return model

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import io
 import json
+import sys
+import threading
 import zipfile
 
 import numpy as np
@@ -227,3 +229,60 @@ def test_a_worker_that_loaded_a_version_stores_the_next_without_encoding_its_par
         x = dataset.samples[:8]
         stored = bundles.load_model(s, v2)
         np.testing.assert_array_equal(stored.known_proba(x), grown.known_proba(x))
+
+
+def test_two_threads_load_versions_through_one_cache_at_once(store, base_model, monkeypatch):
+    """The API process's model poller and its embedded worker load through one cache: a
+    version each, at the same moment, again and again (promotions whose row blocks extend
+    the held arrays, and enrollments that share them). Every load must give its version's
+    answers, and the cache then holds parts of the versions loaded only."""
+    monkeypatch.setattr(bundle, "BLOCK_BYTES", 2048)
+    _, sessions = store
+    dataset = base_model[1]
+    model = make_method("best", n_estimators=10, seed=0).fit(dataset)
+    vectors = np.asarray(unused_vectors(dataset, 4), np.float32)
+    samples = dataset.samples[:4] * 1.1
+    models = [model]
+    for n in range(3):  # promotions, each appending rows to the one before
+        models.append(models[-1].with_known_samples({f"p{n}": samples + n}, {f"p{n}": vectors[n]}))
+    models.append(models[-1].add_novel_classes(["mug"], vectors[3:]))  # an enrollment
+    encoder = bundle.PartEncoder(min_bytes=1024, freeze=True)
+    with sessions.begin() as s:
+        heads = [bundles.store_model(s, encoder.split(m)) for m in models]
+    x = dataset.samples[:6]
+    expected = [m.known_proba(x) for m in models]
+    cache = bundles.PartCache()
+    rounds = 12
+    start = threading.Barrier(2)
+    errors: list[BaseException] = []
+
+    def load(order: list[int]) -> None:
+        try:
+            for r in range(rounds):
+                start.wait(timeout=60)
+                i = order[r % len(order)]
+                with sessions() as s:
+                    loaded = bundles.load_model(s, heads[i], cache)
+                np.testing.assert_array_equal(loaded.known_proba(x), expected[i])
+        except BaseException as exc:
+            start.abort()
+            errors.append(exc)
+
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # threads swap often, inside the cache's loops too
+    try:
+        threads = [
+            threading.Thread(target=load, args=(order,))
+            for order in ([0, 1, 2, 3, 4], [1, 3, 0, 4, 2])
+        ]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(timeout=300)
+    finally:
+        sys.setswitchinterval(switch)
+    assert not errors, errors[0]
+    assert not any(t.is_alive() for t in threads)
+    with sessions() as s:  # and what the cache holds afterwards is sound
+        loaded = bundles.load_model(s, heads[-1], cache)
+    np.testing.assert_array_equal(loaded.known_proba(x), expected[-1])
