@@ -15,8 +15,10 @@ measures it); ``none``, the default, is the simulator as it is, whose objects cr
 as N grows; ``--modes K`` gives each object K contact modes. Two whole trials per known
 object are held out.
 The child fits ``--method`` (the service's default method unless named; its defaults,
-``n_jobs`` = the cores, each ``--param`` in place of a default, its value read as JSON where
-it parses) on the rest and measures:
+each ``--param`` in place of a default, its value read as JSON where it parses) on the rest
+and measures. ``n_jobs`` is the method's default, 1, which the service's bootstrap and its
+worker's refit run with; ``--param n_jobs=2`` measures a fit on more cores (each record
+names its ``n_jobs``):
 
 - ``fit_s`` and ``fit_peak_gb``: the fit's wall time and the process's peak RSS from the
   start of the fit, the kernel's high-water mark (VmHWM, reset before the fit; the dataset
@@ -138,9 +140,10 @@ def measure(
     sim_peak = _peak_gb()
     _reset_peak()  # the kernel's high-water mark from here on is the fit's
     t = time.perf_counter()
-    model = make_method(method, **{"seed": seed, "n_jobs": os.cpu_count(), **(params or {})})
+    model = make_method(method, **{"seed": seed, **(params or {})})
     model.fit(train, progress=True)
     out: dict = {"objects": n, "separation": separation, "fit_s": time.perf_counter() - t}
+    out["n_jobs"] = getattr(model, "n_jobs", None)
     out["method"], out["modes"] = method, modes
     out["params"] = params or {}
     out["fit_peak_gb"] = _peak_gb()
@@ -394,9 +397,15 @@ def finish_plot(fig, path, xlabel: str, ylabel: str, title: str, legend_size: in
 
 
 def machine() -> dict:
-    commit = subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True
-    ).stdout.strip()
+    """The machine and the code a result comes from, which every bench's JSON records:
+    ``commit`` is HEAD, and ``dirty`` says whether tracked files differed from it
+    (``changed`` lists them). The documents cite no result with ``dirty`` true
+    (``tests/test_docs_figures.py``): its code is in no commit."""
+
+    def git(*args: str) -> str:
+        return subprocess.run(["git", *args], capture_output=True, text=True).stdout.strip()
+
+    changed = git("status", "--porcelain", "--untracked-files=no").splitlines()
     pages = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     return {
         "platform": platform.platform(),
@@ -404,7 +413,9 @@ def machine() -> dict:
         "cpus": os.cpu_count(),
         "memory_gb": round(pages / 1e9, 1),
         "python": platform.python_version(),
-        "commit": commit,
+        "commit": git("rev-parse", "--short", "HEAD"),
+        "dirty": bool(changed),
+        "changed": [line[3:] for line in changed],
     }
 
 

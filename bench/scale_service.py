@@ -65,7 +65,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.scale import machine as scale_machine
+from bench.scale import machine
 
 TRIALS = 10
 EVERYWHERE = 8  # fresh connections in a row that must see a version
@@ -529,14 +529,6 @@ def in_process_table(figures: dict) -> str:
     lines.append(f"| encode the loaded bundle's parts | {figures['encode_base_s']:.3g} s |")
     lines.append(f"| a reader's first load from the store | {figures['store_load_base_s']:.3g} s |")
     return "\n".join(lines)
-
-
-def machine() -> dict:
-    """``bench.scale.machine()``, its commit marked when tracked files have changes."""
-    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                           capture_output=True, text=True).stdout.strip()  # fmt: skip
-    out = scale_machine()
-    return {**out, "commit": out["commit"] + ("+changes" if dirty else "")}
 
 
 # ----------------------------------------------------------------------------- main

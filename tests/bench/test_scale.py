@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import functools
 import json
+import subprocess
 
-from tests.bench import run_bench
+from tests.bench import ROOT, run_bench
 
 FIELDS = (
     "objects", "fit_s", "fit_peak_gb", "bundle_mb", "enrol_ms", "one_shot_ms", "promote_s",
@@ -17,6 +18,12 @@ FIELDS = (
 
 
 run = functools.partial(run_bench, "bench.scale")
+
+
+def tracked_changes() -> str:
+    """Tracked files that differ from HEAD, as ``git status`` lists them."""
+    cmd = ["git", "status", "--porcelain", "--untracked-files=no"]
+    return subprocess.run(cmd, capture_output=True, text=True, check=True, cwd=ROOT).stdout.strip()
 
 
 def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
@@ -33,6 +40,7 @@ def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
         assert r["separation"] == "phac2"
         assert 0 < r["fit_timings"]["total_s"] <= r["fit_s"]  # the model's own breakdown
         assert r["by_procedure_s"] == r["fit_timings"].get("by_procedure_s")
+        assert r["n_jobs"] == 1  # what the service's bootstrap and refit run with
         for acc in ("known_acc", "nn1_acc", "zsl_acc", "known_acc_one_procedure"):
             assert 0.0 <= r[acc] <= 1.0
         assert r["vectors_distinct"] <= r["objects"]
@@ -40,6 +48,8 @@ def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
         assert set(r["zsl_by_novel"]) == {"10"} and 0 <= r["zsl_by_novel"]["10"]["zsl"] <= 1
     assert set(report["exponents"]) >= {"fit_s", "fit_peak_gb", "recognise_1_us"}
     assert report["machine"]["cpus"] >= 1 and report["machine"]["commit"]
+    stamp = report["machine"]  # the tree's changes beside the commit
+    assert stamp["dirty"] == bool(stamp["changed"]) == bool(tracked_changes())
     assert report["separation"] == "phac2"
     assert report["params"] == {"procedure_estimators": 7}  # the value read as JSON
     assert done.stdout.startswith("| objects | fit_s |") and "| exponent |" in done.stdout
@@ -49,12 +59,12 @@ def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
 
 def test_another_method_with_contact_modes_beside_the_lda_reference(tmp_path):
     done = run("--sizes", "16", "--novel", "6", "--trials", "4", "--modes", "2",
-               "--method", "prototypes", "--out", str(tmp_path))  # fmt: skip
+               "--method", "prototypes", "--param", "n_jobs=2", "--out", str(tmp_path))  # fmt: skip
     assert done.returncode == 0, done.stderr[-3000:]
     report = json.loads((tmp_path / "scale.json").read_text())
     assert report["method"] == "prototypes" and report["modes"] == 2
     (r,) = report["sizes"]
-    assert r["method"] == "prototypes" and r["modes"] == 2
+    assert r["method"] == "prototypes" and r["modes"] == 2 and r["n_jobs"] == 2
     for key in ("known_acc", "lda_acc", "nd_auroc", "lda_auroc", "nd_known_kept"):
         assert 0.0 <= r[key] <= 1.0, key
     # the kernel's high-water mark of the fit, apart from the simulator's before it
