@@ -8,6 +8,7 @@ and enrolments that a retry never doubles.
     job = client.register_class("teapot", attributes=["hard", "smooth"], wait=20)
     added = client.add_sample(job["class_id"], touch, wait=20)  # added["recognized_as"]: what
                                              # the model made of the touch before learning it
+    job = client.register_class("mug", samples=touches, wait=20)  # learnt from its touches
 
 ``recognize`` answers as ``POST /v1/recognize`` does, plus ``"source"``: ``"service"``, or
 ``"offline"`` when the service cannot be reached (connection errors and timeouts, after
@@ -39,11 +40,15 @@ UNREACHABLE_STATUS = frozenset({502, 503, 504})
 
 
 class ServiceError(RuntimeError):
-    """The service refused a request (``status``, and its problem detail in the message)."""
+    """The service refused a request (``status``, and its problem detail in the message;
+    ``problem``: the service's RFC 9457 body, where it answered with one)."""
 
-    def __init__(self, message: str, status: int | None = None) -> None:
+    def __init__(
+        self, message: str, status: int | None = None, problem: dict[str, Any] | None = None
+    ) -> None:
         super().__init__(message)
         self.status = status
+        self.problem = problem
 
 
 class ServiceUnreachable(ServiceError):
@@ -159,7 +164,7 @@ class TactileClient:
         """Recognise raw BioTac trials (``RawTrial``s or their JSON form), one answer per
         trial from all its fingers (with ``same_object``, one for all of them); offline,
         the model file's own featurizer makes the images."""
-        body = [t.to_dict() if hasattr(t, "to_dict") else t for t in trials]
+        body = [_json_trial(t) for t in trials]
         try:
             r = self._send(
                 "POST", "/v1/recognize", json={"trials": body}, params={"same_object": same_object}
@@ -181,6 +186,11 @@ class TactileClient:
             "results": batch.records(meta.get("class_ids", {})),
             "source": "offline",
         }
+
+    def active_model(self) -> dict[str, Any]:
+        """The served model (``GET /v1/models/active``): its version, input shape and kind,
+        procedures and classes."""
+        return self._send("GET", "/v1/models/active").json()
 
     def describe(self, samples: Any, same_object: bool = False) -> dict[str, Any]:
         """What each touch feels like (``POST /v1/describe``): every attribute's probability
@@ -232,13 +242,40 @@ class TactileClient:
         attribute_vector: list[float | None] | None = None,
         wait: float = 0,
         description: str | None = None,
+        *,
+        samples: Any = None,
+        trials: Any = None,
     ) -> dict[str, Any]:
         """Register a never-touched object by its attribute names, by names with values in
         [0, 1] (``{"soft": 0.5}``; others not known), by a vector (None: not known), or in
         words (``description="a soft, spongy foam block"``; values given beside it must
-        agree with it); returns its job (``class_id`` names the class), after up to ``wait``
-        seconds for it to finish."""
-        body = {"name": name, **_attributes_body(attributes, attribute_vector, description)}
+        agree with it); or learn it from its touches: ``samples`` (a batch (N, *input
+        shape), or a list of samples) or ``trials`` (raw BioTac trials, ``RawTrial``s or
+        their JSON form, for a model of raw trials), with or without a description. Returns
+        its job (``class_id`` names the class), after up to ``wait`` seconds for it to
+        finish."""
+        if samples is not None and trials is not None:
+            raise ValueError("give samples or trials, not both")
+        described = (attributes, attribute_vector, description) != (None, None, None)
+        if not described and samples is None and trials is None:
+            raise ValueError("give attributes, attribute_vector, description, samples or trials")
+        body = {
+            "name": name,
+            **_attributes_body(attributes, attribute_vector, description, required=False),
+        }
+        if samples is not None:
+            body["samples"] = [_json_sample(x) for x in samples]
+        if trials is not None:
+            body["trials"] = [_json_trial(t) for t in trials]
+        job = self._send(
+            "POST", "/v1/classes", json=body, idempotency_key=str(uuid.uuid4())
+        ).json()["job"]
+        return self.job(job["id"], wait) if wait else job
+
+    def create_class(self, body: dict[str, Any], wait: float = 0) -> dict[str, Any]:
+        """``POST /v1/classes`` with ``body``, its JSON as a robot relays it (``name`` and
+        attributes, a description, samples or raw trials); returns its job, after up to
+        ``wait`` seconds for it to finish."""
         job = self._send(
             "POST", "/v1/classes", json=body, idempotency_key=str(uuid.uuid4())
         ).json()["job"]
@@ -288,11 +325,17 @@ class TactileClient:
         ).json()["job"]
         return self.job(job["id"], wait) if wait else job
 
-    def add_sample(self, class_id: int, sample: Any, wait: float = 0) -> dict[str, Any]:
-        """Add one real sample to a class (one-shot learning); returns the service's answer:
-        ``sample_id``, ``job`` (after up to ``wait`` seconds for it to finish) and what the
-        served model made of the sample before learning from it (``recognized_as``)."""
-        body = {"sample": np.asarray(sample, dtype=np.float32).tolist()}
+    def add_sample(
+        self, class_id: int, sample: Any = None, wait: float = 0, *, trial: Any = None
+    ) -> dict[str, Any]:
+        """Add one real sample to a class (one-shot learning), or one raw BioTac ``trial``
+        (a ``RawTrial`` or its JSON form) for a model of raw trials; returns the service's
+        answer: ``sample_id``, ``job`` (after up to ``wait`` seconds for it to finish) and
+        what the served model made of the touch before learning from it
+        (``recognized_as``)."""
+        if (sample is None) == (trial is None):
+            raise ValueError("give exactly one of sample or trial")
+        body = {"sample": _json_sample(sample)} if trial is None else {"trial": _json_trial(trial)}
         added = self._send(
             "POST",
             f"/v1/classes/{int(class_id)}/samples",
@@ -339,10 +382,14 @@ class TactileClient:
                 continue
             if r.status_code in UNREACHABLE_STATUS:
                 raise ServiceUnreachable(
-                    f"{method} {path}: the service answered {r.status_code}", r.status_code
+                    f"{method} {path}: the service answered {r.status_code}",
+                    r.status_code,
+                    _problem(r),
                 )
             if r.status_code >= 400:
-                raise ServiceError(f"{method} {path}: {r.status_code} {_detail(r)}", r.status_code)
+                raise ServiceError(
+                    f"{method} {path}: {r.status_code} {_detail(r)}", r.status_code, _problem(r)
+                )
             return r
 
     def _every(self, path: str, key: str) -> list[dict[str, Any]]:
@@ -387,14 +434,30 @@ def _npy(samples: Any) -> bytes:
     return body.getvalue()
 
 
+def _json_sample(sample: Any) -> list:
+    """One sample as JSON: nested lists of numbers, ``null`` where a value is missing (NaN),
+    which JSON cannot write and the service names by its cell."""
+    x = np.asarray(sample, dtype=np.float32)
+    out = x.astype(object)
+    out[~np.isfinite(x)] = None
+    return out.tolist()
+
+
+def _json_trial(trial: Any) -> dict[str, Any]:
+    """A raw trial as JSON: a ``RawTrial``'s ``to_dict()``, or its JSON form as it is."""
+    return trial.to_dict() if hasattr(trial, "to_dict") else trial
+
+
 def _attributes_body(
     attributes: list[str] | dict[str, float | None] | None,
     attribute_vector: list[float | None] | None,
     description: str | None = None,
+    required: bool = True,
 ) -> dict[str, Any]:
+    """The attributes part of a body; ``required``: one of the three must be given."""
     if attributes is not None and attribute_vector is not None:
         raise ValueError("give attributes or attribute_vector, not both")
-    if attributes is None and attribute_vector is None and description is None:
+    if required and attributes is None and attribute_vector is None and description is None:
         raise ValueError("give attributes, attribute_vector or description")
     body: dict[str, Any] = {} if description is None else {"description": description}
     if attributes is not None:
@@ -402,6 +465,17 @@ def _attributes_body(
     if attribute_vector is not None:
         body["attribute_vector"] = attribute_vector
     return body
+
+
+def _problem(r: httpx.Response) -> dict[str, Any] | None:
+    """The response's problem+json body, None when it is not one."""
+    if not r.headers.get("content-type", "").startswith("application/problem+json"):
+        return None
+    try:
+        body = r.json()
+    except ValueError:
+        return None
+    return body if isinstance(body, dict) else None
 
 
 def _detail(r: httpx.Response) -> str:

@@ -120,15 +120,31 @@ def problem_response(
     errors: Sequence[dict[str, Any]] = (),
     headers: dict[str, str] | None = None,
 ) -> ProblemResponse:
-    body = {
+    body = problem_body(status, detail, request.url.path, errors)
+    return ProblemResponse(body, status_code=status, headers=headers)
+
+
+def problem_body(
+    status: int, detail: str, instance: str | None, errors: Sequence[dict[str, Any]] = ()
+) -> dict[str, Any]:
+    """The RFC 9457 body of a problem (the ROS 2 bridge answers with it too)."""
+    return {
         "type": "about:blank",
         "title": HTTPStatus(status).phrase,
         "status": status,
         "detail": detail,
-        "instance": request.url.path,
+        "instance": instance,
         "errors": list(errors),
     }
-    return ProblemResponse(body, status_code=status, headers=headers)
+
+
+def framework_problem(exc: FrameworkError, instance: str | None) -> dict[str, Any]:
+    """The body a framework error is answered with (``framework_exception_handler``)."""
+    status, default_field = next(
+        (v for cls, v in FRAMEWORK_STATUS.items() if isinstance(exc, cls)), (422, "body")
+    )
+    field = getattr(exc, "field", None) or default_field
+    return problem_body(status, str(exc), instance, [{"field": field, "reason": str(exc)}])
 
 
 def field_name(loc: Sequence[Any]) -> str:
@@ -270,14 +286,9 @@ async def validation_exception_handler(
 
 
 async def framework_exception_handler(request: Request, exc: FrameworkError) -> ProblemResponse:
-    status, default_field = next(
-        (v for cls, v in FRAMEWORK_STATUS.items() if isinstance(exc, cls)), (422, "body")
-    )
-    field = getattr(exc, "field", None) or default_field
-    headers = {"Retry-After": "5"} if status == 503 else None
-    return problem_response(
-        request, status, str(exc), [{"field": field, "reason": str(exc)}], headers
-    )
+    body = framework_problem(exc, request.url.path)
+    headers = {"Retry-After": "5"} if body["status"] == 503 else None
+    return ProblemResponse(body, status_code=body["status"], headers=headers)
 
 
 async def enrolment_exception_handler(request: Request, exc: EnrolmentError) -> ProblemResponse:

@@ -10,7 +10,17 @@ import argparse
 import importlib
 import sys
 
-SUBCOMMANDS = ["train", "evaluate", "recognize", "serve", "worker", "apikey", "store", "dataset"]
+SUBCOMMANDS = [
+    "train",
+    "evaluate",
+    "recognize",
+    "serve",
+    "worker",
+    "apikey",
+    "store",
+    "dataset",
+    "ros2",
+]
 
 
 def build_parser() -> argparse.ArgumentParser:

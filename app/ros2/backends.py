@@ -1,0 +1,260 @@
+"""Who answers the bridge: a running service over HTTP (``ServiceBackend``), or a model
+bundle file in this process (``ModelFileBackend``, as ``tactile-zsl recognize --lines``).
+
+Both give the JSON bodies ``POST /v1/recognize`` gives: the answer, or the RFC 9457
+problem with which the service refuses the same input (the model file's answers build it
+with the service's own code, ``app.api.problems``). Neither raises for bad input or a
+service that is down: every call returns a body.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from app.api.problems import Problem, blame, framework_problem, problem_body
+from app.framework import bundle
+from app.framework.errors import FrameworkError
+
+RECOGNIZE, CLASSES = "/v1/recognize", "/v1/classes"
+
+
+@dataclass
+class ModelInfo:
+    """What the bridge needs of the served model (``GET /v1/models/active``)."""
+
+    version: int | None
+    input_shape: tuple[int, ...]
+    input_kind: str
+    procedures: tuple[str, ...] = ()
+
+
+@dataclass
+class Health:
+    """A probe's outcome, for ``/diagnostics``."""
+
+    reachable: bool
+    message: str
+    model: ModelInfo | None = None
+    warning: str | None = None
+    values: dict[str, str] = field(default_factory=dict)
+
+
+def internal_problem(instance: str) -> dict[str, Any]:
+    return problem_body(500, "internal error in the bridge; its log has the details", instance)
+
+
+class ServiceBackend:
+    """A service at ``url``. After a failure to reach it, inputs are answered at once with a
+    503 problem until a retry is due: ``backoff`` seconds, doubling on each failure up to
+    ``max_backoff``; the first success resets it."""
+
+    def __init__(
+        self,
+        url: str,
+        api_key: str | None = None,
+        timeout: float = 10.0,
+        backoff: float = 0.5,
+        max_backoff: float = 30.0,
+        enrol_wait: float = 600.0,
+    ) -> None:
+        from app.client import TactileClient
+
+        if backoff <= 0 or max_backoff < backoff or enrol_wait <= 0:
+            raise ValueError("backoff must be > 0, max_backoff ≥ backoff and enrol_wait > 0")
+        self.url = url
+        self.client = TactileClient(url, api_key=api_key, timeout=timeout, retries=0)
+        self.backoff, self.max_backoff, self.enrol_wait = backoff, max_backoff, enrol_wait
+        self.model: ModelInfo | None = None
+        self._failures = 0
+        self._retry_at = 0.0
+        self._last_error = ""
+        self._lock = threading.Lock()  # answers, enrolments and probes come from three threads
+
+    @property
+    def source(self) -> str:
+        return self.url
+
+    def recognize(self, samples: np.ndarray) -> dict[str, Any]:
+        return self._call(RECOGNIZE, lambda: self.client.recognize(samples))
+
+    def recognize_trial(self, trial: dict[str, Any]) -> dict[str, Any]:
+        wire = {**trial, "fingers": [_lists(f) for f in trial["fingers"]]}
+        return self._call(RECOGNIZE, lambda: self.client.recognize_trials([wire]))
+
+    def enrol(self, body: dict[str, Any]) -> dict[str, Any]:
+        """The enrolment's job once it succeeded or failed (its class live, or why not), or
+        the problem with which the service refused it."""
+
+        def enrol() -> dict[str, Any]:
+            job = self.client.create_class(body)
+            deadline = time.monotonic() + self.enrol_wait
+            while job["status"] not in ("succeeded", "failed"):
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    break
+                job = self.client.job(job["id"], wait=min(20.0, left))
+            return job
+
+        return self._call(CLASSES, enrol)
+
+    def probe(self) -> Health:
+        """Whether the service answers, and its active model (``GET /v1/models/active``)."""
+        started = time.perf_counter()
+        active = self._call("/v1/models/active", self.client.active_model)
+        if "detail" in active:  # a problem
+            return Health(False, active["detail"], self.model)
+        self.model = ModelInfo(
+            active.get("version"),
+            tuple(active.get("input_shape") or ()),
+            active.get("input_kind", "samples"),
+            tuple(active.get("procedures") or ()),
+        )
+        took = f"{(time.perf_counter() - started) * 1e3:.1f}"
+        return Health(True, "service reachable", self.model, values={"probe_ms": took})
+
+    def close(self) -> None:
+        self.client.close()
+
+    def _call(self, instance: str, request) -> dict[str, Any]:
+        from app.client import ServiceError, ServiceUnreachable
+
+        with self._lock:
+            waiting = self._retry_at - time.monotonic()
+        if waiting > 0:
+            return self._unreachable(instance, f"retrying in {waiting:.1f} s")
+        try:
+            out = request()
+        except ServiceUnreachable as exc:
+            with self._lock:
+                self._failures += 1
+                delay = min(self.max_backoff, self.backoff * 2 ** (self._failures - 1))
+                self._retry_at = time.monotonic() + delay
+                self._last_error = str(exc).split(": ", 1)[-1]
+            return exc.problem or self._unreachable(instance, f"retrying in {delay:.1f} s")
+        except ServiceError as exc:
+            self._reached()
+            return exc.problem or problem_body(exc.status or 502, str(exc), instance)
+        self._reached()
+        out.pop("source", None)  # the client's own field: the bridge relays the body as sent
+        return out
+
+    def _reached(self) -> None:
+        with self._lock:
+            self._failures, self._retry_at = 0, 0.0
+
+    def _unreachable(self, instance: str, when: str) -> dict[str, Any]:
+        detail = f"the service at {self.url} cannot be reached ({self._last_error}); {when}"
+        return problem_body(503, detail, instance)
+
+
+class ModelFileBackend:
+    """A model bundle file answering in this process, read again whenever it changes (a
+    sync renames a new one over it); ``<file>.json`` beside it (written by
+    ``TactileClient.sync_model``) names its version and class ids when it describes this
+    very file. A changed file that cannot be read leaves the model read before answering,
+    with a warning in the diagnostics."""
+
+    def __init__(self, path: str | Path, top_k: int = 3) -> None:
+        if top_k < 1:
+            raise ValueError(f"top_k must be at least 1, got {top_k}")
+        self.path = Path(path)
+        self.top_k = top_k
+        self._file = bundle.BundleFile(self.path)
+        self._file.load()  # a model that cannot be read is the caller's error, at once
+        self._meta: dict[str, Any] = self._read_meta()
+        self._warning: str | None = None
+        self._lock = threading.Lock()
+
+    @property
+    def source(self) -> str:
+        return str(self.path)
+
+    @property
+    def model(self) -> ModelInfo:
+        rec = self._file.model
+        return ModelInfo(self._meta.get("version"), rec.input_shape, rec.input_kind, rec.procedures)
+
+    def recognize(self, samples: np.ndarray) -> dict[str, Any]:
+        from app.api.routes.recognize import Body, takes_kind
+
+        with self._lock:
+            rec = self._current()
+            try:
+                takes_kind(rec, Body(samples, None, 1))
+                with blame("samples"):
+                    batch = rec.recognize_batch(samples, self.top_k)
+            except Problem as exc:
+                return problem_body(exc.status_code, str(exc.detail), RECOGNIZE, exc.errors)
+            except FrameworkError as exc:
+                return framework_problem(exc, RECOGNIZE)
+            return self._answer(batch)
+
+    def recognize_trial(self, trial: dict[str, Any]) -> dict[str, Any]:
+        from app.api import trials
+
+        with self._lock:
+            rec = self._current()
+            try:
+                parsed = trials.one(trial, "trials", 0)
+                with blame("trials"):
+                    batch = rec.recognize_trials([parsed], self.top_k)
+            except Problem as exc:
+                return problem_body(exc.status_code, str(exc.detail), RECOGNIZE, exc.errors)
+            except FrameworkError as exc:
+                return framework_problem(exc, RECOGNIZE)
+            return self._answer(batch)
+
+    def enrol(self, body: dict[str, Any]) -> dict[str, Any]:
+        detail = (
+            "enrolment needs the service: this bridge answers from a model file (--model); "
+            "start it with --url to enrol"
+        )
+        return problem_body(503, detail, CLASSES)
+
+    def probe(self) -> Health:
+        with self._lock:
+            self._current()
+            return Health(True, "model file loaded", self.model, self._warning)
+
+    def close(self) -> None:
+        pass
+
+    def _current(self):
+        try:
+            rec, fresh = self._file.load()
+            if fresh:
+                self._meta = self._read_meta()
+            self._warning = None
+            return rec
+        except (ValueError, OSError) as exc:  # BundleError is a ValueError
+            if self._file.model is None:
+                raise
+            self._warning = (
+                f"{self.path} changed and cannot be read ({exc}); answering with "
+                "the model read before"
+            )
+            return self._file.model
+
+    def _answer(self, batch: Any) -> dict[str, Any]:
+        return {
+            "model_version": self._meta.get("version"),
+            "results": batch.records(self._meta.get("class_ids", {})),
+        }
+
+    def _read_meta(self) -> dict[str, Any]:
+        try:
+            meta = json.loads(self.path.with_name(self.path.name + ".json").read_text())
+        except (OSError, ValueError):
+            return {}
+        return meta if isinstance(meta, dict) and meta.get("sha256") == self._file.sha256 else {}
+
+
+def _lists(finger: dict[str, Any]) -> dict[str, Any]:
+    return {k: np.asarray(v).tolist() for k, v in finger.items()}
