@@ -5,8 +5,16 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StringConstraints, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    StringConstraints,
+    computed_field,
+    model_validator,
+)
 
+from app.data.procedures import block
 from app.store.enums import ClassKind, JobKind, JobStatus, Origin, VersionReason
 from app.words.interpret import MAX_TEXT
 
@@ -359,7 +367,17 @@ class RecognizeRequest(Strict):
         "shape `input_shape` of `GET /v1/models/active` says. Where the model names its "
         "`procedures`, a sample may lack some: their rows are `null` (or NaN in a .npy "
         "body), and a sample may come as one entry per procedure, e.g. PHAC-2's "
-        "`[[...47 numbers], null, null, null]` after a squeeze alone.",
+        "`[[...47 numbers], null, null, null]` after a squeeze alone. `procedure_rows` of "
+        "`GET /v1/models/active` says which rows each procedure takes. The example is for "
+        'a model of `input_shape` `[4, 3]` whose `procedure_rows` are `{"squeeze": [0, 2], '
+        '"hold": [2, 4]}`: one complete sample, and one after a squeeze alone. One sample '
+        "may also come alone, without its list (as a `.npy` body of `input_shape` may).",
+        examples=[
+            [
+                [[0.12, 0.4, 0.31], [0.2, 0.1, 0.05], [0.7, 0.66, 0.61], [0.02, 0.03, 0.01]],
+                [[0.12, 0.4, 0.31], [0.2, 0.1, 0.05], None, None],
+            ]
+        ],
     )
 
 
@@ -478,6 +496,26 @@ class ModelSummary(BaseModel):
         "(e.g. PHAC-2's squeeze, hold, slide, move down); empty where the model does not name "
         "them.",
     )
+
+    @computed_field(
+        description="Where each of `procedures` lies in a sample: `[start, stop)` of the rows "
+        "of its first axis (of a flat sample, its slice). A procedure not done yet has its "
+        "rows `null` (NaN throughout in a `.npy` body): with the rows below, a sample after "
+        "squeeze and slide is rows 0-7 and 16-23 of numbers and rows 8-15 and 24-31 `null`, "
+        "or one entry per procedure, `[[8 rows], null, [8 rows], null]`. Empty where the "
+        "model names no procedures.",
+        examples=[{"squeeze": [0, 8], "hold": [8, 16], "slide": [16, 24], "move_down": [24, 32]}],
+    )
+    @property
+    def procedure_rows(self) -> dict[str, list[int]]:
+        if not self.procedures or not self.input_shape:
+            return {}
+        return {
+            name: [rows.start, rows.stop]
+            for j, name in enumerate(self.procedures)
+            for rows in [block(self.procedures, tuple(self.input_shape), j)]
+        }
+
     first_procedure: str | None = Field(
         None,
         description="The procedure to do first when exploring an object; then send the "

@@ -631,8 +631,14 @@ def _failed_registration(session: Session, name: str, key: str) -> ObjectClass |
 
 def _check_free(session: Session, name: str, key: str, field: str) -> None:
     """No live class has the name, nor (for a described class) the vector ``key``."""
-    if repo.class_by_name(session, name) is not None:
-        raise NameTaken(f"a class named '{name}' already exists", "name")
+    existing = repo.class_by_name(session, name)
+    if existing is not None:
+        alike = "" if existing.name == name else " (names are compared without regard to case)"
+        raise NameTaken(
+            f"a class named '{existing.name}' already exists (class {existing.id}){alike}: "
+            "add samples to it, or choose another name",
+            "name",
+        )
     if key:
         _check_vector(session, key, field)
 

@@ -86,11 +86,24 @@ LIVE_ENROLLED = f"origin = '{Origin.ENROLLED}' AND withdrawn_at IS NULL"
 DESCRIBED_LIVE_ENROLLED = f"{LIVE_ENROLLED} AND attribute_key <> ''"
 
 
+def fold_name(name: str) -> str:
+    """A class name as names are compared: without regard to case and surrounding spaces
+    ('Foam-Block ' is 'foam-block')."""
+    return name.strip().casefold()
+
+
+def _name_key(context: Any) -> str:
+    return fold_name(context.get_current_parameters()["name"])
+
+
 class ObjectClass(Base):
     __tablename__ = "classes"
 
     id: Mapped[int] = mapped_column(primary_key=True)
     name: Mapped[str] = mapped_column(String(200), unique=True)
+    # fold_name(name), unique: 'Foam-Block' cannot join 'foam-block'. Null only for a class
+    # that already shared its folded name with an older one when migration 0010 ran.
+    name_key: Mapped[str | None] = mapped_column(String(800), default=_name_key)
     kind: Mapped[str] = mapped_column(String(10))  # ClassKind
     origin: Mapped[str] = mapped_column(String(10))  # Origin
     # the description, one token per attribute position: "1,0,0.5,,1" (app.store.vocabulary)
@@ -105,6 +118,7 @@ class ObjectClass(Base):
     withdrawn_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
 
     __table_args__ = (
+        Index("uq_classes_name_key", "name_key", unique=True),
         # Two concurrent registrations of one vector cannot both commit; dataset
         # classes are exempt because real datasets may repeat a vector, a withdrawn
         # class no longer holds its vector, and classes without one have nothing to share.
@@ -213,6 +227,9 @@ class Job(Base):
     # the principal that queued it: key:<id>, env:<hash prefix> or addr:<ip> (keys.Principal)
     requested_by: Mapped[str | None] = mapped_column(String(200))
     claimed_by: Mapped[str | None] = mapped_column(String(200))
+    # what the request that queued it was warned of (app.service.enrolment), e.g. a sample
+    # the served model gave to another class with high confidence; null: none
+    warnings: Mapped[list[str] | None] = mapped_column(JSON)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     started_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
     finished_at: Mapped[datetime | None] = mapped_column(UTCDateTime)

@@ -26,6 +26,28 @@ def test_the_served_model_names_its_procedures_and_the_first(best_service):
     assert active["first_procedure"] in PROCEDURES
     listed = client.get("/v1/models").json()["models"][0]
     assert listed["procedures"] == PROCEDURES
+    # which rows of a (32, 30) sample each procedure takes: 4 blocks of 8
+    rows = {"squeeze": [0, 8], "hold": [8, 16], "slide": [16, 24], "move_down": [24, 32]}
+    assert active["procedure_rows"] == rows and listed["procedure_rows"] == rows
+
+
+def test_procedure_rows_say_which_rows_a_missing_procedure_leaves_null(best_service, best_base):
+    """A sample built from procedure_rows alone (squeeze and slide done) is answered from
+    exactly those procedures; /docs shows the field with its example."""
+    client, _, _ = best_service
+    x = best_base[1].samples[0].tolist()
+    spans = client.get("/v1/models/active").json()["procedure_rows"]
+    done = ("squeeze", "slide")
+    sample = [None] * len(x)
+    for name in done:
+        start, stop = spans[name]
+        sample[start:stop] = x[start:stop]
+    answer = client.post("/v1/recognize", json={"samples": [sample]}).json()["results"][0]
+    assert answer["procedures_used"] == list(done)
+    schema = client.get("/openapi.json").json()["components"]["schemas"]
+    field = schema["ModelOut"]["properties"]["procedure_rows"]
+    assert "[start, stop)" in field["description"] and field["examples"][0]["hold"] == [8, 16]
+    assert None in schema["RecognizeRequest"]["properties"]["samples"]["examples"][0][1]
 
 
 def test_a_sample_with_null_rows_is_answered_from_the_procedures_it_holds(best_service, best_base):

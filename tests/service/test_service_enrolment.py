@@ -79,6 +79,34 @@ def test_a_live_name_or_vector_is_refused_naming_the_field(sessions, attributes,
         assert repo.class_by_name(s, "mug") is None  # nothing stored
 
 
+def test_names_are_compared_without_regard_to_case_and_surrounding_spaces(
+    sessions, attributes, interpreter
+):
+    first = register(sessions, "foam-block", attributes[0], interpreter)
+    for name in ("Foam-Block", " FOAM-BLOCK  "):
+        with pytest.raises(enrolment.NameTaken) as e:
+            register(sessions, name, attributes[1], interpreter)
+        assert e.value.field == "name"
+        assert f"a class named 'foam-block' already exists (class {first.cls.id})" in str(e.value)
+        assert "without regard to case" in str(e.value)
+    with sessions() as s:
+        assert repo.class_by_name(s, "FOAM-block").id == first.cls.id
+        enrolment.withdraw_class(s, first.cls.id, requested_by=ENROLLER)
+    # a withdrawn class comes back under any spelling of its name, with its own
+    again = register(sessions, "Foam-Block", attributes[1], interpreter)
+    assert again.cls.id == first.cls.id and again.cls.name == "foam-block"
+
+
+def test_the_store_refuses_a_second_spelling_of_a_name(sessions):
+    """The unique index on the folded name holds even where the rules are bypassed
+    (a concurrent registration that checked before the other committed)."""
+    with sessions() as s:
+        repo.add_class(s, "Mug", "")
+        s.commit()
+    with sessions() as s, pytest.raises(IntegrityError):
+        repo.add_class(s, "mug ", "")
+
+
 def test_a_dataset_class_name_is_taken(sessions, dataset, attributes, interpreter):
     with pytest.raises(enrolment.NameTaken):
         register(sessions, dataset.class_names[0], attributes[0], interpreter)

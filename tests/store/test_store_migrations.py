@@ -10,13 +10,14 @@ from collections.abc import Iterator
 import pytest
 from alembic import command
 from sqlalchemy import inspect, text
+from sqlalchemy.exc import IntegrityError
 
 from app.store import migrate
 from app.store.db import make_engine
 from app.testing.service import fresh_postgres_database
 from tests.service_fixtures import postgres_url, require_postgres
 
-HEAD = "0009"
+HEAD = "0010"
 PG_URL = postgres_url()
 
 TABLES = {
@@ -364,6 +365,43 @@ def test_0009_adds_procedures_to_model_versions_and_keeps_every_row(backend, tmp
         assert not {"procedures", "first_procedure"} & set(_columns(engine, "model_versions"))
         with engine.connect() as conn:
             assert conn.execute(text("SELECT count(*) FROM model_versions")).scalar() == 1
+        migrate.upgrade(engine)
+        assert migrate.current_revision(engine) == HEAD
+        engine.dispose()
+
+
+@pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
+def test_0010_folds_class_names_and_keeps_names_that_already_differ_only_in_case(backend, tmp_path):
+    with _database(backend, tmp_path) as url:
+        engine = make_engine(url)
+        migrate.upgrade(engine, "0009")
+        with engine.begin() as conn:
+            for name in ("Foam-Block", "foam-block", "mug"):
+                conn.execute(
+                    text(
+                        "INSERT INTO classes (name, kind, origin, attribute_key, created_at) "
+                        "VALUES (:n, 'novel', 'enrolled', '', '2026-11-28')"
+                    ),
+                    {"n": name},
+                )
+        migrate.upgrade(engine)
+        with engine.connect() as conn:
+            keys = dict(conn.execute(text("SELECT name, name_key FROM classes")).all())
+        # the oldest of each folded name holds it; the later one keeps its row, unkeyed
+        assert keys == {"Foam-Block": "foam-block", "foam-block": None, "mug": "mug"}
+        assert "warnings" in set(_columns(engine, "jobs"))
+        with pytest.raises(IntegrityError), engine.begin() as conn:
+            conn.execute(
+                text(
+                    "INSERT INTO classes (name, name_key, kind, origin, attribute_key, "
+                    "created_at) VALUES ('MUG', 'mug', 'novel', 'enrolled', '', '2026-11-28')"
+                )
+            )
+        migrate.downgrade(engine, "0009")
+        assert "name_key" not in set(_columns(engine, "classes"))
+        assert "warnings" not in set(_columns(engine, "jobs"))
+        with engine.connect() as conn:
+            assert conn.execute(text("SELECT count(*) FROM classes")).scalar() == 3
         migrate.upgrade(engine)
         assert migrate.current_revision(engine) == HEAD
         engine.dispose()

@@ -7,12 +7,12 @@ from collections.abc import Collection, Mapping, Sequence
 from typing import Any
 
 import numpy as np
-from sqlalchemy import Row, Select, func, insert, select, update
+from sqlalchemy import Row, Select, func, insert, or_, select, update
 from sqlalchemy.orm import Session, aliased, defer
 
 from app.data.biotac import RawTrial
 from app.store.enums import ClassKind, JobKind, Origin
-from app.store.models import Attribute, Job, ObjectClass, Sample, utcnow
+from app.store.models import Attribute, Job, ObjectClass, Sample, fold_name, utcnow
 from app.store.repo.encoding import encode
 from app.store.vocabulary import Vocabulary
 
@@ -101,10 +101,14 @@ def get_class(session: Session, class_id: int) -> ObjectClass | None:
 
 
 def class_by_name(session: Session, name: str, withdrawn: bool = False) -> ObjectClass | None:
-    """The live class of that name; with ``withdrawn``, the withdrawn one (names are unique
-    over both, so a withdrawn class's name comes back with its row)."""
+    """The live class of that name, compared without regard to case and surrounding spaces
+    (``fold_name``); with ``withdrawn``, the withdrawn one (names are unique over both, so a
+    withdrawn class's name comes back with its row). The exact name first, where a store
+    kept two names differing only in case (migration 0010)."""
     state = ObjectClass.withdrawn_at.is_not(None) if withdrawn else LIVE_CLASS
-    return session.scalar(select(ObjectClass).where(ObjectClass.name == name, state))
+    same = or_(ObjectClass.name_key == fold_name(name), ObjectClass.name == name)
+    stmt = select(ObjectClass).where(same, state)
+    return session.scalar(stmt.order_by((ObjectClass.name == name).desc()).limit(1))
 
 
 def class_by_key(session: Session, key: str, other_than: int | None = None) -> ObjectClass | None:
