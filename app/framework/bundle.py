@@ -13,6 +13,13 @@ bundle without the entry (every bundle of a model of fixed-shape samples, and al
 before raw trials were supported) loads as a model of fixed-shape samples, as before.
 Written to a temporary file in the target folder, then renamed into place.
 
+A model fitted since 2026-11-28 also stores its ``InputProfile`` (the training samples'
+channel ranges, ``app.framework.input_health``): the manifest's ``input_profile`` entry
+and five small arrays under ``input_profile/``. A bundle without them loads with no
+profile, and its answers carry ``input_outlier`` and ``input_outlier_score`` as None (null
+over HTTP): not measured, rather than healthy; fitting the model again measures them. The
+entry needs no new format version: a build older than it reads the bundle and ignores it.
+
 A store that keeps many versions of one model writes them ``split``: the large
 arrays go into parts of their own, named by the SHA-256 of their bytes and
 listed in the manifest's ``parts``, and the rest is a small head bundle. An
@@ -40,6 +47,7 @@ from typing import Any
 import numpy as np
 
 from app.framework.errors import BundleError
+from app.framework.input_health import InputProfile
 from app.framework.recognizer import ClassRegistry, NoveltyTuning, TactileRecognizer
 from app.framework.registry import UnknownMethodError, method_class
 
@@ -61,6 +69,7 @@ _MANIFEST = "manifest.json"
 _ARRAYS = "arrays.npz"
 _REG = "registry/"  # prefix of the registry's arrays inside arrays.npz
 _FEATURIZER = "featurizer/"  # prefix of the raw-trial featurizer's arrays
+_PROFILE = "input_profile/"  # prefix of the input profile's arrays
 # an array is deflated when its first 64 kB shrink below 80 % at level 1
 _PROBE_BYTES = 64 * 1024
 _WORTH_IT = 0.8
@@ -290,6 +299,11 @@ def _contents(model: TactileRecognizer) -> tuple[dict[str, Any], dict[str, np.nd
         manifest["format_version"] = RAW_TRIALS_FORMAT_VERSION
         for name, value in featurizer_arrays.items():
             all_arrays[_FEATURIZER + name] = value
+    if model.input_profile_ is not None:
+        profile_meta, profile_arrays = model.input_profile_.get_state()
+        manifest["input_profile"] = profile_meta
+        for name, value in profile_arrays.items():
+            all_arrays[_PROFILE + name] = value
     if any(name.endswith("forest/nodes") for name in all_arrays):
         manifest["format_version"] = RECORDS_FORMAT_VERSION
     all_arrays[_REG + "known_attributes"] = reg.known_attributes
@@ -391,6 +405,7 @@ def from_bytes(
         model.novelty_tuning = NoveltyTuning.from_dict(tuning) if tuning else None
         model.metrics = manifest.get("metrics") or {}
         model.featurizer_ = _featurizer(manifest, arrays, model.input_shape)
+        model.input_profile_ = _input_profile(manifest, arrays, model.input_shape)
         model.set_state(manifest["method_state"], arrays)
     except BundleError:
         raise
@@ -428,6 +443,30 @@ def _featurizer(
             f"model takes {list(input_shape)}"
         )
     return featurizer
+
+
+def _input_profile(
+    manifest: dict[str, Any], arrays: dict[str, np.ndarray], input_shape: tuple[int, ...]
+) -> InputProfile | None:
+    """The input profile a bundle stores (its arrays popped from ``arrays``), or None for a
+    bundle written before profiles."""
+    profile_arrays = {
+        name[len(_PROFILE) :]: arrays.pop(name)
+        for name in [n for n in arrays if n.startswith(_PROFILE)]
+    }
+    meta = manifest.get("input_profile")
+    if meta is None:
+        return None
+    try:
+        profile = InputProfile.from_state(meta, profile_arrays)
+    except (ValueError, TypeError, KeyError) as exc:
+        raise BundleError(f"bundle's input profile is unreadable: {exc}") from None
+    if profile.input_shape != tuple(input_shape):
+        raise BundleError(
+            f"bundle's input profile is of samples of shape {list(profile.input_shape)} but "
+            f"the model takes {list(input_shape)}"
+        )
+    return profile
 
 
 def join(data: bytes, part: Callable[[str], np.ndarray]) -> bytes:

@@ -55,6 +55,7 @@ from app.framework.errors import (
     UnsupportedOperationError,
 )
 from app.framework.fusion import FUSION_RULE, check_groups, fuse_groups, group_mean
+from app.framework.input_health import OUTLIER_THRESHOLD, InputProfile
 from app.framework.params import Hyperparameters
 from app.framework.raw_input import (
     RAW_TRIALS,
@@ -146,6 +147,9 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
         self.featurizer_: Any = None
         # the exploratory procedures a sample holds (``TactileDataset.procedures``); () none
         self.procedures: tuple[str, ...] = ()
+        # the training samples' channel ranges (``app.framework.input_health``); None for a
+        # model loaded from a bundle written before them: its answers' input health is None
+        self.input_profile_: InputProfile | None = None
 
     # --------------------------------------------------------- hyper-parameters
     def _validate_params(self) -> None:
@@ -204,6 +208,7 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
         self.input_shape = dataset.input_shape
         self.featurizer_ = featurizer
         self.procedures = dataset.procedures
+        self.input_profile_ = InputProfile.fit(dataset.samples)
         self.registry = ClassRegistry(
             attribute_names=dataset.attribute_names,
             known_names=list(dataset.class_names),
@@ -487,12 +492,14 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
             scores, known_p, novel_p = self._all_scores(x)
         else:
             scores, known_p, novel_p = self._by_procedures(x, used, self._scores_from)
+        g = None
         if groups is not None:
             g = check_groups(groups, len(x))
             scores, known_p, novel_p = fuse_groups(g, scores, known_p, novel_p)
             if used is not None:
                 used = group_mean(used.astype(np.float64), g, int(g.max()) + 1) > 0
         batch = self._batch(scores, known_p, novel_p, top_k)
+        self._add_input_health(batch, x, g)
         if used is None:
             return self._complete(batch)
         ask = asks_next(batch.top_probability[:, 0], used, target_confidence)
@@ -502,6 +509,35 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
             next_procedure=self._next_procedures(known_p, used, ask),
         )
         return batch
+
+    def input_outlier_score(self, samples: Any) -> np.ndarray:
+        """(N,) how far each sample lies outside the training data's channel ranges, in
+        training IQRs (``app.framework.input_health``; above ``OUTLIER_THRESHOLD`` it is an
+        outlier); NaN for every sample of a model without an input profile."""
+        x, _ = self._checked(samples)
+        if self.input_profile_ is None:
+            return np.full(len(x), np.nan)
+        return self.input_profile_.score(x)
+
+    def _add_input_health(
+        self, batch: RecognitionBatch, x: np.ndarray, groups: np.ndarray | None
+    ) -> None:
+        """Set ``batch``'s input health from its samples ``x``: with ``groups``, a group's
+        score is the largest of its samples' (one failing finger makes the trial's answer
+        an outlier). Left None where the model holds no input profile."""
+        if self.input_profile_ is None:
+            return
+        statistics = self.input_profile_.features(x)
+        score = self.input_profile_.score_features(statistics)
+        if groups is not None:
+            fused = np.zeros(len(batch))
+            np.maximum.at(fused, groups, score)
+            score = fused
+        batch.__dict__.update(
+            input_outlier_score=score,
+            input_outlier=score > OUTLIER_THRESHOLD,
+            input_statistics=statistics,
+        )
 
     def _complete(self, batch: RecognitionBatch) -> RecognitionBatch:
         """``batch``, answers from complete samples: every procedure used, none next (a

@@ -32,6 +32,10 @@ class Recognition(NamedTuple):
     top_k: tuple[ClassScore, ...]
     procedures_used: tuple[str, ...] = ()
     next_procedure: str | None = None  # the procedure to do next; None: stop
+    #: the sample lies outside the training data's channel ranges (``app.framework.
+    #: input_health``); None where the model holds no input profile (fitted before them)
+    input_outlier: bool | None = None
+    input_outlier_score: float | None = None
 
 
 @dataclass(frozen=True)
@@ -55,6 +59,16 @@ class RecognitionBatch:
     procedures: tuple[str, ...] = ()
     procedures_used: np.ndarray | None = None
     next_procedure: np.ndarray | None = None
+    #: (N,) float64 how far each input lies outside the training data's channel ranges,
+    #: and (N,) bool whether that is beyond the threshold (``app.framework.input_health``);
+    #: None where the model holds no input profile
+    input_outlier_score: np.ndarray | None = None
+    input_outlier: np.ndarray | None = None
+    #: (n, S) float32 the compressed channel statistics of each sample answered, which the
+    #: service's drift monitor keeps (``InputProfile.features``): one row per *sample*, more
+    #: rows than answers where groups fused samples (a slice keeps them only where each
+    #: answer is one sample); None where the model holds no input profile
+    input_statistics: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.novelty_score)
@@ -70,6 +84,20 @@ class RecognitionBatch:
             self.procedures,
             None if self.procedures_used is None else self.procedures_used[rows],
             None if self.next_procedure is None else self.next_procedure[rows],
+            None if self.input_outlier_score is None else self.input_outlier_score[rows],
+            None if self.input_outlier is None else self.input_outlier[rows],
+            self.input_statistics[rows]
+            if self.input_statistics is not None and len(self.input_statistics) == len(self)
+            else None,
+        )
+
+    def health_fields(self) -> list[tuple[bool | None, float | None]]:
+        """(``input_outlier``, ``input_outlier_score``) of each answer; None, None where the
+        model holds no input profile."""
+        if self.input_outlier is None or self.input_outlier_score is None:
+            return [(None, None)] * len(self)
+        return list(
+            zip(self.input_outlier.tolist(), self.input_outlier_score.tolist(), strict=True)
         )
 
     def procedure_fields(self) -> list[tuple[list[str], str | None]]:
@@ -123,13 +151,16 @@ class RecognitionBatch:
                 ],
                 "procedures_used": used,
                 "next_procedure": nxt,
+                "input_outlier": outlier,
+                "input_outlier_score": outlier_score,
             }
-            for idx, top_p, novel, score, (used, nxt) in zip(
+            for idx, top_p, novel, score, (used, nxt), (outlier, outlier_score) in zip(
                 self.top_index.tolist(),
                 self.top_probability.tolist(),
                 self.is_novel.tolist(),
                 self.novelty_score.tolist(),
                 self.procedure_fields(),
+                self.health_fields(),
                 strict=True,
             )
         ]
@@ -145,13 +176,16 @@ class RecognitionBatch:
                 tuple(ClassScore(names[j], q) for j, q in zip(idx, tp, strict=True) if j >= 0),
                 tuple(used),
                 nxt,
+                outlier,
+                outlier_score,
             )
-            for idx, tp, nov, score, (used, nxt) in zip(
+            for idx, tp, nov, score, (used, nxt), (outlier, outlier_score) in zip(
                 self.top_index.tolist(),
                 self.top_probability.tolist(),
                 self.is_novel.tolist(),
                 self.novelty_score.tolist(),
                 self.procedure_fields(),
+                self.health_fields(),
                 strict=True,
             )
         ]
@@ -233,6 +267,9 @@ def one_row_batch(
         procedures=(),
         procedures_used=None,
         next_procedure=None,
+        input_outlier_score=None,
+        input_outlier=None,
+        input_statistics=None,
     )
     return batch
 

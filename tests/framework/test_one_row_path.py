@@ -56,6 +56,13 @@ def assert_same(one: RecognitionBatch, ref: RecognitionBatch) -> None:
     assert len(one) == 1 and len(one[0:1]) == 1
 
 
+def healthy(model, batch: RecognitionBatch, x: np.ndarray, groups=None) -> RecognitionBatch:
+    """``batch`` with the input health of its samples ``x``, as ``recognize_batch`` adds it
+    after the ranking (``app.framework.input_health``)."""
+    model._add_input_health(batch, model.validate_samples(x), groups)
+    return batch
+
+
 def stub(n_known: int, n_novel: int, threshold: float) -> SimpleNamespace:
     """What ``_one_row`` and ``_rows`` read of a recognizer: its classes and threshold."""
     registry = ClassRegistry(
@@ -198,16 +205,23 @@ def check_model(model, x: np.ndarray) -> None:
         routed[bool(scores[0] > model.novelty_threshold)] += 1
         for top_k in TOP_KS:
             ref = model._complete(TactileRecognizer._rows(model, scores, known_p, novel_p, top_k))
+            ref = healthy(model, ref, one)
             assert_same(model.recognize_batch(one, top_k), ref)
             assert_same(model.recognize_batch(one[0], top_k), ref)  # no batch axis
         ref = model._complete(TactileRecognizer._rows(model, scores, known_p, novel_p, 3))
+        ref = healthy(model, ref, one)
         assert repr(model.recognize(one)) == repr(ref.answers())
         # two samples fused as one group: one row too
         pair = x[[i, (i + 1) % len(x)]]
         fused = fuse_groups(np.zeros(2, np.int64), *model._all_scores(model.validate_samples(pair)))
         assert_same(
             model.recognize_batch(pair, 3, groups=[0, 0]),
-            model._complete(TactileRecognizer._rows(model, *fused, 3)),
+            healthy(
+                model,
+                model._complete(TactileRecognizer._rows(model, *fused, 3)),
+                pair,
+                np.zeros(2, np.int64),
+            ),
         )
     assert routed[False] and routed[True], routed  # both classifiers answered some sample
 
@@ -224,9 +238,10 @@ def general_path(model, one: np.ndarray, top_k: int) -> RecognitionBatch:
     (``small_batch_max = 0``), then the general ranking (``_rows``)."""
     general = copy.copy(model)
     general.small_batch_max = 0
-    return general._complete(
+    batch = general._complete(
         TactileRecognizer._rows(general, *general._all_scores(general.validate_samples(one)), top_k)
     )
+    return healthy(general, batch, one)
 
 
 def test_best_one_sample_is_the_general_path_bit_for_bit(data):

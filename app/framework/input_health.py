@@ -1,0 +1,197 @@
+"""Input health: how far a sample lies outside what the model was trained on.
+
+A robot whose sensor fails (all zeros), saturates, is read at the wrong scale or loses a
+channel still gets an answer from any classifier, often a confident one. ``InputProfile``
+is fitted on the training samples with the model (``TactileRecognizer.fit``) and stored in
+its bundle; every answer then carries ``input_outlier`` and ``input_outlier_score``.
+
+Channels. A channel is one index of a sample's first axis: a row of a tactile image (the
+simulator's 32 readings, a raw-trial model's image rows), one feature of a flat sample
+(PHAC-2's 188). Each channel gives its *level* (its mean over the rest of the sample) and,
+where it has more than one value, its *spread* (their standard deviation): a flat sample
+has C statistics, an image 2C.
+
+Each statistic f is compressed by ``t = asinh(f / s)``, with ``s`` fitted per statistic:
+for one that never changes sign in training (a pressure, an energy, a spread) ``s`` is a
+thousandth of its smallest magnitude, so that ``t`` is ``log |f|`` up to a constant and 0
+lies ``asinh(1000)`` = 7.6 below every training value; for one that does, ``s`` is its
+robust spread (IQR / 1.349), linear near the middle and logarithmic in the tails. So the
+heavy tails of real features (PHAC-2's reach 1e10) stay within a few units, while a scale
+off by orders of magnitude moves ``t`` by ln 10 per order.
+
+The score of a sample is the largest *excess* over its statistics: how far ``t`` lies
+outside the training range ``[min, max]`` of that statistic, in units of its training
+interquartile range (at least a tenth of the range). 0 inside the range everywhere; an
+answer is an outlier above ``OUTLIER_THRESHOLD``. Statistics of a missing procedure (NaN
+throughout its block) are skipped: a sample is never an outlier for lacking procedures.
+
+Drift. ``window_drift`` compares recent samples with training, per channel: the median of
+the window's ``t`` minus the training median, in training IQRs, the larger of a channel's
+level and spread. One object touched over and over sits within about two IQRs of the middle
+of its channels; a sensor that drifts, loses gain or dies moves its channel's figure far
+beyond (the service exports it on ``/metrics``).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
+
+import numpy as np
+
+#: a sample whose score exceeds this is an outlier: one of its channel statistics lies
+#: more than this many training IQRs beyond the training range (docs/DEPLOY.md; the pass
+#: and detection rates at it: python -m bench.input_health)
+OUTLIER_THRESHOLD = 2.0
+#: ``s`` of a statistic that keeps its sign, as a share of its smallest training magnitude
+_SIGN_KEPT_SCALE = 1e-3
+#: the width that turns an excess into a score: the IQR of ``t``, or at least this share of
+#: its range (a statistic nearly constant in training but for a few trials is not so strict)
+_MIN_WIDTH_SHARE = 0.1
+_TINY = 1e-12
+_FIT_ROWS = 8192
+STATE_VERSION = 1
+
+
+class InputProfile:
+    """Per-channel training ranges and distribution of a model's samples (see the module
+    docstring). ``fit`` on training samples; ``score`` and ``features`` per sample;
+    ``window_drift`` on a window of ``features``."""
+
+    def __init__(
+        self,
+        input_shape: tuple[int, ...],
+        scale: np.ndarray,
+        low: np.ndarray,
+        high: np.ndarray,
+        median: np.ndarray,
+        width: np.ndarray,
+    ) -> None:
+        self.input_shape = tuple(int(s) for s in input_shape)
+        self.inv_scale = (1.0 / np.asarray(scale, np.float64)).astype(np.float32)
+        self.low = np.asarray(low, np.float32)
+        self.high = np.asarray(high, np.float32)
+        self.median = np.asarray(median, np.float32)
+        self.inv_width = (1.0 / np.asarray(width, np.float64)).astype(np.float32)
+
+    # --------------------------------------------------------------- fitting
+    @classmethod
+    def fit(cls, samples: np.ndarray) -> InputProfile:
+        """The profile of training ``samples`` (N, *input_shape), complete or with missing
+        procedures (NaN blocks; they are left out of their channels' statistics)."""
+        x = np.asarray(samples)
+        if x.ndim < 2 or len(x) == 0:
+            raise ValueError(f"fit takes at least one sample, got an array of shape {x.shape}")
+        # in blocks of rows: the statistics of 300,000 samples take 77 MB, their
+        # temporaries for all of them at once several GB
+        f = np.concatenate(
+            [channel_statistics(x[i : i + _FIT_ROWS]) for i in range(0, len(x), _FIT_ROWS)]
+        ).astype(np.float64)
+        with _all_nan_ok():
+            lo_f, hi_f = np.nanmin(f, axis=0), np.nanmax(f, axis=0)
+            magnitude = np.nanmin(np.abs(f), axis=0)
+            q25, q50, q75 = np.nanpercentile(f, [25, 50, 75], axis=0)
+        kept = (lo_f > 0) | (hi_f < 0)
+        robust = (q75 - q25) / 1.349
+        robust = np.where(robust > _TINY, robust, np.nanmean(np.abs(f - q50), axis=0))
+        scale = np.where(kept, _SIGN_KEPT_SCALE * magnitude, robust)
+        scale = np.where(np.isfinite(scale) & (scale > _TINY), scale, 1.0)
+        t = np.arcsinh(f / scale)
+        with _all_nan_ok():
+            low, high = np.nanmin(t, axis=0), np.nanmax(t, axis=0)
+            t25, median, t75 = np.nanpercentile(t, [25, 50, 75], axis=0)
+        width = np.maximum(t75 - t25, _MIN_WIDTH_SHARE * (high - low))
+        width = np.where(np.isfinite(width) & (width > _TINY), width, 1.0)
+        # a statistic training never saw (its procedure always missing) scores nothing
+        unseen = ~np.isfinite(low)
+        low, high, median = (
+            np.where(unseen, v, a) for v, a in ((-np.inf, low), (np.inf, high), (0.0, median))
+        )
+        return cls(x.shape[1:], scale, low, high, median, width)
+
+    # ------------------------------------------------------------- answering
+    def features(self, x: np.ndarray) -> np.ndarray:
+        """(N, S) float32 compressed channel statistics ``t`` of validated samples ``x``;
+        NaN for those of missing procedures."""
+        return np.arcsinh(channel_statistics(x) * self.inv_scale)
+
+    def excess(self, t: np.ndarray) -> np.ndarray:
+        """(N, S) how far each statistic lies outside its training range, in training IQRs;
+        0 inside, NaN where the statistic is missing."""
+        beyond = np.maximum(self.low - t, t - self.high)
+        return np.maximum(beyond, 0.0) * self.inv_width
+
+    def score(self, x: np.ndarray) -> np.ndarray:
+        """(N,) float64 the largest excess of each sample's statistics (0: every one inside
+        the training range); missing procedures count for nothing."""
+        return self.score_features(self.features(x))
+
+    def score_features(self, t: np.ndarray) -> np.ndarray:
+        e = self.excess(t)
+        if np.isnan(e).any():
+            e = np.where(np.isnan(e), 0.0, e)
+        return e.max(axis=1).astype(np.float64)
+
+    @property
+    def n_channels(self) -> int:
+        return self.input_shape[0]
+
+    def window_drift(self, t: np.ndarray) -> np.ndarray:
+        """(C,) per channel: |median of the window's ``t`` - training median| in training
+        IQRs, the larger of the channel's level and spread; NaN where the window holds no
+        value of the channel (its procedure always missing). ``t``: (W, S) ``features``."""
+        with _all_nan_ok():
+            shift = np.abs(np.nanmedian(t, axis=0) - self.median) * self.inv_width
+        per_stat = shift.reshape(-1, self.n_channels)  # (levels; spreads) x channels
+        with _all_nan_ok():
+            return np.nanmax(per_stat, axis=0)
+
+    # ----------------------------------------------------------- persistence
+    def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        meta = {"version": STATE_VERSION, "input_shape": list(self.input_shape)}
+        arrays = {
+            "scale": (1.0 / self.inv_scale.astype(np.float64)).astype(np.float32),
+            "low": self.low,
+            "high": self.high,
+            "median": self.median,
+            "width": (1.0 / self.inv_width.astype(np.float64)).astype(np.float32),
+        }
+        return meta, arrays
+
+    @classmethod
+    def from_state(cls, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> InputProfile:
+        """The profile ``get_state`` described; ValueError when the arrays do not fit."""
+        if meta.get("version") != STATE_VERSION:
+            raise ValueError(f"input profile version {meta.get('version')!r} is not supported")
+        shape = tuple(int(s) for s in meta["input_shape"])
+        size = n_statistics(shape)
+        for name in ("scale", "low", "high", "median", "width"):
+            if name not in arrays or np.shape(arrays[name]) != (size,):
+                raise ValueError(f"input profile array {name!r} must have shape ({size},)")
+        return cls(shape, **{k: arrays[k] for k in ("scale", "low", "high", "median", "width")})
+
+
+def n_statistics(input_shape: tuple[int, ...]) -> int:
+    """How many channel statistics a sample of ``input_shape`` gives."""
+    per_channel = int(np.prod(input_shape[1:])) if len(input_shape) > 1 else 1
+    return input_shape[0] * (2 if per_channel > 1 else 1)
+
+
+def channel_statistics(x: np.ndarray) -> np.ndarray:
+    """(N, S): each channel's level, then each one's spread where a channel holds several
+    values (see the module docstring)."""
+    n, c = x.shape[0], x.shape[1]
+    if x.ndim == 2 or x[0, 0].size == 1:
+        return x.reshape(n, c)
+    rows = x.reshape(n, c, -1)
+    return np.concatenate([rows.mean(axis=2), rows.std(axis=2)], axis=1)
+
+
+@contextmanager
+def _all_nan_ok() -> Iterator[None]:
+    """Silence numpy's warnings about all-NaN slices (a procedure never present)."""
+    with warnings.catch_warnings(), np.errstate(invalid="ignore"):
+        warnings.simplefilter("ignore", RuntimeWarning)
+        yield
