@@ -341,3 +341,23 @@ def test_a_trial_with_no_phase_is_422_and_enrolment_takes_whole_trials(raw_servi
     assert "phase(s) 1 are null" in body["detail"], body
     names = [c["name"] for c in client.get("/v1/classes", params={"limit": 1000}).json()["classes"]]
     assert "half-touched" not in names  # nothing stored
+
+
+def test_a_robot_enrols_an_object_from_its_trials(raw_service, raw_worker, pilot):
+    """TactileClient.register_class(trials=...) and add_sample(trial=...) send RawTrials as
+    the API takes them; the class is learnt from them and keeps each trial as sent."""
+    from app.client import TactileClient
+
+    client, _ = raw_service
+    robot = TactileClient(http=client, retries=0, timeout=5)
+    trials = pilot[3].trials
+    job = robot.register_class(NEW_OBJECT, trials=trials[:2])
+    raw_worker.run_once()
+    assert robot.job(job["id"])["status"] == "succeeded"
+    added = robot.add_sample(job["class_id"], trial=trials[2])
+    assert added["recognized_as"]["class_name"] == NEW_OBJECT  # known from its 2 trials
+    raw_worker.run_once()
+    assert robot.job(added["job"]["id"])["status"] == "succeeded"
+    assert client.get(f"/v1/classes/{job['class_id']}").json()["n_samples"] == 3
+    stored = client.get(f"/v1/classes/{job['class_id']}/samples/{added['sample_id']}").json()
+    assert RawTrial(**stored["sample"]).same_as(trials[2])

@@ -140,7 +140,7 @@ def test_bad_client_settings_are_refused(tmp_path):
         TactileClient("http://127.0.0.1:1", retries=-1)
     with pytest.raises(ValueError, match="no model_file"):
         TactileClient("http://127.0.0.1:1").sync_model()
-    with pytest.raises(ValueError, match="give attributes, attribute_vector or description"):
+    with pytest.raises(ValueError, match="description, samples or trials"):
         TactileClient("http://127.0.0.1:1").register_class("x")
     with pytest.raises(ValueError, match="attributes or attribute_vector, not both"):
         TactileClient("http://127.0.0.1:1").redescribe_class(1, ["hard"], [1, 0])
@@ -218,5 +218,54 @@ def test_an_operator_describes_an_object_in_words(best_service):
     assert cls["description"] == "a thin bumpy mat" and cls["attribute_values"]["thick"] < 0.5
     with pytest.raises(ServiceError, match="422.*closest"):
         robot.interpret("a present for my aunt")
-    with pytest.raises(ValueError, match="give attributes, attribute_vector or description"):
+    with pytest.raises(ValueError, match="description, samples or trials"):
         robot.register_class("nothing")
+
+
+def test_a_class_is_enrolled_from_its_touches(best_service, best_base):
+    """register_class(samples=...) sends the touches as POST /v1/classes takes them; the
+    class is learnt from them and keeps them as sent; add_sample adds one more."""
+    client, _, worker = best_service
+    _, dataset = best_base
+    robot = TactileClient(http=client, retries=0)
+    rng = np.random.default_rng(0)
+    touches = dataset.samples[dataset.labels == 2][:4]
+    touches = touches + rng.normal(0, 0.05, touches.shape).astype(np.float32)
+    job = robot.register_class("mug", samples=touches[:3])  # a batch (N, *input shape)
+    assert job["kind"] == "register_class" and job["status"] == "queued"
+    worker.run_once()
+    assert robot.job(job["id"], wait=2)["status"] == "succeeded"
+    cls = client.get(f"/v1/classes/{job['class_id']}").json()
+    assert cls["name"] == "mug" and cls["n_samples"] == 3 and cls["in_active_model"]
+    stored = client.get(f"/v1/classes/{job['class_id']}/samples").json()["samples"]
+    for row, sent in zip(stored, touches[:3], strict=True):
+        np.testing.assert_array_equal(robot.sample(job["class_id"], row["id"]), sent)
+    added = robot.add_sample(job["class_id"], touches[3])
+    assert added["recognized_as"]["class_name"] and added["job"]["status"] == "queued"
+    # a list of samples and a description together, as the API takes them
+    worded = robot.register_class(
+        "mug two", samples=[t.tolist() for t in touches[:2]], description="a smooth hard mug"
+    )
+    worker.run_once()
+    assert robot.job(worded["id"])["status"] == "succeeded"
+    assert client.get(f"/v1/classes/{worded['class_id']}").json()["n_samples"] == 2
+
+
+def test_touches_the_service_refuses_are_errors_and_nothing_is_stored(best_service, best_base):
+    client, _, _ = best_service
+    _, dataset = best_base
+    robot = TactileClient(http=client, retries=0)
+    before = client.get("/v1/classes").json()["classes"]
+    partial = dataset.samples[:2].copy()
+    partial[1, 0, 0] = np.nan  # sent as null, which enrolment refuses with a 422
+    with pytest.raises(ServiceError) as refused:
+        robot.register_class("cup", samples=partial)
+    assert refused.value.status == 422 and "samples[1]" in str(refused.value)
+    with pytest.raises(ServiceError) as refused:  # this model takes samples, not trials
+        robot.register_class("cup", trials=[{"fingers": [{"pdc": [0.0]}]}])
+    assert refused.value.status in (409, 422)
+    assert client.get("/v1/classes").json()["classes"] == before
+    with pytest.raises(ValueError, match="samples or trials, not both"):
+        robot.register_class("cup", samples=dataset.samples[:1], trials=[{}])
+    with pytest.raises(ValueError, match="exactly one of sample or trial"):
+        robot.add_sample(1)
