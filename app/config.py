@@ -126,6 +126,14 @@ class Settings(BaseSettings):
     model_poll_seconds: float = Field(
         0.5, gt=0, description="How often an API process checks for a new active model."
     )
+    model_wait_seconds: float = Field(
+        30.0,
+        ge=0,
+        description="Longest a request waits for its API process to load a newer model "
+        "version (a recognition's min_model_version, a finished job's version): past it the "
+        "answer is 503 with Retry-After, and the load goes on. Every request waiting meanwhile "
+        "shares one load and holds no request thread.",
+    )
     worker_poll_seconds: float = Field(0.2, gt=0, description="How often a worker looks for jobs.")
     worker_nice: int = Field(
         5,

@@ -15,11 +15,13 @@ version is tried again every ``DAMAGED_RETRY_SECONDS``, at once when another one
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import logging
 import threading
 import time
 from collections.abc import Iterator
+from concurrent.futures import Future
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +39,19 @@ log = logging.getLogger(__name__)
 DAMAGED_RETRY_SECONDS = 60.0
 #: the longest a refresh waits for this process's worker to serve what it is committing
 HANDOVER_WAIT_SECONDS = 60.0
+
+
+class ModelWaitTimeout(TimeoutError):
+    """A newer model version was not served within the wait a request may take; its load
+    goes on (``ModelHolder.at_least``)."""
+
+    def __init__(self, version: int, waited: float) -> None:
+        super().__init__(
+            f"model version {version} is still loading in this process after {waited:g} s "
+            "(TACTILE_MODEL_WAIT_SECONDS); try again shortly"
+        )
+        self.version = version
+        self.waited = waited
 
 
 @dataclass(frozen=True)
@@ -59,6 +74,9 @@ class ModelHolder(Poller):
         super().__init__(poll_seconds)
         self._sessions = sessions
         self._metrics = metrics
+        # the refresh that ``at_least``'s callers share, run in a thread of its own
+        self._shared: Future[bool] | None = None
+        self._shared_guard = threading.Lock()
         self._current: LoadedModel | None = None
         self._load_lock = threading.Lock()  # one load at a time; readers never take it
         # versions this process's embedded worker is committing, then serving (``handing_over``)
@@ -101,17 +119,55 @@ class ModelHolder(Poller):
             self._handed.wait_for(lambda: not self._handing_over, HANDOVER_WAIT_SECONDS)
         return self._load_active()
 
-    def at_least(self, version: int) -> LoadedModel | None:
+    async def at_least(self, version: int, wait_seconds: float) -> LoadedModel | None:
         """The served model, once it is ``version`` or newer: a process serving an older
         one loads the active version now instead of at its next poll (a job's waiter, a
         recognition that names the version it needs). None when the active version is
         older than ``version`` (rolled back, or not made yet) or cannot be loaded
-        (``degraded`` says why)."""
-        current = self._current
-        if current is None or current.version < version:
-            self.refresh()
+        (``degraded`` says why).
+
+        Every caller waiting meanwhile shares one load, run in a thread of its own, and
+        waits without holding a thread of the request pool: a fleet asking for a new
+        version at once takes no slots from recognition. ModelWaitTimeout after
+        ``wait_seconds`` (the service's ``model_wait_seconds``); the load goes on and
+        serves the version when done."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + wait_seconds
+        for _ in range(2):  # a shared load begun before this call may predate the version
             current = self._current
+            if current is not None and current.version >= version:
+                return current
+            load, begun_now = self._shared_refresh()
+            waiting = asyncio.wrap_future(load)
+            waiting.add_done_callback(_retrieved)
+            done, _ = await asyncio.wait({waiting}, timeout=max(0.0, deadline - loop.time()))
+            if not done:
+                raise ModelWaitTimeout(version, wait_seconds)
+            waiting.result()  # its BundleError, if the load failed
+            if begun_now:
+                break
+        current = self._current
         return current if current is not None and current.version >= version else None
+
+    def _shared_refresh(self) -> tuple[Future[bool], bool]:
+        """The ``refresh`` running for ``at_least``'s callers, or a new one; True when
+        new (begun after this call, so it sees the active version as of now)."""
+        with self._shared_guard:
+            if self._shared is not None and not self._shared.done():
+                return self._shared, False
+            load: Future[bool] = Future()
+            load.set_running_or_notify_cancel()  # a waiter that gives up cannot cancel it
+            self._shared = load
+        threading.Thread(
+            target=self._refresh_into, args=(load,), name="model-load", daemon=True
+        ).start()
+        return load, True
+
+    def _refresh_into(self, load: Future[bool]) -> None:
+        try:
+            load.set_result(self.refresh())
+        except BaseException as exc:  # the waiters raise it
+            load.set_exception(exc)
 
     def _load_active(self) -> bool:
         with self._load_lock:
@@ -211,3 +267,10 @@ class ModelHolder(Poller):
         if self._metrics:
             self._metrics.active_version.set(version)
         log.info("serving model version %s", version)
+
+
+def _retrieved(waiting: asyncio.Future[bool]) -> None:
+    """Read a shared load's outcome, so that one no waiter awaited any longer is not
+    logged as an exception never retrieved."""
+    if not waiting.cancelled():
+        waiting.exception()

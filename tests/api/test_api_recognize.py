@@ -239,3 +239,67 @@ def test_min_model_version_answers_with_the_enrolment_a_job_waited_for(
         for bad in ("0", "-1", "1.5", "two", ""):
             r = client.post(f"/v1/recognize?min_model_version={bad}", content=x, headers=NPY)
             assert "min_model_version" in problem(r, 422, "min_model_version")["detail"]
+
+
+def test_waiting_for_a_version_shares_one_load_and_holds_no_request_thread(
+    settings, base_model, dataset
+):
+    """A fleet that asks for a new version at once, more requests than the request thread
+    pool has slots: they share one load, recognition without ``min_model_version`` is
+    answered meanwhile, and past ``model_wait_seconds`` each gets a 503 with Retry-After
+    while the load goes on to serve the version."""
+    import threading
+    import time
+
+    import anyio.to_thread
+    from fastapi.testclient import TestClient
+
+    from app.api.main import create_app
+    from app.testing.service import unused_vectors
+    from worker import Worker
+
+    slots, fleet = 4, 12
+    slow = settings.model_copy(update={"model_poll_seconds": 3600, "model_wait_seconds": 1.0})
+    app = create_app(slow, trainer=lambda: base_model)
+    with TestClient(app) as client:
+        client.portal.call(
+            lambda: setattr(anyio.to_thread.current_default_thread_limiter(), "total_tokens", slots)
+        )
+        holder = app.state.service.holder
+        vector = unused_vectors(dataset, 1)[0]
+        created = client.post("/v1/classes", json={"name": "cup", "attribute_vector": vector})
+        assert Worker(slow, app.state.service.sessions).run_once() == 1  # another process's
+        x = npy(dataset.samples[:2])
+        answers: list = [None] * fleet
+
+        def ask(i: int) -> None:
+            answers[i] = client.post("/v1/recognize?min_model_version=2", content=x, headers=NPY)
+
+        # this process's worker is handing a version over: a refresh waits for it (up to a
+        # minute), as a load of a large model takes seconds
+        with holder.handing_over():
+            robots = [threading.Thread(target=ask, args=(i,)) for i in range(fleet)]
+            for t in robots:
+                t.start()
+            time.sleep(0.3)  # all of them waiting now
+            loads = [t for t in threading.enumerate() if t.name == "model-load"]
+            assert len(loads) == 1
+            started = time.monotonic()
+            plain = client.post("/v1/recognize", content=x, headers=NPY)
+            assert plain.status_code == 200 and plain.json()["model_version"] == 1
+            assert time.monotonic() - started < 5  # not queued behind them (a minute before)
+            job = client.get(f"/v1/jobs/{created.json()['job']['id']}")
+            assert job.status_code == 503 and job.headers["retry-after"] == "5"
+            assert "model version 2 is still loading" in problem(job, 503, "job_id")["detail"]
+            for t in robots:
+                t.join(timeout=30)
+            assert holder.current.version == 1
+        for r in answers:
+            body = problem(r, 503, "min_model_version")
+            assert r.headers["retry-after"] == "5"
+            assert "TACTILE_MODEL_WAIT_SECONDS" in body["detail"]
+        loads[0].join(timeout=30)  # the load went on once the handover ended
+        assert holder.current.version == 2
+        r = client.post("/v1/recognize?min_model_version=2", content=x, headers=NPY)
+        assert r.status_code == 200 and r.json()["model_version"] == 2
+        assert client.get(f"/v1/jobs/{created.json()['job']['id']}").status_code == 200

@@ -6,9 +6,19 @@ from fastapi.concurrency import run_in_threadpool
 from sqlalchemy.orm import Session
 
 from app.api import problems
-from app.api.deps import MAX_ROW_ID, HolderDep, JobWatchDep, PageDep, ReadAccess, RowId, SessionDep
-from app.api.problems import not_found
+from app.api.deps import (
+    MAX_ROW_ID,
+    HolderDep,
+    JobWatchDep,
+    PageDep,
+    ReadAccess,
+    RowId,
+    SessionDep,
+    SettingsDep,
+)
+from app.api.problems import Problem, not_found
 from app.api.schemas import JobList, JobOut
+from app.service.holder import ModelWaitTimeout
 from app.store import repo
 from app.store.enums import JobKind, JobStatus
 from app.store.models import Job
@@ -59,16 +69,19 @@ def list_jobs(
     return JobList(jobs=[JobOut.model_validate(j) for j in rows], next_after=next_after)
 
 
-@router.get("/{job_id}", response_model=JobOut)
+@router.get("/{job_id}", response_model=JobOut, responses=problems.responses(503))
 async def get_job(
     job_id: RowId,
     session: SessionDep,
     holder: HolderDep,
     watch: JobWatchDep,
+    settings: SettingsDep,
     wait: WaitSeconds = 0,
 ) -> JobOut:
     """An enrollment's progress: queued, running, succeeded (with the model version
-    that includes it) or failed (with the error)."""
+    that includes it) or failed (with the error). A succeeded job's version is served by
+    this process before the answer: a 503 with `Retry-After` when it has not loaded it
+    within `TACTILE_MODEL_WAIT_SECONDS`."""
     deadline = time.monotonic() + wait
     job = await run_in_threadpool(_read_job, session, job_id)
     if job is None:
@@ -79,5 +92,9 @@ async def get_job(
     served = holder.current
     if job.model_version is not None and (served is None or served.version < job.model_version):
         # whoever sees "succeeded" here gets the new model from this process next
-        await run_in_threadpool(holder.at_least, job.model_version)
+        try:
+            await holder.at_least(job.model_version, settings.model_wait_seconds)
+        except ModelWaitTimeout as exc:
+            detail = f"job {job_id} succeeded: {exc}"
+            raise Problem(503, detail, "job_id", {"Retry-After": "5"}) from None
     return JobOut.model_validate(job)

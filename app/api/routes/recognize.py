@@ -18,7 +18,7 @@ from app.api.sample_input import sample_array
 from app.api.schemas import RecognizeRequest, RecognizeResponse
 from app.data.biotac import RawTrial
 from app.framework.recognizer import RAW_TRIALS, TARGET_CONFIDENCE, TactileRecognizer
-from app.service.holder import LoadedModel
+from app.service.holder import LoadedModel, ModelWaitTimeout
 
 router = APIRouter(prefix="/v1", tags=["recognize"], responses=problems.responses(401, 403, 429))
 
@@ -72,7 +72,8 @@ MIN_MODEL_VERSION = (
     "enrolment job you waited for, and the answer includes that class or sample whichever "
     "API process answers (one that still serves an older version loads the active one "
     "first, instead of at its next poll). A 409 when the active version is older (it was "
-    "rolled back); a 503 when this process cannot load it."
+    "rolled back); a 503 when this process cannot load it, or has not loaded it within "
+    "`TACTILE_MODEL_WAIT_SECONDS` (30 s by default; its `Retry-After` says when to ask again)."
 )
 # recognize reads its query by hand too: FastAPI's parameter machinery cost ~25 µs a request
 # (bench/side_by_side.py measures the route against the framework's floor)
@@ -197,10 +198,17 @@ def _min_model_version(request: Request) -> int | None:
 
 
 async def _serving_at_least(request: Request, wanted: int) -> LoadedModel:
-    """This process's model once it is version ``wanted`` or newer (``ModelHolder.at_least``,
-    in the thread pool: a load reads the store); a 409 or 503 saying why it cannot be."""
-    holder = service_state(request).holder
-    model = await run_in_threadpool(holder.at_least, wanted)
+    """This process's model once it is version ``wanted`` or newer (``ModelHolder.at_least``:
+    one load shared by every request that waits, none of them in the thread pool); a 409 or
+    503 saying why it cannot be (503 with Retry-After past ``model_wait_seconds``)."""
+    state = service_state(request)
+    holder = state.holder
+    try:
+        model = await holder.at_least(wanted, state.settings.model_wait_seconds)
+    except ModelWaitTimeout as exc:
+        raise Problem(
+            503, f"min_model_version: {exc}", "min_model_version", {"Retry-After": "5"}
+        ) from None
     if model is not None:
         return model
     if holder.degraded:
