@@ -77,6 +77,7 @@ from app.evaluation.splits import ZslSplit, make_zsl_splits
 from app.evaluation.touches import check_touches, touch_figures
 from app.evaluation.touches import measure as measure_touches
 from app.framework.jsonable import jsonable
+from app.framework.progress import bar_disabled
 from app.framework.recognizer import TactileRecognizer
 from app.framework.registry import method_class
 
@@ -400,7 +401,12 @@ def evaluate(
     results["intervals"] = INTERVALS
     results["rerun_splits"] = int(rerun_splits or n_splits)
     started = time.perf_counter()
-    bar = tqdm(total=len(splits) * len(methods), desc="evaluate", unit="fit", disable=not progress)
+    bar = tqdm(
+        total=len(splits) * len(methods),
+        desc="evaluate",
+        unit="fit",
+        disable=bar_disabled(progress),
+    )
     per_split: dict[int, list[tuple[dict, dict, float]]] = {}
 
     def finished(index: int, outcome: list[tuple[dict, dict, float]]) -> None:

@@ -57,6 +57,7 @@ from app.evaluation import metrics, procedures
 from app.evaluation.protocol import make_recognizer, paired_summary
 from app.evaluation.splits import SplitError
 from app.framework.jsonable import jsonable
+from app.framework.progress import bar_disabled
 from app.framework.registry import method_class
 
 TRIAL_FIGURES = ("known_acc", "known_acc_finger", "nd_known_kept")
@@ -320,7 +321,7 @@ def evaluate_raw(
         results["procedure_targets"] = list(procedures.TARGETS)
     k = raw.n_classes
     total = len(methods) * (len(splits) + n_splits * sum(map(len, by_pressure.values())))
-    bar = tqdm(total=total, desc="evaluate", unit="fit", disable=not progress)
+    bar = tqdm(total=total, desc="evaluate", unit="fit", disable=bar_disabled(progress))
     started = time.perf_counter()
     try:
         for m in methods:

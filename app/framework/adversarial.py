@@ -8,6 +8,7 @@ from torch import nn
 from tqdm.auto import tqdm
 
 from app.framework.generator import noisy
+from app.framework.progress import bar_disabled
 
 
 def _frozen(*modules: nn.Module) -> None:
@@ -40,7 +41,9 @@ def train_generator_through_classifier(
     loss_fn = nn.CrossEntropyLoss()
     generator.train()
     history = []
-    for _ in tqdm(range(epochs), desc="G, Algorithm 1", disable=not progress, leave=False):
+    for _ in tqdm(
+        range(epochs), desc="G, Algorithm 1", disable=bar_disabled(progress), leave=False
+    ):
         losses = []
         for idx in torch.randperm(len(a), generator=gen).split(batch_size):
             opt.zero_grad()
@@ -91,7 +94,9 @@ def train_adversarially(
     generator.train()
     discriminator.train()
     n_batches = max(1, len(f_real) // batch_size)
-    for _ in tqdm(range(epochs), desc="G and D, Algorithm 2", disable=not progress, leave=False):
+    for _ in tqdm(
+        range(epochs), desc="G and D, Algorithm 2", disable=bar_disabled(progress), leave=False
+    ):
         order = torch.randperm(len(f_real), generator=gen)
         for b in range(n_batches):
             real_idx = order[b * batch_size : (b + 1) * batch_size]

@@ -23,6 +23,7 @@ from app.framework.generator import build_generator, noisy
 from app.framework.novelty import GMMNoveltyDetector, novelty_validation_split, tune_threshold
 from app.framework.one_shot import one_shot_training_set
 from app.framework.params import at_least, one_of
+from app.framework.progress import bar_disabled
 from app.framework.recognizer import TactileRecognizer
 from app.framework.runtime import configure_torch
 from app.framework.scaling import RobustInputScaler
@@ -346,7 +347,12 @@ class PaperRecognizer(TactileRecognizer):
         opt = torch.optim.Adam(model.parameters(), lr=self.lr, weight_decay=self.weight_decay)
         loss_fn = nn.CrossEntropyLoss()
         model.train()
-        bar = tqdm(range(self._epochs()), desc="CONV_XF + FC_Y", disable=not progress, leave=False)
+        bar = tqdm(
+            range(self._epochs()),
+            desc="CONV_XF + FC_Y",
+            disable=bar_disabled(progress),
+            leave=False,
+        )
         for _ in bar:
             for idx in torch.randperm(len(xt), generator=gen).split(self.batch_size):
                 opt.zero_grad()

@@ -49,6 +49,7 @@ from tqdm import tqdm
 from app.data.dataset import DatasetError, TactileDataset
 from app.framework.errors import FrameworkError
 from app.framework.params import either, integer, number, one_of
+from app.framework.progress import bar_disabled
 from app.framework.recognizer import TactileRecognizer
 from app.framework.runtime import ensure_threads_configured
 from app.framework.scaling import flatten
@@ -320,7 +321,7 @@ class BestRecognizer(DescribedClasses, TactileRecognizer):
             total=int(self.tuning_rounds) + 1,
             # a procedure model's dataset is named "<dataset>/<procedure>": its bar says so
             desc=f"best on {dataset.name}: probes, model",
-            disable=not progress,
+            disable=bar_disabled(progress),
         )
         known_scores, val_scores, val_objects = [], [], 0
         for r in range(int(self.tuning_rounds)):

@@ -43,6 +43,7 @@ from app.data.dataset import DatasetError, TactileDataset
 from app.data.procedures import block, seconds_of
 from app.framework.errors import FrameworkError
 from app.framework.params import either, integer, number, one_of
+from app.framework.progress import bar_disabled
 from app.framework.recognizer import TactileRecognizer
 from app.framework.runtime import ensure_threads_configured
 from app.framework.scaling import RobustInputScaler, flatten
@@ -197,7 +198,9 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         del x
         k = dataset.n_classes
         bar = tqdm(
-            total=2, desc=f"prototypes on {dataset.name}: probe, model", disable=not progress
+            total=2,
+            desc=f"prototypes on {dataset.name}: probe, model",
+            disable=bar_disabled(progress),
         )
         probe = self._probe(z, y, np.asarray(dataset.trials), k)
         if probe is None:
