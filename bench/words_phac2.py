@@ -47,20 +47,32 @@ def read_descriptions(path: Path = DESCRIPTIONS) -> dict[int, dict[str, str]]:
         return {int(r["object_id"]): r for r in csv.DictReader(f)}
 
 
-def text_vectors(texts: list[str], attributes: tuple[str, ...]) -> np.ndarray:
-    """(len(texts), M) values read from each text, NaN where it says nothing."""
+def text_vectors(
+    texts: list[str],
+    attributes: tuple[str, ...],
+    lexicon: Path | None = None,
+    known: np.ndarray | None = None,
+) -> np.ndarray:
+    """(len(texts), M) values read from each text, NaN where it says nothing; with
+    ``known`` (K, M) known classes' vectors, the attributes it does not mention estimated
+    from them (``app.words.estimate``). ``lexicon``: None, the frozen one."""
+    from app.words.estimate import UnmentionedEstimator
     from app.words.interpret import NothingRecognised, TextInterpreter
 
-    reader = TextInterpreter()
+    reader = TextInterpreter(lexicon=lexicon)
+    estimator = None if known is None else UnmentionedEstimator().fit(known, attributes)
     out = np.full((len(texts), len(attributes)), np.nan, np.float32)
     for i, text in enumerate(texts):
         try:
             read = reader.interpret(text, attributes)
         except NothingRecognised:
             continue
+        values = {a: r.value for a, r in read.items()}
+        if estimator is not None:
+            values.update(estimator.estimate(values))
         for j, a in enumerate(attributes):
-            if a in read:
-                out[i, j] = read[a].value
+            if a in values:
+                out[i, j] = values[a]
     return out
 
 

@@ -29,6 +29,7 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -107,6 +108,9 @@ class TextInterpreter:
         Longest text read; longer is ``TextTooLong``.
     embedder : SentenceEmbedder or None
         The model; None takes the process's shared one.
+    lexicon : path or None
+        A lexicon file as ``app.words.lexicon_build`` writes it; None takes the frozen one
+        (``app.words.lexicon.LEXICON``).
     """
 
     def __init__(
@@ -115,12 +119,14 @@ class TextInterpreter:
         margin: float = 0.1,
         max_chars: int = MAX_TEXT,
         embedder: SentenceEmbedder | None = None,
+        lexicon: Path | None = None,
     ) -> None:
         self.threshold = threshold
         self.margin = margin
         self.max_chars = max_chars
         self.embedder = embedder
-        self._lexicon = readings()
+        self.lexicon = lexicon
+        self._lexicon = readings() if lexicon is None else readings(Path(lexicon))
         self._longest = max(len(p.split()) for p in self._lexicon)
 
     def _model(self) -> SentenceEmbedder:

@@ -33,7 +33,7 @@ def values(reader, text, vocab=VOCAB):
         ("not hard", {"hard": 0.0}),
         ("it is not very thick", {"thick": 0.3}),
         ("spongy", {"squishy": 0.9, "absorbent": 0.9}),
-        ("furry", {"fuzzy": 0.9, "hairy": 0.9}),
+        ("furry", {"hairy": 0.9}),  # WordNet: covered with a dense coat of fine hairs
         ("stiff", {"hard": 0.9, "soft": 0.1}),
         ("slick", {"slippery": 0.9}),
         ("it soaks up water", {"absorbent": 0.9}),
