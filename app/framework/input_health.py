@@ -70,11 +70,15 @@ class InputProfile:
         width: np.ndarray,
     ) -> None:
         self.input_shape = tuple(int(s) for s in input_shape)
-        self.inv_scale = (1.0 / np.asarray(scale, np.float64)).astype(np.float32)
+        # stored as given, float32; their inverses (what answering multiplies by) made from
+        # those, so that a profile read back from a bundle scores bit for bit alike
+        self.scale = np.asarray(scale, np.float32)
+        self.width = np.asarray(width, np.float32)
+        self.inv_scale = (1.0 / self.scale.astype(np.float64)).astype(np.float32)
         self.low = np.asarray(low, np.float32)
         self.high = np.asarray(high, np.float32)
         self.median = np.asarray(median, np.float32)
-        self.inv_width = (1.0 / np.asarray(width, np.float64)).astype(np.float32)
+        self.inv_width = (1.0 / self.width.astype(np.float64)).astype(np.float32)
 
     # --------------------------------------------------------------- fitting
     @classmethod
@@ -152,11 +156,11 @@ class InputProfile:
     def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         meta = {"version": STATE_VERSION, "input_shape": list(self.input_shape)}
         arrays = {
-            "scale": (1.0 / self.inv_scale.astype(np.float64)).astype(np.float32),
+            "scale": self.scale,
             "low": self.low,
             "high": self.high,
             "median": self.median,
-            "width": (1.0 / self.inv_width.astype(np.float64)).astype(np.float32),
+            "width": self.width,
         }
         return meta, arrays
 
