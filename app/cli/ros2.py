@@ -34,10 +34,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--top-k", type=int, default=3, help="scores listed per answer with --model (default 3)"
     )
     p.add_argument(
-        "ros_args",
+        "--ros-args",
+        dest="ros_args",
         nargs=argparse.REMAINDER,
-        help="--ros-args and ROS's own arguments, e.g. --ros-args -r __ns:=/left_hand "
-        "-p queue_size:=128",
+        default=[],
+        help="ROS's own arguments, to the end of the line: e.g. --ros-args -r "
+        "__ns:=/left_hand -p queue_size:=128",
     )
     p.set_defaults(handler=run)
 
@@ -45,8 +47,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from app.ros2 import require_rclpy
 
-    if args.ros_args and args.ros_args[0] != "--ros-args":
-        raise ValueError(f"unknown arguments {args.ros_args}; ROS arguments follow --ros-args")
     if args.api_key and args.model:
         raise ValueError("--api-key goes with --url, not --model")
     if args.timeout <= 0 or args.top_k < 1:
@@ -66,4 +66,4 @@ def run(args: argparse.Namespace) -> int:
         backend = ModelFileBackend(args.model, top_k=args.top_k)
     else:
         backend = ServiceBackend(args.url, api_key=args.api_key, timeout=args.timeout)
-    return spin(backend, args.ros_args)
+    return spin(backend, ["--ros-args", *args.ros_args] if args.ros_args else [])

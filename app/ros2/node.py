@@ -263,16 +263,28 @@ def _shape_problem(exc: MessageShapeError) -> dict[str, Any]:
 
 
 def run(backend: Any, ros_args: list[str]) -> int:
-    """Spin the node until it is interrupted (Ctrl-C, SIGTERM via ROS's signal handler)."""
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
+    """Spin the node until SIGINT or SIGTERM; then its threads stop before rclpy does (ROS's
+    own handlers would shut rclpy down under threads still publishing)."""
+    import signal
 
-    rclpy.init(args=["tactile-zsl", *ros_args])
+    import rclpy
+    import rclpy.executors
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
+
+    def interrupt(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, interrupt)
+    rclpy.init(args=["tactile-zsl", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:
         node = TactileBridge(backend).start()
         node.get_logger().info(f"answering from {backend.source}")
-        rclpy.spin(node)
+        executor = rclpy.executors.SingleThreadedExecutor()
+        executor.add_node(node)
+        while rclpy.ok():  # short waits: a signal's handler runs between them
+            executor.spin_once(timeout_sec=0.2)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
