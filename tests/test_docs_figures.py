@@ -120,10 +120,9 @@ def check_document(text: str, docs: Path, name: str = "document") -> tuple[int, 
 
 
 def opening(text: str) -> str:
-    """A document's opening screen: everything before its second ``## `` heading (the
-    first is the placeholder for the default's choice)."""
-    heads = [m.start() for m in re.finditer(r"^## ", text, flags=re.M)]
-    return text[: heads[1]] if len(heads) > 1 else text
+    """A document's opening screen: everything before its first ``## `` heading."""
+    head = re.search(r"^## ", text, flags=re.M)
+    return text[: head.start()] if head else text
 
 
 @pytest.mark.parametrize("document", DOCUMENTS)
