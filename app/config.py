@@ -123,6 +123,13 @@ class Settings(BaseSettings):
         1, ge=1, description="Torch intra-op threads; the networks are tiny, more mostly contend."
     )
     embedded_worker: bool = Field(True, description="Run the retraining worker inside serve.")
+    warm_words: bool = Field(
+        True,
+        description="Load the sentence-embedding model that reads descriptions in words in the "
+        "background once an API process is ready (about 4 s and 0.5 GB each), so the first "
+        "description is answered as fast as the next; only where the vocabulary has "
+        "attributes to read. Off for a service never sent descriptions.",
+    )
     model_poll_seconds: float = Field(
         0.5, gt=0, description="How often an API process checks for a new active model."
     )
@@ -130,7 +137,8 @@ class Settings(BaseSettings):
         30.0,
         ge=0,
         description="Longest a request waits for its API process to load a newer model "
-        "version (a recognition's min_model_version, a finished job's version): past it the "
+        "version (a recognition's min_model_version; a finished job's answer does not wait "
+        "for it): past it the "
         "answer is 503 with Retry-After, and the load goes on. Every request waiting meanwhile "
         "shares one load and holds no request thread.",
     )

@@ -24,6 +24,7 @@ from app.api.deps import Replay, replay_handler
 from app.api.fast_path import RecognizeFastPath
 from app.api.routes import attributes, classes, describe, health, jobs, models, recognize, samples
 from app.api.state import ServiceState
+from app.api.warm import warm_words
 from app.config import Settings
 from app.service.bootstrap import Trainer, ensure_ready
 from app.service.holder import ModelHolder
@@ -94,6 +95,8 @@ def create_app(
                 handover=holder.handing_over,
             )
             embedded = start_in_thread(worker)
+        if settings.warm_words:  # ready now: the first description need not load the model
+            await run_in_threadpool(warm_words, sessions)
         try:
             yield
         finally:

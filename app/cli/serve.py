@@ -78,20 +78,17 @@ def run(args: argparse.Namespace) -> int:
     }
     n = settings.api_processes if processes.supported() else 1
     port = settings.port or processes.free_port(settings.host)  # one port for all of them
-    log = logging.getLogger("tactile")
-    log.info(
-        "serving on http://%s:%d with %d API process%s; API docs at http://%s:%d/docs",
-        settings.host,
-        port,
-        n,
-        "" if n == 1 else "es",
-        settings.host,
-        port,
+    # said once the model is loaded and every process listens: when /readyz answers ready
+    ready = (
+        f"serving on http://{settings.host}:{port} with {n} API process{'' if n == 1 else 'es'}; "
+        f"API docs at http://{settings.host}:{port}/docs"
     )
     if n == 1:
-        uvicorn.run(create_app(settings), host=settings.host, port=port, **server)
+        app = create_app(settings)
+        config = uvicorn.Config(app, host=settings.host, port=port, **server)
+        processes.AnnouncingServer(config, ready).run()
         return 0
-    return processes.serve({**overrides, "port": port}, n, server)
+    return processes.serve({**overrides, "port": port}, n, server, ready)
 
 
 def _give_back_freed_memory() -> None:

@@ -23,6 +23,7 @@ import tempfile
 import threading
 from typing import Any
 
+import uvicorn
 from prometheus_client import multiprocess
 
 log = logging.getLogger(__name__)
@@ -41,9 +42,24 @@ def free_port(host: str) -> int:
         return s.getsockname()[1]
 
 
-def serve(overrides: dict[str, Any], n: int, server: dict[str, Any]) -> int:
+class AnnouncingServer(uvicorn.Server):
+    """A uvicorn server that logs ``ready`` once its app has started (the model loaded) and
+    its socket listens: the moment ``/readyz`` answers ready, not before the model loads."""
+
+    def __init__(self, config: uvicorn.Config, ready: str) -> None:
+        super().__init__(config)
+        self.ready = ready
+
+    async def startup(self, sockets: list[socket.socket] | None = None) -> None:
+        await super().startup(sockets)
+        if self.started:
+            log.info("%s", self.ready)
+
+
+def serve(overrides: dict[str, Any], n: int, server: dict[str, Any], ready: str = "") -> int:
     """Run ``n`` API processes (``Settings(**overrides)`` each, uvicorn options ``server``)
-    until SIGTERM or SIGINT; the exit status."""
+    until SIGTERM or SIGINT; the exit status. ``ready`` is logged once every process
+    serves (each has loaded its model and listens)."""
     metrics_dir = tempfile.mkdtemp(prefix="tactile-metrics-")
     os.environ["PROMETHEUS_MULTIPROC_DIR"] = metrics_dir  # the spawned processes inherit it
     context = multiprocessing.get_context("spawn")  # fresh interpreters: no forked threads or locks
@@ -63,10 +79,15 @@ def serve(overrides: dict[str, Any], n: int, server: dict[str, Any]) -> int:
         procs[index] = (proc, serving)
 
     status = 0
+    announced = False
     try:
         for index in range(n):
             start(index)
-        while not stop.wait(0.5):
+        while not stop.wait(0.1 if not announced else 0.5):
+            if not announced and all(serving.is_set() for _, serving in procs.values()):
+                announced = True
+                if ready:
+                    log.info("%s", ready)
             for index, (proc, serving) in list(procs.items()):
                 if proc.is_alive():
                     continue
@@ -118,8 +139,6 @@ def _stop_with_parent() -> None:
 
 
 def _run_one(overrides: dict[str, Any], server: dict[str, Any], index: int, serving: Any) -> None:
-    import uvicorn
-
     class Server(uvicorn.Server):
         async def startup(self, sockets: list[socket.socket] | None = None) -> None:
             await super().startup(sockets)

@@ -94,6 +94,8 @@ def quick_settings(data_dir, **overrides) -> Settings:
         "worker_poll_seconds": 0.05,
         "lease_seconds": 10.0,
         "promotion_threshold": 10,
+        # 0.5 GB and 4 s of CPU per app; the tests of descriptions load it when they read one
+        "warm_words": False,
     }
     return Settings(**{**values, **overrides})
 

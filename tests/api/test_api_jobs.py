@@ -28,8 +28,41 @@ def test_a_waiting_request_answers_when_the_job_succeeds(client, app, worker, da
     finally:
         retrain.join()
     assert job["status"] == "succeeded" and job["model_version"] == 2
-    # the process that said "succeeded" serves the version that includes the class
+    # this process's worker handed the version over: it serves it already
     assert app.state.service.holder.current.version == 2
+
+
+def test_a_finished_jobs_answer_does_not_wait_for_this_process_to_load_its_version(
+    settings, base_model, dataset
+):
+    """Another process's worker made version 2; this process cannot load it yet (its own
+    worker is handing a version over, which a load waits for). The job is answered all the
+    same, and the answer starts the load, which serves version 2 once it can (its poll
+    would take an hour)."""
+    from fastapi.testclient import TestClient
+
+    from app.api.main import create_app
+    from worker import Worker
+
+    slow = settings.model_copy(update={"model_poll_seconds": 3600})
+    app = create_app(slow, trainer=lambda: base_model)
+    with TestClient(app) as client:
+        holder = app.state.service.holder
+        job_id = register(client, dataset)
+        assert Worker(slow, app.state.service.sessions).run_once() == 1  # another process's
+        with holder.handing_over():
+            for wait in (0, 20):
+                job = client.get(f"/v1/jobs/{job_id}", params={"wait": wait})
+                assert job.status_code == 200, job.text
+                assert job.json()["status"] == "succeeded" and job.json()["model_version"] == 2
+            assert holder.current.version == 1  # answered before the version was loaded
+            loads = [t for t in threading.enumerate() if t.name == "model-load"]
+            assert len(loads) == 1  # the answers started one load
+        loads[0].join(timeout=60)  # the handover over, the load goes on
+        assert holder.current.version == 2
+        x = {"samples": dataset.samples[:1].tolist()}
+        r = client.post("/v1/recognize?min_model_version=2", json=x)
+        assert r.status_code == 200 and r.json()["model_version"] == 2
 
 
 def test_without_a_worker_the_wait_ends_with_the_status_then(client, app, dataset):

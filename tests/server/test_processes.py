@@ -61,6 +61,7 @@ def start(data_dir: Path, port: int) -> subprocess.Popen:
         "TACTILE_METHOD": QUICK_METHOD,
         "TACTILE_METHOD_PARAMS": json.dumps(QUICK_PARAMS),
         "TACTILE_RATE_LIMIT": "0",
+        "TACTILE_WARM_WORDS": "false",  # two processes need not load it for these checks
     }
     data_dir.mkdir(parents=True, exist_ok=True)
     log = open(data_dir / "serve.log", "wb")  # noqa: SIM115 - the process writes it

@@ -1,3 +1,5 @@
+import asyncio
+import logging
 import time
 from typing import Annotated
 
@@ -16,12 +18,14 @@ from app.api.deps import (
     SessionDep,
     SettingsDep,
 )
-from app.api.problems import Problem, not_found
+from app.api.problems import not_found
 from app.api.schemas import JobList, JobOut
-from app.service.holder import ModelWaitTimeout
+from app.service.holder import ModelHolder
 from app.store import repo
 from app.store.enums import JobKind, JobStatus
 from app.store.models import Job
+
+log = logging.getLogger(__name__)
 
 router = APIRouter(
     prefix="/v1/jobs",
@@ -69,7 +73,7 @@ def list_jobs(
     return JobList(jobs=[JobOut.model_validate(j) for j in rows], next_after=next_after)
 
 
-@router.get("/{job_id}", response_model=JobOut, responses=problems.responses(503))
+@router.get("/{job_id}", response_model=JobOut)
 async def get_job(
     job_id: RowId,
     session: SessionDep,
@@ -79,9 +83,10 @@ async def get_job(
     wait: WaitSeconds = 0,
 ) -> JobOut:
     """An enrollment's progress: queued, running, succeeded (with the model version
-    that includes it) or failed (with the error). A succeeded job's version is served by
-    this process before the answer: a 503 with `Retry-After` when it has not loaded it
-    within `TACTILE_MODEL_WAIT_SECONDS`."""
+    that includes it) or failed (with the error). The answer comes as soon as the job has
+    finished, without waiting for this process to load that version (seconds for a large
+    model): it starts loading it then. To be answered by that version, pass it to
+    `POST /v1/recognize` as `min_model_version`."""
     deadline = time.monotonic() + wait
     job = await run_in_threadpool(_read_job, session, job_id)
     if job is None:
@@ -91,10 +96,25 @@ async def get_job(
             job = await run_in_threadpool(_read_job, session, job_id)
     served = holder.current
     if job.model_version is not None and (served is None or served.version < job.model_version):
-        # whoever sees "succeeded" here gets the new model from this process next
-        try:
-            await holder.at_least(job.model_version, settings.model_wait_seconds)
-        except ModelWaitTimeout as exc:
-            detail = f"job {job_id} succeeded: {exc}"
-            raise Problem(503, detail, "job_id", {"Retry-After": "5"}) from None
+        # this process loads the version now rather than at its next poll; the answer does
+        # not wait for it (a robot's next recognition names it: min_model_version)
+        _catch_up(holder, job.model_version, settings.model_wait_seconds)
     return JobOut.model_validate(job)
+
+
+_catching_up: set[asyncio.Task] = set()  # the loads begun, held until done (asyncio's advice)
+
+
+def _catch_up(holder: ModelHolder, version: int, wait_seconds: float) -> None:
+    """Start this process's load of ``version`` (shared with every request that waits for
+    it) without waiting for it."""
+    task = asyncio.create_task(holder.at_least(version, wait_seconds))
+    _catching_up.add(task)
+    task.add_done_callback(_caught_up)
+
+
+def _caught_up(task: asyncio.Task) -> None:
+    _catching_up.discard(task)
+    if not task.cancelled() and (exc := task.exception()) is not None:
+        # slow (the load goes on) or damaged (the holder serves the newest intact one)
+        log.info("loading the version a job made: %s", exc)
