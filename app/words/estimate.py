@@ -15,8 +15,12 @@ e^(-0.81/0.5) ≈ 0.2 of the weight of one that agrees.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from app.words.interpret import Reading
 
 
 class UnmentionedEstimator:
@@ -71,3 +75,15 @@ class UnmentionedEstimator:
                 w = weight[known]
                 out[attribute] = round(float(np.clip(w @ column[known] / w.sum(), 0.0, 1.0)), 3)
         return out
+
+
+def estimated_readings(
+    read: Mapping[str, Reading], estimator: UnmentionedEstimator
+) -> dict[str, Reading]:
+    """``Reading``s (source ``"estimated"``) for the fitted attributes ``read`` is silent on,
+    their ``words`` naming the attributes read that they follow from."""
+    from app.words.interpret import Reading
+
+    said = {a: r.value for a, r in read.items()}
+    basis = "estimated from " + ", ".join(sorted(said)) + " and the known classes"
+    return {a: Reading(a, v, basis, "estimated") for a, v in estimator.estimate(said).items()}

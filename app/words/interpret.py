@@ -70,10 +70,12 @@ class Reading:
     attribute: str
     value: float  # in [0, 1]
     words: str  # the part of the text that gave it
-    source: str  # "word", "implied" (what a word says of its opposite), "material", "embedding"
+    # "word", "implied" (what a word says of its opposite), "material", "embedding"; or
+    # "estimated": not said, estimated from what was said (``app.words.estimate``)
+    source: str
 
 
-_RANK = {"word": 3, "implied": 2, "embedding": 1, "material": 0}
+_RANK = {"word": 3, "implied": 2, "embedding": 1, "material": 0, "estimated": -1}
 
 
 def _stem(word: str) -> str:
