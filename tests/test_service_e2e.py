@@ -89,12 +89,20 @@ class Service:
         )
 
 
-def wait_job(client: httpx.Client, job_id: int, service: Service) -> dict:
+def wait_job(client: httpx.Client, job_id: int, service: Service, served: bool = True) -> dict:
+    """The job once finished; with ``served``, once the process behind ``client``'s
+    connection serves the version it made too (the job's answer does not wait for that)."""
     deadline = time.monotonic() + JOB_TIMEOUT
     while time.monotonic() < deadline:  # the way a robot waits: one long poll at a time
         job = client.get(f"/v1/jobs/{job_id}", params={"wait": 10}, timeout=30).json()
         if job["status"] in ("succeeded", "failed"):
-            return job
+            version = job.get("model_version") if served else None
+            while version is not None and time.monotonic() < deadline:
+                if (client.get("/readyz").json().get("model_version") or 0) >= version:
+                    return job
+                time.sleep(0.1)
+            if version is None:
+                return job
     raise AssertionError(f"job {job_id} not done after {JOB_TIMEOUT}s:\n{service.logs()}")
 
 
@@ -129,14 +137,19 @@ def test_robot_session_survives_a_restart(tmp_path):
             r = client.post("/v1/classes", json={"name": "teapot", "attributes": names})
             assert r.status_code == 202, r.text
             teapot = r.json()["class"]["id"]
-            job = wait_job(client, r.json()["job"]["id"], service)
+            job = wait_job(client, r.json()["job"]["id"], service, served=False)
             assert job["status"] == "succeeded", job
-            assert client.get(f"/v1/classes/{teapot}").json()["in_active_model"] is True
 
-            # the robot touches it: recognised by the model that includes it
+            # the robot touches it: recognised by the model that includes it, which the
+            # process that answers loads first if it has not yet
             touch = samples[0] + rng.normal(0, 0.05, samples[0].shape).astype(np.float32)
-            r = client.post("/v1/recognize", json={"samples": [touch.tolist()]})
+            r = client.post(
+                "/v1/recognize",
+                params={"min_model_version": job["model_version"]},
+                json={"samples": [touch.tolist()]},
+            )
             assert r.status_code == 200 and r.json()["model_version"] >= job["model_version"]
+            assert client.get(f"/v1/classes/{teapot}").json()["in_active_model"] is True
 
             # and adds the real sample (one-shot)
             r = client.post(f"/v1/classes/{teapot}/samples", json={"sample": touch.tolist()})
