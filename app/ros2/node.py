@@ -28,7 +28,7 @@ from app.ros2 import topics
 from app.ros2.arrays import MessageShapeError, frame_of, samples_of
 from app.ros2.backends import CLASSES, RECOGNIZE, Health, internal_problem
 from app.ros2.queue import AnswerQueue, Work
-from app.ros2.trials import TrialAssembler, TrialProblem
+from app.ros2.trials import MarkOrder, TrialAssembler, TrialProblem
 
 NODE_NAME = "tactile_zsl"
 log = logging.getLogger(__name__)
@@ -37,12 +37,13 @@ log = logging.getLogger(__name__)
 PARAMETERS: dict[str, Any] = {
     "queue_size": 64,  # inputs waiting for an answer; beyond, each is answered with a 503
     "input_depth": 100,  # keep-last depth of the samples subscription
-    "frame_depth": 1000,  # of the raw frames subscription (10 s of a 100 Hz sensor)
+    "frame_depth": 10_000,  # of the raw frames subscription (100 s of a 100 Hz sensor)
     "answer_depth": 1000,  # of the answer publishers (reliable)
     "diagnostics_period": 1.0,  # seconds between /diagnostics messages
     "rest_frames": 100,  # frames before a trial's first procedure kept as its rest
     "max_trial_frames": 60_000,  # a trial longer than this is answered with a problem
     "enrol_queue_size": 16,  # enrolments waiting; beyond, each is answered with a 503
+    "mark_wait": 1.0,  # seconds a procedure mark waits for a frame to place it (MarkOrder)
 }
 LATENCIES_KEPT = 1000
 
@@ -59,6 +60,7 @@ class TactileBridge(Node):
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
         self.answers = AnswerQueue(int(p["queue_size"]))
         self.assembler = TrialAssembler(int(p["rest_frames"]), int(p["max_trial_frames"]))
+        self.marks = MarkOrder(float(p["mark_wait"]))
         self.diagnostics_period = float(p["diagnostics_period"])
         self._enrolments: queue.Queue[dict[str, Any]] = queue.Queue(int(p["enrol_queue_size"]))
         self._latencies: deque[float] = deque(maxlen=LATENCIES_KEPT)
@@ -87,6 +89,7 @@ class TactileBridge(Node):
             String, topics.PROCEDURE, self._on_procedure, topics.reliable_qos(100)
         )
         self.create_subscription(String, topics.ENROL, self._on_enrol, topics.reliable_qos(100))
+        self.create_timer(0.1, self._flush_marks)
 
     # ------------------------------------------------------------------ threads
     def start(self) -> TactileBridge:
@@ -117,10 +120,13 @@ class TactileBridge(Node):
             work = Work("problem", internal_problem(RECOGNIZE), received)
         self.answers.put(work)
 
-    def _on_frame(self, msg: Float32MultiArray) -> None:
+    def _on_frame(self, msg: Float32MultiArray, info: dict[str, Any]) -> None:
         self._counts["frames"] += 1
         try:
-            self.assembler.frame(frame_of(msg))
+            frame = frame_of(msg)
+            for name in self.marks.frame(info["source_timestamp"], time.monotonic()):
+                self._follow(name, 0, time.perf_counter())
+            self.assembler.frame(frame)
         except MessageShapeError as exc:
             self._counts["bad_frames"] += 1
             self.assembler.fault(f"frame message {self._counts['frames']}: {exc}")
@@ -128,15 +134,24 @@ class TactileBridge(Node):
             log.exception("reading a frame message")
             self.assembler.fault("a frame could not be read (the bridge's log has the details)")
 
-    def _on_procedure(self, msg: String) -> None:
+    def _on_procedure(self, msg: String, info: dict[str, Any]) -> None:
         received = time.perf_counter()
+        for name, late in self.marks.mark(msg.data, info["source_timestamp"]):
+            self._follow(name, late, received)
+
+    def _flush_marks(self) -> None:
+        for name in self.marks.flush(time.monotonic()):
+            self._follow(name, 0, time.perf_counter())
+
+    def _follow(self, name: str, late: int, received: float) -> None:
+        """Follow a procedure mark ``late`` frames back; queue the answer it calls for."""
         try:
             model = self.backend.model
             if model is None:
                 detail = f"the model of {self.backend.source} is not known yet (not reached)"
                 work = Work("problem", problem_body(503, detail, RECOGNIZE), received)
             else:
-                trial = self.assembler.procedure(msg.data, model.procedures)
+                trial = self.assembler.procedure(name, model.procedures, late)
                 if trial is None:
                     return  # a trial's first procedure: nothing to answer yet
                 work = Work("trial", trial, received)

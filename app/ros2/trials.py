@@ -79,19 +79,25 @@ class TrialAssembler:
         if self._frames is not None and self._fault is None:
             self._fault = why
 
-    def procedure(self, name: str, procedures: Sequence[str]) -> dict[str, Any] | None:
+    def procedure(
+        self, name: str, procedures: Sequence[str], late: int = 0
+    ) -> dict[str, Any] | None:
+        """Follow a procedure message; ``late``: how many of the frames received last were
+        published after it (``ProcedureClock`` counts them), so that it falls before them."""
         name = name.strip()
         if name == END:
             if self._frames is None:
                 raise TrialProblem("'end' with no trial open; name a procedure to start one")
+            after = self._frames[len(self._frames) - late :] if late else []
             try:
-                return self._complete(procedures) if self._current else None
+                return self._complete(procedures, late) if self._current else None
             finally:
                 self._reset()
+                self._rest.extend(after)  # frames after the end are the next trial's rest
         if name == REST:
             if self._frames is None:
                 raise TrialProblem(f"{REST!r} with no trial open; name a procedure to start one")
-            return self._complete(procedures) if self._current else None
+            return self._complete(procedures, late) if self._current else None
         if name not in procedures:
             raise TrialProblem(
                 f"unknown procedure {name!r}; the model's procedures are "
@@ -105,16 +111,17 @@ class TrialAssembler:
                 f"procedure {name!r} was done already in this trial; publish {END!r} first"
             )
         try:
-            return self._complete(procedures) if self._current else None
+            return self._complete(procedures, late) if self._current else None
         finally:  # the new procedure starts even where the one before is a problem
-            self._phases[name] = (len(self._frames), None)
+            self._phases[name] = (max(0, len(self._frames) - late), None)
             self._current = name
 
-    def _complete(self, procedures: Sequence[str]) -> dict[str, Any]:
-        """Close the current procedure; the trial so far, its phases in the model's order."""
+    def _complete(self, procedures: Sequence[str], late: int = 0) -> dict[str, Any]:
+        """Close the current procedure ``late`` frames before the last; the trial so far,
+        its phases in the model's order."""
         assert self._frames is not None and self._current is not None
         name, (start, _) = self._current, self._phases[self._current]
-        end = len(self._frames)
+        end = len(self._frames) - late
         self._current = None
         if self._fault is not None:
             raise TrialProblem(self._fault, "frames")
@@ -122,9 +129,55 @@ class TrialAssembler:
             del self._phases[name]
             raise TrialProblem(f"procedure {name!r} has no frames", "frames")
         self._phases[name] = (start, end)
-        frames = np.stack(self._frames)
+        frames = np.stack(self._frames[:end])
         phases = [list(self._phases[p]) if p in self._phases else None for p in procedures]
         return {"fingers": fingers_of(frames), "phases": phases}
 
     def _reset(self) -> None:
         self._frames, self._phases, self._current, self._fault = None, {}, None, None
+
+
+class MarkOrder:
+    """Puts procedure marks among the frames by their DDS source timestamps: frames and
+    marks travel on two topics, and a backlog of frames (a busy bridge) would otherwise
+    let a mark overtake frames published before it.
+
+    A mark that comes before the frames published after it waits for the first of them;
+    one that comes after such frames is placed ``late`` frames back. Marks wait at most
+    ``wait`` seconds of no frames at all (a sensor that stopped streaming). Stamps are the
+    publishers' clocks: a mark and its frames should come from one host's clock."""
+
+    def __init__(self, wait: float = 1.0, keep: int = 10_000) -> None:
+        self.wait = wait
+        self._stamps: deque[int] = deque(maxlen=keep)  # of the frames received last
+        self._pending: deque[tuple[int, str]] = deque()
+        self._last_frame = 0.0
+
+    def frame(self, stamp: int, now: float) -> list[str]:
+        """The marks due before a frame stamped ``stamp``, in order; it is recorded."""
+        due = []
+        while self._pending and self._pending[0][0] <= stamp:
+            due.append(self._pending.popleft()[1])
+        self._stamps.append(stamp)
+        self._last_frame = now
+        return due
+
+    def mark(self, name: str, stamp: int) -> list[tuple[str, int]]:
+        """The marks to follow now, each with how many frames it falls before."""
+        if self._pending or not self._stamps or self._stamps[-1] < stamp:
+            self._pending.append((stamp, name))
+            return []
+        late = 0
+        for seen in reversed(self._stamps):
+            if seen < stamp:
+                break
+            late += 1
+        return [(name, late)]
+
+    def flush(self, now: float) -> list[str]:
+        """Marks that waited ``wait`` seconds without a frame: follow them as they are."""
+        if not self._pending or now - self._last_frame < self.wait:
+            return []
+        due = [name for _, name in self._pending]
+        self._pending.clear()
+        return due

@@ -209,15 +209,16 @@ def replay_trial(
     procedures: tuple[str, ...],
     period: float,
     rest_frames: int = 100,
-    pause: float = 0.05,
-) -> list[dict[str, Any]]:
+    pause: float = 0.0,
+) -> tuple[list[dict[str, Any]], int]:
     """Publish a recorded ``RawTrial`` as a robot does: its frames every ``period`` seconds
     (0.01: the pilot's recorded rate), a procedure's name on ``~/procedure`` as its phase
     starts (the phases the project's ``PhaseRule`` finds in finger 0's pdc), ``rest`` as it
-    ends, ``end`` after the last; 150 frames of rest lead in. ``pause`` seconds of quiet
-    around each mark keep it between the right frames (frames and marks travel on two
-    topics). Returns the trial as the bridge assembles it after each procedure (its JSON
-    form, the bridge keeping ``rest_frames`` frames of rest): what it answers."""
+    ends, ``end`` after the last; 150 frames of rest lead in (``pause``: seconds of quiet
+    around each mark; the bridge places marks by their stamps without it). Returns the
+    trial as the bridge assembles it after each procedure (its JSON form, the bridge
+    keeping ``rest_frames`` frames of rest): what it answers; and the number of frames
+    published."""
     from app.ros2.arrays import fingers_of, frames_of
 
     frames = frames_of(trial)
@@ -245,4 +246,4 @@ def replay_trial(
         shifted = [[s - origin, e - origin] if j <= i else None for j, (s, e) in enumerate(phases)]
         fingers = [{k: v.tolist() for k, v in f.items()} for f in fingers_of(frames[origin:end])]
         expected.append({"fingers": fingers, "phases": shifted})
-    return expected
+    return expected, last - first

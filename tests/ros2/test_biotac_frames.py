@@ -1,0 +1,106 @@
+"""Raw BioTac frames over DDS: the real pilot recordings replayed frame by frame (ten times
+their recorded rate, to keep the suite short; bench/ros2.py replays at the recorded rate)
+into a real ``tactile-zsl ros2`` bridging a real ``serve`` trained on four of every five
+trials. After each procedure the bridge answers the trial so far, as HTTP answers the same
+frames; held-out trials are recognised."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import httpx
+import pytest
+
+from app.client import TactileClient
+from app.data.biotac import read_biotac_h5, write_biotac_h5
+from app.ros2.arrays import frames_of
+from app.testing.ros2 import replay_trial
+
+from .conftest import PILOT, serve
+
+pytestmark = pytest.mark.slow
+
+OBJECTS = ("bouncy_foam", "cork", "glass_bottle", "hard_rough_foam")
+PERIOD = 0.001  # seconds between frames: 10× the pilot's ~100 Hz
+
+
+@pytest.fixture(scope="module")
+def pilot(tmp_path_factory):
+    """(the URL of a service trained on four objects' trials, one held-out trial each)."""
+    if not (PILOT / "cork.h5").is_file():
+        pytest.skip(f"BioTac pilot data not found at {PILOT.resolve()}")
+    folder = tmp_path_factory.mktemp("biotac")
+    held = {}
+    for name in OBJECTS:
+        trials = read_biotac_h5(PILOT / f"{name}.h5")
+        names = sorted(trials)
+        write_biotac_h5(folder / f"{name}.h5", {n: trials[n] for n in names[1:]})
+        held[name] = trials[names[0]]
+    env = {"TACTILE_DATASET": f"biotac:{folder}"}
+    for url in serve(tmp_path_factory.mktemp("pilot-service"), env):  # its teardown follows
+        yield url, held
+
+
+def http_answer(url: str, trial: dict) -> dict:
+    return httpx.post(f"{url}/v1/recognize", json={"trials": [trial]}, timeout=120).json()
+
+
+def test_replayed_recordings_get_the_answers_http_gives_after_each_procedure(pilot, bridge_factory):
+    url, held = pilot
+    procedures = tuple(httpx.get(f"{url}/v1/models/active").json()["procedures"])
+    bridge = bridge_factory("--url", url)
+    published, right = 0, 0
+    for name, trial in held.items():
+        expected, n_frames = replay_trial(bridge, trial, procedures, PERIOD)
+        published += n_frames
+        answers = [a.body for a in bridge.next_answers(len(procedures), timeout=120)]
+        assert answers == [http_answer(url, t) for t in expected], name
+        used = [a["results"][0]["procedures_used"] for a in answers]
+        assert used == [list(procedures[: i + 1]) for i in range(len(procedures))]
+        assert answers[0]["results"][0]["next_procedure"] in procedures[1:]
+        right += answers[-1]["results"][0]["class_name"] == name
+    assert right >= 3, f"{right} of {len(held)} held-out trials recognised"
+    diagnostics = bridge.wait_diagnostics(lambda d: d["answered"] == str(len(held) * 3))
+    assert diagnostics["frames"] == str(published), "frames were lost on the way"
+    assert diagnostics["bad_frames"] == "0" and diagnostics["level"] == 0
+
+
+def test_procedure_marks_it_cannot_follow_are_answered_with_a_problem(pilot, bridge_factory):
+    url, held = pilot
+    bridge = bridge_factory("--url", url)
+    frames = frames_of(held["cork"])
+    bridge.procedure("end")  # no trial open
+    bridge.procedure("wiggle")  # no such procedure
+    bridge.procedure("tap")
+    bridge.procedure("tap")  # twice in one trial
+    bridge.procedure("hold")  # tap has no frames
+    for frame in frames[:50]:
+        bridge.publish_frame(frame)
+    bridge.publish_frame(frames[50, :1])  # one finger where the trial has two
+    bridge.procedure("rest")  # completes hold: its trial has the bad frame
+    bridge.procedure("end")
+    answers = [a.body for a in bridge.next_answers(5)]
+    assert [a["status"] for a in answers] == [422] * 5, answers
+    details = [a["detail"] for a in answers]
+    assert "'end' with no trial open" in details[0]
+    assert "unknown procedure 'wiggle'" in details[1] and "tap, hold, squeeze" in details[1]
+    assert "'tap' was done already" in details[2]
+    assert "'tap' has no frames" in details[3]
+    assert "1 finger(s) where the trial's first frame has 2" in details[4]
+    assert answers[4]["errors"] == [{"field": "frames", "reason": details[4]}]
+
+
+def test_the_model_file_answers_replayed_frames_as_the_service(
+    pilot, bridge_factory, tmp_path: Path
+):
+    url, held = pilot
+    model_file = tmp_path / "hand.bundle"
+    with TactileClient(url, model_file=model_file) as client:
+        assert client.sync_model()
+    procedures = tuple(httpx.get(f"{url}/v1/models/active").json()["procedures"])
+    bridge = bridge_factory("--model", str(model_file))
+    expected, n_frames = replay_trial(bridge, held["glass_bottle"], procedures, PERIOD)
+    answers = [a.body for a in bridge.next_answers(len(procedures), timeout=120)]
+    bridge.wait_diagnostics(lambda d: d["answered"] == str(len(procedures)))
+    assert bridge.diagnostics["frames"] == str(n_frames), "frames were lost on the way"
+    assert answers == [http_answer(url, t) for t in expected]
