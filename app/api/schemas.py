@@ -115,7 +115,10 @@ class ReadingOut(BaseModel):
         description="`word`: a word about the feel; `implied`: what a word says of its "
         'opposite ("soft": not hard); `material`: what such material usually is '
         '("steel": cool); `embedding`: a word the lexicon lacks, matched by the sentence-'
-        "embedding model."
+        "embedding model; `estimated`: an attribute the text does not mention, estimated "
+        "from what it does say and which attributes go together in the live classes "
+        "(`words` names the attributes read it follows from). A value given beside the "
+        "text overrides an estimate, never a value read."
     )
 
 
@@ -208,7 +211,9 @@ class ClassOut(BaseModel):
     n_samples: int = Field(description="Real tactile samples stored for the class.")
     description: str | None = Field(None, description="Its description in words, if any.")
     description_readings: list[ReadingOut] | None = Field(
-        None, description="The values read from `description`, with the words behind each."
+        None,
+        description="The values read from `description`, with the words behind each, and "
+        "the values estimated for the attributes it does not mention (source `estimated`).",
     )
     created_at: datetime
     in_active_model: bool = Field(description="Whether the model now serving covers the class.")

@@ -25,6 +25,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import AbstractContextManager, contextmanager
 from typing import Any, NamedTuple, Protocol, TypeVar
 
+import numpy as np
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
@@ -34,6 +35,7 @@ from app.store.enums import ClassKind, JobKind, Origin
 from app.store.models import Attribute, Job, ObjectClass, Sample
 from app.store.vocabulary import MAX_ATTRIBUTES, Vocabulary, describes
 from app.words.embedding import EmbeddingModelError
+from app.words.estimate import UnmentionedEstimator, estimated_readings
 from app.words.interpret import NothingRecognised, Reading, TextError, TextInterpreter
 
 T = TypeVar("T")
@@ -264,10 +266,13 @@ def description_key(
 
 
 def _agree(read: dict[str, Reading] | None, given: dict, field: str) -> None:
-    """A value given beside a description must not contradict what was read from it."""
+    """A value given beside a description must not contradict what was read from it (an
+    estimate, which the text does not say, gives way to a value given)."""
     for name, value in given.items():
         reading = (read or {}).get(name)
-        if reading is not None and value is not None and abs(float(value) - reading.value) >= 0.5:
+        if reading is None or reading.source == "estimated" or value is None:
+            continue
+        if abs(float(value) - reading.value) >= 0.5:
             raise InvalidDescription(
                 f"the description says '{reading.words}' ({name} {reading.value:g}) but "
                 f"{field} gives {name} {float(value):g}: correct one of them",
@@ -294,12 +299,25 @@ def check_names(names: Iterable[str], vocab: Vocabulary, field: str) -> None:
 
 
 def _read(
-    described: Description, vocab: Vocabulary, interpreter: TextInterpreter
+    described: Description, vocab: Vocabulary, interpreter: TextInterpreter, session: Session
 ) -> dict[str, Reading] | None:
-    """The readings of the description's text (None without one)."""
+    """The readings of the description's text (None without one), with the attributes it
+    does not mention estimated from the live classes' vectors (source ``estimated``)."""
     if described.description is None:
         return None
-    return read_text(described.description, vocab, interpreter, "description")
+    read = read_text(described.description, vocab, interpreter, "description")
+    return {**read, **estimates(session, vocab, read)}
+
+
+def estimates(session: Session, vocab: Vocabulary, read: dict[str, Reading]) -> dict:
+    """Readings (source ``estimated``) of the active attributes ``read`` is silent on, from
+    which attributes go together in the live classes' vectors (``app.words.estimate``);
+    none while no live class has a vector."""
+    keys = [s.attribute_key for s in repo.class_states(session) if s.attribute_key]
+    if not keys:
+        return {}
+    known = np.stack([vocab.vector(k) for k in keys])
+    return estimated_readings(read, UnmentionedEstimator().fit(known, vocab.active))
 
 
 # -------------------------------------------------------------------------- classes
@@ -333,7 +351,7 @@ def register_class(
     Otherwise a live class of the same name (``NameTaken``) or attribute vector
     (``SameDescription``) refuses it."""
     vocab = repo.vocabulary(session)
-    read = _read(described, vocab, interpreter)
+    read = _read(described, vocab, interpreter, session)
     field = field_of(described)
     cls = None
     kept: list = []
@@ -380,7 +398,7 @@ def redescribe_class(
     field = field_of(described)
     if cls.origin == Origin.DATASET:
         _check_dataset_values(cls, described, vocab)
-    read = _read(described, vocab, interpreter)
+    read = _read(described, vocab, interpreter, session)
     key = description_key(described, vocab, base=cls.attribute_key, read=read)
     if cls.origin == Origin.ENROLLED:
         _check_vector(session, key, field, other_than=cls.id)

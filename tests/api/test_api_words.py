@@ -58,7 +58,10 @@ def test_a_class_registered_in_words_keeps_its_text_and_is_learnt(service):
     assert cls["description"] == SPONGE and cls["in_active_model"] is True
     read = {x["attribute"]: x for x in cls["description_readings"]}
     assert cls["attribute_values"]["soft"] == read["soft"]["value"] == pytest.approx(0.9)
-    assert "metallic" not in cls["attribute_values"]  # not known, not 0
+    # not mentioned: estimated from what the text says, and shown as an estimate
+    assert read["metallic"]["source"] == "estimated" and read["soft"]["source"] == "word"
+    assert cls["attribute_values"]["metallic"] == read["metallic"]["value"] < 0.5
+    assert "soft" in read["metallic"]["words"]
     # a name alone is a description too
     r = client.post("/v1/classes", json={"name": "vase", "description": "steel vase"})
     assert r.status_code == 202 and r.json()["class"]["attribute_values"]["metallic"] >= 0.5
@@ -78,9 +81,17 @@ def test_values_beside_a_text_must_agree_with_it(service):
         json={"name": "ok", "description": "very hard and smooth", "attributes": {"cool": 1}},
     )
     assert r.status_code == 202, r.text
-    assert r.json()["class"]["attribute_values"] == pytest.approx(
-        {"hard": 1.0, "soft": 0.0, "smooth": 0.9, "rough": 0.1, "cool": 1.0}
+    values = r.json()["class"]["attribute_values"]
+    said = {"hard": 1.0, "soft": 0.0, "smooth": 0.9, "rough": 0.1, "cool": 1.0}
+    assert {a: values[a] for a in said} == pytest.approx(said)
+    r = client.post(  # a value given overrides an estimate, where it would a value read
+        "/v1/classes",
+        json={"name": "ok2", "description": "very hard and rough", "attributes": {"cool": 0}},
     )
+    assert r.status_code == 202, r.text
+    readings = {x["attribute"]: x for x in r.json()["class"]["description_readings"]}
+    assert readings["cool"]["source"] == "estimated"
+    assert r.json()["class"]["attribute_values"]["cool"] == 0.0
 
 
 def test_patch_replaces_the_text_and_a_new_word_is_read_from_texts(service):

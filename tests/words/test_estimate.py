@@ -51,3 +51,15 @@ def test_the_lexicon_names_no_phac2_object_that_no_general_source_gives():
         s in ("name", "definition", "development") or s.startswith("wordnet ")
         for s in origin.values()
     )
+
+
+def test_estimated_readings_are_marked_and_name_what_they_follow_from():
+    from app.words.estimate import estimated_readings
+    from app.words.interpret import Reading
+
+    read = {"soft": Reading("soft", 0.9, "soft", "word")}
+    out = estimated_readings(read, UnmentionedEstimator().fit(KNOWN, ATTRS))
+    assert set(out) == {"squishy", "compressible", "metallic", "cool"}
+    assert {r.source for r in out.values()} == {"estimated"}
+    assert out["metallic"].words == "estimated from soft and the known classes"
+    assert out["squishy"].value > 0.8 > 0.2 > out["metallic"].value
