@@ -8,7 +8,9 @@ traces and SQL never leave the process.
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
+import re
 from collections.abc import Iterator, Sequence
 from http import HTTPStatus
 from typing import Any
@@ -79,7 +81,9 @@ class Problem(HTTPException):
         headers: dict[str, str] | None = None,
     ) -> None:
         super().__init__(status, detail, headers)
-        self.errors = [{"field": field, "reason": detail}] if field else []
+        # the field is named beside the reason: "target_confidence: ..." says it once
+        reason = detail.removeprefix(f"{field}: ") if field else detail
+        self.errors = [{"field": field, "reason": reason}] if field else []
 
 
 def body_too_large(max_bytes: int) -> Problem:
@@ -185,7 +189,21 @@ _REASONS = {
     "model_attributes_type": "not an object",
     "missing": "required",
     "extra_forbidden": "not a field of this request",
+    # pydantic's constraints, in the service's words (its ctx fills the braces)
+    "too_short": "at least {min_length} item(s) needed",
+    "too_long": "at most {max_length} item(s) taken",
+    "string_too_short": "at least {min_length} character(s) needed",
+    "string_too_long": "at most {max_length} character(s) taken",
+    "string_pattern_mismatch": "a control character{comma} is not allowed here",
+    "less_than_equal": "at most {le}",
+    "less_than": "less than {lt}",
+    "greater_than_equal": "at least {ge}",
+    "greater_than": "more than {gt}",
+    "literal_error": "one of {expected}",
+    "enum": "one of {expected}",
 }
+# reasons that are about the value, which is then shown: "(got null)"
+_SHOWN = frozenset(_REASONS) - {"missing", "extra_forbidden"}
 # at most this many distinct problems per answer: a batch with 992 bad values is one problem
 MAX_ERRORS = 5
 
@@ -195,13 +213,31 @@ def _validation_reason(err: dict[str, Any]) -> str:
         return f"malformed JSON: {err.get('ctx', {}).get('error', 'cannot be parsed')}"
     if err.get("type") == "value_error":  # our validators' own words, without pydantic's prefix
         return str(err.get("ctx", {}).get("error", err.get("msg", "invalid")))
-    return _REASONS.get(err.get("type", ""), str(err.get("msg", "invalid")))
+    reason = _REASONS.get(err.get("type", ""))
+    if reason is None:
+        return str(err.get("msg", "invalid"))
+    ctx = {k: _json(v) if k != "expected" else v for k, v in err.get("ctx", {}).items()}
+    if err.get("type") == "string_pattern_mismatch":
+        ctx["comma"] = " or a comma" if "," in str(ctx.get("pattern", "")) else ""
+    try:
+        reason = reason.format(**ctx)
+    except (KeyError, IndexError, ValueError):  # a constraint without the context we name
+        return str(err.get("msg", "invalid"))
+    return re.sub(r"\b1 (\w+)\(s\)", r"1 \1", reason).replace("(s)", "s")
+
+
+def _json(value: Any) -> str:
+    """``value`` as JSON writes it (``null``, ``true``, ``"x"``), not as Python does."""
+    try:
+        return json.dumps(value, ensure_ascii=False, allow_nan=True)
+    except (TypeError, ValueError):
+        return repr(value)
 
 
 def _value_shown(err: dict[str, Any]) -> str:
-    if err.get("type") not in _REASONS or err["type"] in ("missing", "extra_forbidden"):
+    if err.get("type") not in _SHOWN or "input" not in err:
         return ""
-    shown = repr(err.get("input"))
+    shown = _json(err["input"])
     return f" (got {shown if len(shown) <= 40 else shown[:37] + '...'})"
 
 
@@ -277,12 +313,36 @@ async def validation_exception_handler(
     request: Request, exc: RequestValidationError
 ) -> ProblemResponse:
     errors = readable_errors(exc.errors())
+    model = request.app.state.service.holder.current
+    about_samples = model is not None and any(e["field"].startswith("sample") for e in errors)
+    partial = request.url.path in PARTIAL_SAMPLE_ROUTES
+    by_shape = []
+    if about_samples:  # a sample's shape says more than the value pydantic stopped at
+        from app.api.sample_input import explain  # it raises Problem: imported here
+
+        rec = model.recognizer
+        by_shape = explain(exc.body, rec.input_shape, rec.procedures, partial)
+        named = {e["field"] for e in by_shape}
+        errors = by_shape + [e for e in errors if not _within(e["field"], named)]
     first = errors[0] if errors else {"field": "body", "reason": "invalid request"}
     detail = f"{first['field']}: {first['reason']}"
-    model = request.app.state.service.holder.current
-    if model is not None and any(e["field"].startswith("sample") for e in errors):
+    if about_samples and not by_shape:
         detail += f"; one sample has shape {list(model.recognizer.input_shape)}"
-    return problem_response(request, 422, detail, errors)
+        if "(got null)" in first["reason"] and partial and model.recognizer.procedures:
+            detail += (
+                ": a procedure not done yet is null as whole rows (`procedure_rows` of "
+                "GET /v1/models/active), not cell by cell"
+            )
+    return problem_response(request, 422, detail, errors[:MAX_ERRORS])
+
+
+# the routes whose samples may lack procedures (null rows); enrolment takes whole samples
+PARTIAL_SAMPLE_ROUTES = frozenset({"/v1/recognize", "/v1/describe"})
+
+
+def _within(field: str, named: set[str]) -> bool:
+    """Whether ``field`` (``samples[0][3]``) lies in one of the fields ``named``."""
+    return any(field == n or field.startswith((f"{n}[", f"{n}.")) for n in named)
 
 
 async def framework_exception_handler(request: Request, exc: FrameworkError) -> ProblemResponse:

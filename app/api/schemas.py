@@ -11,6 +11,7 @@ from pydantic import (
     Field,
     StringConstraints,
     computed_field,
+    field_validator,
     model_validator,
 )
 
@@ -254,6 +255,16 @@ class JobOut(BaseModel):
         "it), `env:<hash prefix>` for a key from the environment, `addr:<ip>` while no keys "
         "exist; null for jobs older than this field."
     )
+    warnings: list[str] = Field(
+        default_factory=list,
+        description="What the request that queued it was warned of, as its 202 said: e.g. a "
+        "sample the served model gave to another class with probability 0.9 or more.",
+    )
+
+    @field_validator("warnings", mode="before")
+    @classmethod
+    def _none_is_no_warning(cls, value: Any) -> Any:
+        return [] if value is None else value
 
 
 class JobList(BaseModel):
@@ -298,6 +309,13 @@ class SampleCreated(BaseModel):
         "another class may be of the wrong object (withdraw it with `DELETE`)."
     )
     model_version: int = Field(description="The version that gave `recognized_as`.")
+    warnings: list[str] = Field(
+        default_factory=list,
+        description="What may be wrong with the sample, which is kept all the same (the job "
+        "keeps these too): the served model gave it to another class with probability 0.9 "
+        "or more (where it knows the class; before it does, to a known class it found no "
+        "novelty in), so it may be of the wrong object. Withdraw it with `DELETE` if so.",
+    )
 
 
 class SampleOut(BaseModel):

@@ -16,6 +16,18 @@ from app.data.biotac import RawTrial, RawTrialError, parse_trial, read_biotac_h5
 HDF5 = "application/x-hdf5"
 
 
+def refused(input_shape: tuple[int, ...], field: str) -> Problem:
+    """The 409 of raw trials sent to a model of samples, before they are read: what it
+    takes instead."""
+    return Problem(
+        409,
+        f"this model takes samples of shape {list(input_shape)} (`input_kind` `samples` of "
+        'GET /v1/models/active), not raw BioTac trials: send {"samples": [...]} (or a .npy '
+        "body); a model fitted on raw trials takes them (`--dataset biotac:DIR`)",
+        field,
+    )
+
+
 def field_of(err: RawTrialError, prefix: str) -> str:
     """Where in the request a trial error is: ``trials[2].fingers[1].pac``."""
     place = prefix if err.trial is None else f"{prefix}[{err.trial}]"

@@ -90,9 +90,12 @@ def present(x: np.ndarray, procedures: Sequence[str]) -> np.ndarray:
     partly = blocks.any(axis=2) & ~missing
     if partly.any():
         i, j = np.argwhere(partly)[0]
+        rows = block(procedures, x.shape[1:], int(j))
+        cell = first_nan(x[i], rows)
         raise ProcedureError(
-            f"sample {i}: procedure '{procedures[j]}' is partly missing; send all of its "
-            "values, or none (a missing procedure is null or NaN throughout)",
+            f"sample {i}: procedure '{procedures[j]}' is partly missing: cell "
+            f"{cell_name(int(i), cell)} is NaN where the procedure's other values are numbers; "
+            "send all of its values, or none (a missing procedure is null or NaN throughout)",
             int(i),
             procedures[j],
         )
@@ -105,6 +108,26 @@ def present(x: np.ndarray, procedures: Sequence[str]) -> np.ndarray:
             i,
         )
     return ~missing
+
+
+def first_nan(sample: np.ndarray, rows: slice = slice(None)) -> tuple[int, ...]:
+    """The index in ``sample`` of its first NaN (or infinity) within ``rows``."""
+    bad = ~np.isfinite(sample[rows])
+    first = np.unravel_index(int(bad.argmax()), bad.shape)
+    return (int(first[0]) + (rows.start or 0), *map(int, first[1:]))
+
+
+def named_list(names: Sequence[str], noun: str) -> str:
+    """``procedure 'hold'``, ``procedures 'hold' and 'slide'``, ``procedures 'a', 'b' and 'c'``."""
+    quoted = [f"'{n}'" for n in names]
+    if len(quoted) == 1:
+        return f"{noun} {quoted[0]}"
+    return f"{noun}s {', '.join(quoted[:-1])} and {quoted[-1]}"
+
+
+def cell_name(i: int, cell: tuple[int, ...]) -> str:
+    """``[0][3][4]``: cell (3, 4) of sample 0, as a JSON body's ``samples`` nests it."""
+    return "".join(f"[{k}]" for k in (i, *cell))
 
 
 def keep_only(x: np.ndarray, procedures: Sequence[str], keep: Sequence[int]) -> np.ndarray:

@@ -42,7 +42,7 @@ import numpy as np
 
 from app.data.biotac import BioTacDataset
 from app.data.dataset import TactileDataset
-from app.data.procedures import ProcedureError, present
+from app.data.procedures import ProcedureError, cell_name, named_list, present
 from app.framework.enrolment import Enrolment, same_vectors, suggest_attribute
 from app.framework.errors import (
     FrameworkError,
@@ -651,9 +651,10 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
         infinite = np.isinf(flat).any(axis=1)
         if infinite.any() or not self.procedures:
             bad = int(infinite.argmax()) if infinite.any() else int(np.isnan(flat).any(1).argmax())
-            raise NonFiniteInputError(
-                f"sample {bad} contains {'infinity' if infinite.any() else 'NaN'}"
-            )
+            what = "infinity" if infinite.any() else "NaN"
+            hit = np.isinf(x[bad]) if infinite.any() else np.isnan(x[bad])
+            cell = cell_name(bad, tuple(map(int, np.unravel_index(int(hit.argmax()), hit.shape))))
+            raise NonFiniteInputError(f"sample {bad} contains {what}: cell {cell} is {what}")
         try:
             used = present(x, self.procedures)
         except ProcedureError as exc:
@@ -661,12 +662,14 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
         if not partial or not self.answers_from_some_procedures:
             i = int((~used.all(axis=1)).argmax())
             lacking = [p for p, u in zip(self.procedures, used[i], strict=True) if not u]
-            why = (
-                f"method '{self.method}' answers from every procedure"
-                if partial
-                else "samples learnt by the model need every procedure"
+            if partial:
+                why = f"sample {i} lacks {', '.join(lacking)}: method '{self.method}' answers "
+                raise MissingProcedureError(why + "from every procedure")
+            raise MissingProcedureError(
+                f"enrolment takes whole samples: {named_list(lacking, 'procedure')} of sample "
+                f"{i} {'is' if len(lacking) == 1 else 'are'} missing (NaN throughout); samples "
+                "learnt by the model need every procedure"
             )
-            raise MissingProcedureError(f"sample {i} lacks {', '.join(lacking)}: {why}")
 
     def _require_fitted(self) -> None:
         if self.input_shape is None:

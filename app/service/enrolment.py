@@ -423,20 +423,53 @@ def novel_class(session: Session, class_id: int) -> ObjectClass:
     return cls
 
 
+#: a sample the served model gives to another class with at least this probability is
+#: still accepted, with a warning that it may be of the wrong object
+DOUBT_PROBABILITY = 0.9
+
+
+def doubts(cls: ObjectClass, recognized_as: Mapping[str, Any], served: Iterable[str]) -> list[str]:
+    """The warnings a sample added to ``cls`` earns from what the served model made of it
+    (``recognized_as``, a ``POST /v1/recognize`` result; ``served``: the model's class
+    names): given to another class with probability ``DOUBT_PROBABILITY`` or more, where
+    the model knows ``cls``, or, where it does not yet, to a known class it is no novelty to
+    (a novel object's first samples go to some other class: that alone is no doubt)."""
+    best = recognized_as["top_k"][0] if recognized_as.get("top_k") else None
+    if best is None or best["class_name"] == cls.name or best["probability"] < DOUBT_PROBABILITY:
+        return []
+    if cls.name not in served and recognized_as["is_novel"]:
+        return []
+    return [
+        f"the served model recognises this sample as '{best['class_name']}' (class "
+        f"{best.get('class_id')}) with probability {best['probability']:.8g}, not as "
+        f"'{cls.name}': it is kept; if it was taken of another object, withdraw it "
+        "(DELETE /v1/classes/{class_id}/samples/{sample_id})"
+    ]
+
+
 def add_sample(
     session: Session,
     cls: ObjectClass,
     sample: Any,
     *,
     requested_by: str | None,
+    warnings: list[str] | None = None,
     writing: Writing = guarded,
     finish: Callable[[Sample, Job], T] | None = None,
 ) -> T | tuple[Sample, Job]:
     """Store ``sample`` (an array, or a raw trial kept as sent) for the novel class ``cls``
-    (``novel_class``) and queue the ``add_sample`` job that brings it into the model."""
+    (``novel_class``) and queue the ``add_sample`` job that brings it into the model; the
+    job keeps ``warnings`` (``doubts``)."""
     with writing(session, None):  # a concurrent retry with this key may win
         row = repo.add_sample(session, cls.id, sample)
-        job = repo.add_job(session, JobKind.ADD_SAMPLE, cls.id, row.id, requested_by=requested_by)
+        job = repo.add_job(
+            session,
+            JobKind.ADD_SAMPLE,
+            cls.id,
+            row.id,
+            requested_by=requested_by,
+            warnings=warnings,
+        )
         if finish is None:
             session.commit()
             return row, job
@@ -651,9 +684,9 @@ def _check_free(session: Session, name: str, key: str, field: str) -> None:
     """No live class has the name, nor (for a described class) the vector ``key``."""
     existing = repo.class_by_name(session, name)
     if existing is not None:
-        alike = "" if existing.name == name else " (names are compared without regard to case)"
+        alike = "" if existing.name == name else "; names are compared without regard to case"
         raise NameTaken(
-            f"a class named '{existing.name}' already exists (class {existing.id}){alike}: "
+            f"a class named '{existing.name}' already exists (class {existing.id}{alike}): "
             "add samples to it, or choose another name",
             "name",
         )

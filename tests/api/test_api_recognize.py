@@ -182,7 +182,8 @@ def test_touches_of_one_object_get_one_fused_answer(client, dataset):
     assert alone["class_name"] == each[0]["class_name"]
     assert np.isclose(alone["novelty_score"], each[0]["novelty_score"])  # torch: batch-size bits
     bad = problem(client.post("/v1/recognize?same_object=maybe", json={"samples": x}), 422)
-    assert bad["errors"] == [{"field": "same_object", "reason": bad["detail"]}]
+    assert bad["detail"] == "same_object: not true or false (got 'maybe')"
+    assert bad["errors"] == [{"field": "same_object", "reason": "not true or false (got 'maybe')"}]
     spec = client.get("/openapi.json").json()["paths"]["/v1/recognize"]["post"]
     assert [p["name"] for p in spec["parameters"]] == [
         "same_object",

@@ -69,7 +69,8 @@ def test_one_bare_sample_and_json_from_a_file_or_stdin(saved, tmp_path, capsys, 
             lambda d, x: _save(
                 d / "x.npy", np.where(np.arange(x.size).reshape(x.shape) == 7, np.nan, x)
             ),
-            "is partly missing; send all of its values, or none",
+            "is partly missing: cell [0][0][7] is NaN where the procedure's other values are "
+            "numbers; send all of its values, or none",
         ),
     ],
 )

@@ -337,3 +337,24 @@ def test_retiring_an_attribute_keeps_classes_apart_and_described(
     assert done.job.kind == JobKind.RETIRE_ATTRIBUTE
     with sessions() as s, pytest.raises(enrolment.RetiredAttribute):
         enrolment.retire_attribute(s, free, requested_by=ENROLLER)
+
+
+def test_doubts_name_a_confident_answer_of_another_class_unless_the_sample_is_new():
+    cls = SimpleNamespace(name="foam-block")
+
+    def answer(name, p, novel=False):
+        top = [{"class_id": 7, "class_name": name, "probability": p}]
+        return {"top_k": top, "is_novel": novel}
+
+    sure = enrolment.doubts(cls, answer("blend-5-9", 0.99999996), ["foam-block", "blend-5-9"])
+    assert sure == [
+        "the served model recognises this sample as 'blend-5-9' (class 7) with probability "
+        "0.99999996, not as 'foam-block': it is kept; if it was taken of another object, "
+        "withdraw it (DELETE /v1/classes/{class_id}/samples/{sample_id})"
+    ]
+    served = ["foam-block", "blend-5-9"]
+    assert enrolment.doubts(cls, answer("blend-5-9", 0.5), served) == []  # unsure
+    assert enrolment.doubts(cls, answer("foam-block", 0.99), served) == []  # its own class
+    # a class the model does not know yet: a novel sample goes to some other class
+    assert enrolment.doubts(cls, answer("blend-5-9", 0.99, novel=True), ["blend-5-9"]) == []
+    assert enrolment.doubts(cls, answer("blend-5-9", 0.99), ["blend-5-9"]) != []

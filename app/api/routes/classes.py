@@ -23,6 +23,7 @@ from app.api.deps import (
 )
 from app.api.problems import Problem, blame, not_found
 from app.api.routes.samples import one_sample
+from app.api.sample_input import is_one_sample
 from app.api.schemas import (
     ClassCreate,
     ClassCreated,
@@ -33,7 +34,7 @@ from app.api.schemas import (
     Withdrawal,
 )
 from app.api.withdrawals import withdrawal
-from app.framework.recognizer import RAW_TRIALS
+from app.framework.recognizer import RAW_TRIALS, TactileRecognizer
 from app.framework.registry import method_class
 from app.service import enrolment
 from app.service.holder import LoadedModel
@@ -122,6 +123,8 @@ def register_class(
     ``Idempotency-Key``, a retry gets the first answer."""
     idempotency.replay(session)
     shown = body.samples is not None or body.trials is not None
+    if shown and model is not None:  # the wrong kind of touches: said before anything else
+        _takes_kind(body, model.recognizer)
     # what learns the class from its samples: the served model, or the first one's method
     method = None
     if shown:
@@ -200,6 +203,19 @@ def _accepted(
     return finish
 
 
+def _takes_kind(body: ClassCreate, rec: TactileRecognizer) -> None:
+    """A 409 for touches of the kind the served model does not take, before they are read."""
+    if body.trials is not None and rec.input_kind != RAW_TRIALS:
+        raise trials.refused(rec.input_shape, "trials")
+    if body.samples is not None and rec.input_kind == RAW_TRIALS:
+        raise Problem(
+            409,
+            "this model was fitted on raw BioTac trials: send 'trials', raw "
+            "trials, which the store keeps as sent",
+            "samples",
+        )
+
+
 def _samples_of(body: ClassCreate, session: Session, model: LoadedModel | None) -> list:
     """The registration's samples or raw trials, as the store keeps them."""
     return _samples_for(body, model) if model is not None else _samples_for_store(body, session)
@@ -216,11 +232,11 @@ def _samples_for(body: ClassCreate, model: LoadedModel) -> list:
         with blame("trials"):
             rec.trial_samples(kept)  # a model of samples: 409; phases not found: 422
         return kept
-    if rec.input_kind == RAW_TRIALS:
+    if is_one_sample(body.samples, rec.input_shape, rec.procedures):
         raise Problem(
-            409,
-            "this model was fitted on raw BioTac trials: send 'trials', raw "
-            "trials, which the store keeps as sent",
+            422,
+            f"samples: expected a list of samples, got one sample of shape {list(rec.input_shape)} "
+            "alone: wrap one sample in a list",
             "samples",
         )
     kept = []

@@ -40,7 +40,9 @@ async def describe(
     docs/RESULTS.md measures them."""
     model, service = recognizing
     rec = model.recognizer
-    body = await read_body(request, rec.input_shape, service.batch_limit, rec.procedures)
+    body = await read_body(
+        request, rec.input_shape, service.batch_limit, rec.procedures, rec.input_kind
+    )
     takes_kind(rec, body)
     if not rec.has_attributes:
         raise Problem(

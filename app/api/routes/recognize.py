@@ -14,7 +14,7 @@ from app.api import problems, trials
 from app.api.deps import JSON, NPY, api_key_header, get_recognizing, media_type
 from app.api.deps import service as service_state
 from app.api.problems import Problem, blame
-from app.api.sample_input import sample_array
+from app.api.sample_input import is_one_sample, sample_array
 from app.api.schemas import RecognizeRequest, RecognizeResponse
 from app.data.biotac import RawTrial
 from app.framework.recognizer import RAW_TRIALS, TARGET_CONFIDENCE, TactileRecognizer
@@ -156,7 +156,9 @@ async def answer(request: Request) -> bytes:
     same_object = _same_object(request)
     target = _target_confidence(request)
     rec = model.recognizer
-    body = await read_body(request, rec.input_shape, service.batch_limit, rec.procedures)
+    body = await read_body(
+        request, rec.input_shape, service.batch_limit, rec.procedures, rec.input_kind
+    )
     takes_kind(rec, body)
     if body.trials is not None:
         with blame("trials"):
@@ -263,23 +265,29 @@ async def read_body(
     input_shape: tuple[int, ...],
     batch_limit: int,
     procedures: tuple[str, ...] = (),
+    input_kind: str = RAW_TRIALS,
 ) -> Body:
     """The body's samples (JSON or .npy) or raw trials (JSON or HDF5), by its Content-Type,
     at most ``batch_limit``; the model validates samples, the trials are validated here.
-    Samples may lack procedures (``app.api.sample_input``)."""
+    Samples may lack procedures (``app.api.sample_input``), and one sample may come alone,
+    without its list, in JSON as in .npy. Trials sent to a model of samples (``input_kind``)
+    are a 409 that says what it takes, before they are read."""
     content_type = media_type(request, (JSON, NPY, trials.HDF5))
     body = await request.body()
     if content_type == trials.HDF5:
+        if input_kind != RAW_TRIALS:
+            raise trials.refused(input_shape, "trials")
         parsed = await run_in_threadpool(trials.from_hdf5, body, batch_limit)
         return Body(None, parsed, len(parsed))
     if content_type == NPY:
         samples = _from_npy(body)
         n = 1 if samples.ndim <= len(input_shape) else len(samples)  # one bare sample
     else:
+        args = (body, input_shape, batch_limit, procedures, input_kind)
         parsed = (
-            await run_in_threadpool(_from_json, body, input_shape, batch_limit, procedures)
+            await run_in_threadpool(_from_json, *args)
             if len(body) > PARSE_INLINE_BYTES
-            else _from_json(body, input_shape, batch_limit, procedures)
+            else _from_json(*args)
         )
         if parsed.trials is not None:
             return parsed
@@ -294,6 +302,7 @@ def _from_json(
     input_shape: tuple[int, ...],
     batch_limit: int,
     procedures: tuple[str, ...] = (),
+    input_kind: str = RAW_TRIALS,
 ) -> Body:
     """The samples of a JSON body: an array when well-formed, else pydantic's errors or a
     422 naming the first sample not of ``input_shape``; or its validated ``trials``.
@@ -306,11 +315,12 @@ def _from_json(
     try:
         data = orjson.loads(body)
         if isinstance(data, dict) and "trials" in data:
-            parsed = trials.parse(data, batch_limit)
-            return Body(None, parsed, len(parsed))
+            return _trials(data, input_shape, batch_limit, input_kind)
         samples = data["samples"] if isinstance(data, dict) and len(data) == 1 else None
         if isinstance(samples, list) and samples:
             x = np.asarray(samples)
+            if x.dtype.kind in "fiu" and x.shape == input_shape:  # one sample alone
+                x = x[None]
             if x.dtype.kind in "fiu" and x.ndim in (2, 3) and x.shape[1:] == input_shape:
                 with np.errstate(over="ignore"):  # beyond float32 is inf: rejected by name below
                     x = x.astype(np.float32, copy=False)
@@ -319,24 +329,45 @@ def _from_json(
         pass
     # json and pydantic read NaN/Infinity literals, which the trial validator or the
     # framework then rejects by name
+    data = None
     with contextlib.suppress(ValueError, RecursionError):
         data = json.loads(body)
         if isinstance(data, dict) and "trials" in data:
-            parsed = trials.parse(data, batch_limit)
-            return Body(None, parsed, len(parsed))
+            return _trials(data, input_shape, batch_limit, input_kind)
+    alone = isinstance(data, dict) and is_one_sample(data.get("samples"), input_shape, procedures)
     try:
-        request = RecognizeRequest.model_validate_json(body)
+        if alone:  # validated as the batch of one it stands for, its errors named as sent
+            request = RecognizeRequest.model_validate({**data, "samples": [data["samples"]]})
+        else:
+            request = RecognizeRequest.model_validate_json(body)
     except ValidationError as exc:
+        errors = exc.errors(include_url=False)
+        if alone:
+            errors = [{**e, "loc": _unwrapped(e["loc"])} for e in errors]
         raise RequestValidationError(
-            [{**e, "loc": ("body", *e["loc"])} for e in exc.errors(include_url=False)]
+            [{**e, "loc": ("body", *e["loc"])} for e in errors], body=data
         ) from None
     samples = np.stack(
         [
-            sample_array(s, input_shape, f"samples[{i}]", procedures, partial=True)
+            sample_array(s, input_shape, "samples" if alone else f"samples[{i}]", procedures, True)
             for i, s in enumerate(request.samples)
         ]
     )
     return Body(samples, None, len(samples))
+
+
+def _unwrapped(loc: tuple) -> tuple:
+    """A location in the batch of one a lone sample was wrapped in, as the sample was sent."""
+    return (loc[0], *loc[2:]) if loc[:2] == ("samples", 0) else loc
+
+
+def _trials(data: dict, input_shape: tuple[int, ...], batch_limit: int, input_kind: str) -> Body:
+    """The validated raw trials of a JSON body; a 409 before reading them, for a model of
+    samples."""
+    if input_kind != RAW_TRIALS:
+        raise trials.refused(input_shape, "trials")
+    parsed = trials.parse(data, batch_limit)
+    return Body(None, parsed, len(parsed))
 
 
 def _from_npy(body: bytes) -> np.ndarray:

@@ -116,11 +116,15 @@ def add_sample(
 ) -> SampleCreated:
     """Add one real sample of a novel class (one-shot learning). Stored and queued
     before the 202; the job says when a model including it is live. The answer says what
-    the served model made of the sample before learning from it (`recognized_as`). With an
-    ``Idempotency-Key``, a retry gets the first answer and adds nothing."""
+    the served model made of the sample before learning from it (`recognized_as`), and
+    `warnings` where it gave the sample to another class with probability 0.9 or more:
+    the sample is kept, and may be withdrawn. With an ``Idempotency-Key``, a retry gets
+    the first answer and adds nothing."""
     idempotency.replay(session)
     cls = enrolment.novel_class(session, class_id)
     kept, recognized_as = _read_and_recognize(body, model)
+
+    warnings = enrolment.doubts(cls, recognized_as, model.recognizer.registry.all_names)
 
     def accepted(row: Sample, job: Job) -> SampleCreated:
         out = SampleCreated(
@@ -128,12 +132,19 @@ def add_sample(
             job=JobOut.model_validate(job),
             recognized_as=recognized_as,
             model_version=model.version,
+            warnings=job.warnings or [],
         )
         idempotency.accept(session, out, job.id, response)
         return out
 
     out = enrolment.add_sample(
-        session, cls, kept, requested_by=principal.id, writing=idempotency.writing, finish=accepted
+        session,
+        cls,
+        kept,
+        requested_by=principal.id,
+        warnings=warnings,
+        writing=idempotency.writing,
+        finish=accepted,
     )
     metrics.enrollments.labels("sample").inc()
     return out
@@ -144,6 +155,8 @@ def _read_and_recognize(body: SampleCreate, model: LoadedModel) -> tuple[Any, di
     before learning from it (one answer for all of it: both fingers of a trial)."""
     rec = model.recognizer
     if body.trial is not None:
+        if rec.input_kind != RAW_TRIALS:  # said before the trial is read
+            raise trials.refused(rec.input_shape, "trial")
         kept = trials.one(body.trial.model_dump(exclude_none=True), whole=True)
         with blame("trial"):  # 409 when the model takes samples
             x, _ = rec.trial_samples([kept])

@@ -19,6 +19,7 @@ def add_job(
     sample_id: int | None = None,
     requested_by: str | None = None,
     attribute_id: int | None = None,
+    warnings: list[str] | None = None,
 ) -> Job:
     job = Job(
         kind=kind,
@@ -27,6 +28,7 @@ def add_job(
         sample_id=sample_id,
         attribute_id=attribute_id,
         requested_by=requested_by,
+        warnings=warnings or None,
     )
     session.add(job)
     session.flush()
