@@ -73,6 +73,13 @@ class Settings(BaseSettings):
     )
     top_k: int = Field(3, ge=1, description="Scores returned per recognised sample.")
     batch_limit: int = Field(1024, ge=1, description="Most samples in one recognize request.")
+    input_window: int = Field(
+        256,
+        ge=1,
+        description="Recent samples each API process keeps for /metrics' input health: the "
+        "outlier rate and each channel's drift against the training data "
+        "(docs/DEPLOY.md, monitoring).",
+    )
     max_body_bytes: int = Field(
         64 * 1024 * 1024, ge=1024, description="Largest request body accepted (413 beyond)."
     )

@@ -28,6 +28,7 @@ from app.api.warm import warm_words
 from app.config import Settings
 from app.service.bootstrap import Trainer, ensure_ready
 from app.service.holder import ModelHolder
+from app.service.input_monitor import InputDriftPoller
 from app.service.job_watch import JobWatch
 from app.service.keys import KeyRing, RateLimiter
 from app.service.metrics import JobMetricsPoller, Metrics
@@ -58,6 +59,11 @@ def create_app(
     holder = ModelHolder(sessions, settings.model_poll_seconds, metrics)
     keys = KeyRing(sessions, settings.api_keys, settings.api_key_refresh_seconds)
     job_metrics = JobMetricsPoller(metrics, sessions) if process_index == 0 else None
+    recognition = RecognitionService(
+        metrics, settings.top_k, settings.batch_limit, input_window=settings.input_window
+    )
+    # any process may answer a scrape: each computes its input gauges on a timer
+    input_drift = InputDriftPoller(recognition.inputs) if process_index is not None else None
     job_watch = JobWatch(sessions)
 
     @asynccontextmanager
@@ -82,6 +88,8 @@ def create_app(
         keys.start()
         if job_metrics is not None:
             job_metrics.start()
+        if input_drift is not None:
+            input_drift.start()
         embedded = None
         if settings.embedded_worker:
             from worker import Worker, start_in_thread
@@ -107,6 +115,8 @@ def create_app(
             await job_watch.close()
             if job_metrics is not None:
                 job_metrics.stop()
+            if input_drift is not None:
+                input_drift.stop()
             keys.stop()
             holder.stop()
             engine.dispose()
@@ -130,7 +140,7 @@ def create_app(
         holder=holder,
         metrics=metrics,
         job_metrics_at_scrape=process_index is None,
-        recognition=RecognitionService(metrics, settings.top_k, settings.batch_limit),
+        recognition=recognition,
         keys=keys,
         job_watch=job_watch,
         exports=ExportCache(),

@@ -92,6 +92,34 @@ class Metrics:
             registry=r,
             multiprocess_mode="mostrecent",
         )
+        # input health (app.service.input_monitor): a process's window is its own, and the
+        # largest of the live processes' figures is the one to alert on
+        self.input_outliers = Counter(
+            "tactile_input_outliers",
+            "Answers whose input lay outside the training data's channel ranges "
+            "(input_outlier); divide its rate by tactile_recognitions_total's.",
+            registry=r,
+        )
+        self.input_outlier_rate = Gauge(
+            "tactile_input_outlier_rate",
+            "Share of outliers among the last TACTILE_INPUT_WINDOW samples.",
+            registry=r,
+            multiprocess_mode="livemax",
+        )
+        self.input_drift = Gauge(
+            "tactile_input_drift",
+            "Per channel: |median of the last TACTILE_INPUT_WINDOW samples' channel statistic "
+            "- training median| in training IQRs (the larger of level and spread).",
+            ["channel"],
+            registry=r,
+            multiprocess_mode="livemax",
+        )
+        self.input_window_samples = Gauge(
+            "tactile_input_window_samples",
+            "Samples the input-drift window holds (at most TACTILE_INPUT_WINDOW).",
+            registry=r,
+            multiprocess_mode="livemax",
+        )
         self.active_version = Gauge(  # with several processes, one series per process (pid)
             "tactile_active_model_version",
             "Model version this process serves.",

@@ -2,7 +2,8 @@
 
 Small requests (up to ``coalesce`` samples) are validated on their own, so each gets
 its own errors, then share forward passes through the RecognitionBatcher; larger
-ones run alone in the thread pool. Recognitions are counted for /metrics, and the
+ones run alone in the thread pool. Recognitions are counted for /metrics, their inputs'
+health kept for it (``app.service.input_monitor``), and the
 answer's JSON is built here from the arrays, with what is constant per model version
 (each class's name and store id) built once per served model.
 """
@@ -18,6 +19,7 @@ from fastapi.concurrency import run_in_threadpool
 from app.framework.recognizer import TARGET_CONFIDENCE, RecognitionBatch
 from app.service.batcher import RecognitionBatcher
 from app.service.holder import LoadedModel
+from app.service.input_monitor import InputMonitor
 from app.service.metrics import Metrics
 from app.store.enums import ClassKind
 
@@ -30,8 +32,10 @@ class RecognitionService:
         batch_limit: int,
         coalesce: int = 64,
         batcher: RecognitionBatcher | None = None,
+        input_window: int = 256,
     ) -> None:
         self.metrics = metrics
+        self.inputs = InputMonitor(metrics, input_window)
         self.top_k = top_k
         self.batch_limit = batch_limit
         self.coalesce = coalesce
@@ -56,16 +60,17 @@ class RecognitionService:
         rec = model.recognizer
         if target_confidence is not None:
             return self._counted(
+                model,
                 await run_in_threadpool(
                     rec.recognize_batch, samples, self.top_k, None, target_confidence
-                )
+                ),
             )
         if n <= self.coalesce:
             x = rec.validate_samples(samples, partial=True)
             results = await self.batcher.recognize(model, x, self.top_k)
         else:
             results = await run_in_threadpool(rec.recognize_batch, samples, self.top_k)
-        return self._counted(results)
+        return self._counted(model, results)
 
     async def recognize_object(
         self,
@@ -78,7 +83,8 @@ class RecognitionService:
         rec = model.recognizer
         target = TARGET_CONFIDENCE if target_confidence is None else target_confidence
         return self._counted(
-            await run_in_threadpool(rec.recognize_batch, samples, self.top_k, groups, target)
+            model,
+            await run_in_threadpool(rec.recognize_batch, samples, self.top_k, groups, target),
         )
 
     async def recognize_trials(
@@ -94,9 +100,9 @@ class RecognitionService:
                 groups = np.zeros_like(groups)
             return rec.recognize_batch(images, self.top_k, groups)
 
-        return self._counted(await run_in_threadpool(run))
+        return self._counted(model, await run_in_threadpool(run))
 
-    def _counted(self, results: RecognitionBatch) -> RecognitionBatch:
+    def _counted(self, model: LoadedModel, results: RecognitionBatch) -> RecognitionBatch:
         best = results.top_index[:, 0]
         n_known = results.n_known
         if len(best) <= 8:  # a robot's touch: plain Python beats numpy's per-call cost
@@ -106,6 +112,8 @@ class RecognitionService:
         for kind, count in ((ClassKind.KNOWN, len(results) - novel), (ClassKind.NOVEL, novel)):
             if count:
                 self._recognized[kind].inc(count)
+        rec = model.recognizer
+        self.inputs.observe(results, rec.input_profile_, _channel_names(rec))
         return results
 
     def to_json(self, model: LoadedModel, results: RecognitionBatch) -> bytes:
@@ -134,3 +142,10 @@ class RecognitionService:
         kinds = results.class_kinds
         self._labels = (model, names, results.n_known, label, kinds)
         return label, kinds
+
+
+def _channel_names(rec) -> tuple[str, ...]:
+    """The names of a model's channels where it knows them (a raw-trial model's image rows,
+    from its featurizer); () elsewhere (the channels are then numbered)."""
+    featurizer = rec.featurizer
+    return tuple(featurizer.channel_names) if featurizer is not None else ()

@@ -67,11 +67,13 @@ def readyz(session: SessionDep, holder: HolderDep, settings: SettingsDep) -> Rea
 )
 def metrics(request: Request, session: SessionDep, metrics: MetricsDep) -> Response:
     """Prometheus metrics: requests, latencies, recognitions, enrollments, jobs, model version
-    (of every process when `serve` runs several)."""
+    (of every process when `serve` runs several), and the health of recent inputs: the
+    outlier rate and each channel's drift against the training data (docs/DEPLOY.md)."""
     if request.app.state.service.job_metrics_at_scrape:  # else one process reads them on a timer
         try:
             metrics.read_store(session)
         except SQLAlchemyError:  # the process's own metrics are still worth a scrape
             log.warning("metrics: the store is not reachable; job figures left as they were")
+    request.app.state.service.recognition.inputs.refresh()  # this process's input window
     body, content_type = metrics.exposition()
     return Response(body, media_type=content_type)

@@ -1,0 +1,98 @@
+"""Input health over HTTP: every answer of ``POST /v1/recognize`` carries ``input_outlier``
+and ``input_outlier_score`` (documented in the OpenAPI schema), and ``/metrics`` exports the
+outliers and each channel's drift over the last ``TACTILE_INPUT_WINDOW`` samples."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from app.api.main import create_app
+from app.api.schemas import RecognizeResponse
+from app.framework.input_health import OUTLIER_THRESHOLD
+from app.testing.service import quick_settings
+from tests.service_fixtures import npy
+
+NPY = {"content-type": "application/x-npy"}
+
+
+def gauge(text: str, name: str, labels: str = "") -> float:
+    """The value of one series of ``name`` in a Prometheus text exposition."""
+    pattern = rf"^{re.escape(name)}{re.escape(labels)} (\S+)$"
+    found = re.search(pattern, text, re.MULTILINE)
+    assert found, f"{name}{labels} is not in /metrics"
+    return float(found.group(1))
+
+
+def test_each_answer_carries_its_input_health(client, dataset):
+    x = dataset.samples[:2]
+    broken = np.stack([np.zeros_like(x[0]), x[0] * 1e6, x[0]])
+    broken[2, 4] = 0.0  # one dead channel
+    r = client.post("/v1/recognize", json={"samples": np.concatenate([x, broken]).tolist()})
+    assert r.status_code == 200
+    body = r.json()
+    RecognizeResponse.model_validate(body)
+    health = [(a["input_outlier"], a["input_outlier_score"]) for a in body["results"]]
+    assert [h[0] for h in health] == [False, False, True, True, True]
+    assert all(s <= OUTLIER_THRESHOLD for _, s in health[:2])
+    assert all(s > OUTLIER_THRESHOLD for _, s in health[2:])
+    # the same answers from a .npy body, and fused over touches of one object
+    r = client.post("/v1/recognize", content=npy(broken), headers=NPY)
+    assert [a["input_outlier"] for a in r.json()["results"]] == [True, True, True]
+    r = client.post(
+        "/v1/recognize",
+        json={"samples": [x[0].tolist(), broken[0].tolist()]},
+        params={"same_object": True},
+    )
+    assert r.json()["results"][0]["input_outlier"] is True
+
+
+def test_the_schema_documents_the_fields(client):
+    schema = client.get("/openapi.json").json()["components"]["schemas"]["RecognitionOut"]
+    for name in ("input_outlier", "input_outlier_score"):
+        assert name in schema["properties"] and name in schema["required"]
+        assert "training" in schema["properties"][name]["description"]
+    assert str(int(OUTLIER_THRESHOLD)) in schema["properties"]["input_outlier"]["description"]
+
+
+def test_metrics_count_outliers(client, dataset):
+    x = dataset.samples[:3]
+    client.post("/v1/recognize", json={"samples": x.tolist()})
+    client.post("/v1/recognize", json={"samples": np.zeros_like(x[:2]).tolist()})
+    text = client.get("/metrics").text
+    assert gauge(text, "tactile_input_outliers_total") == 2.0
+    assert gauge(text, "tactile_input_window_samples") == 5.0
+    assert gauge(text, "tactile_input_outlier_rate") == pytest.approx(0.4)
+    assert "# HELP tactile_input_drift " in text
+
+
+def test_metrics_show_a_drifting_channel_over_the_window(tmp_path, base_model):
+    """A window of 8 samples: sound ones, then ones whose channel 3 is dead, then sound ones
+    again; the drift of channel 3 rises and falls with the window, the others stay low (a
+    window of 8 samples: under 2 training IQRs from the middle)."""
+    model, dataset = base_model
+    settings = quick_settings(tmp_path / "d", input_window=8)
+    sound = dataset.samples[:: len(dataset) // 8][:8]  # touches of 8 objects
+    dead = sound.copy()
+    dead[:, 3] = dead[:, 3, :1]  # stuck at its first value
+    with TestClient(create_app(settings, trainer=lambda: base_model)) as c:
+
+        def drift_after(samples: np.ndarray) -> tuple[np.ndarray, float]:
+            for s in samples:  # one touch per request, as a robot sends them
+                assert c.post("/v1/recognize", json={"samples": [s.tolist()]}).status_code == 200
+            text = c.get("/metrics").text
+            drift = [gauge(text, "tactile_input_drift", f'{{channel="{i}"}}') for i in range(32)]
+            return np.array(drift), gauge(text, "tactile_input_outlier_rate")
+
+        drift, rate = drift_after(sound)
+        assert drift.max() < 2.0 and rate == 0.0
+        drift, rate = drift_after(dead)
+        assert drift.argmax() == 3 and drift[3] > 10 and rate == 1.0
+        assert np.delete(drift, 3).max() < 2.0
+        drift, rate = drift_after(sound[:4])  # half the window
+        assert rate == 0.5
+        drift, rate = drift_after(sound[4:])
+        assert drift.max() < 2.0 and rate == 0.0
