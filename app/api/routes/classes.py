@@ -115,8 +115,9 @@ def register_class(
     interpreter: InterpreterDep,
 ) -> ClassCreated:
     """Register a novel class by its attributes (zero-shot), or in words (`description`:
-    the class keeps the text and the values read from it). The class and its job are
-    committed before the 202; poll the job until the class is in the active model.
+    the class keeps the text and the values read from it). Names are unique without regard
+    to case and surrounding spaces (a 409 names the class that has one). The class and its
+    job are committed before the 202; poll the job until the class is in the active model.
     Registering a class whose registration failed again, with the same attributes,
     queues a new attempt. Registering a withdrawn class's name again gives that class
     back (same id) with the new attributes and none of its old samples. With an
