@@ -54,6 +54,28 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--overwrite", action="store_true", help="replace the files of a dataset already in --out"
     )
     export.set_defaults(handler=run_export)
+    bag = actions.add_parser(
+        "bag",
+        help="write ROS 2 bags of the bridge's topics as a biotac: or folder: dataset",
+        description="Read ROS 2 bags (mcap or sqlite3, as 'ros2 bag record' writes them) of "
+        "the tactile_zsl bridge's topics, each the recording of one object, and write them as "
+        "a dataset in --out: raw frames with procedure marks (topics ending in "
+        "tactile_zsl/frames and tactile_zsl/procedure) as a biotac: folder, one trial per "
+        "procedure...end, assembled as the bridge assembles them; samples (tactile_zsl/"
+        "samples) as a folder: dataset, each message a trial. The dataset is loaded back and "
+        "summarised as 'check' does (docs/ROS2.md).",
+    )
+    bag.add_argument(
+        "recordings", nargs="+", metavar="OBJECT=BAG", help="a bag and the object it recorded"
+    )
+    bag.add_argument("--out", required=True, help="folder to write (created if absent)")
+    bag.add_argument(
+        "--procedures",
+        default="tap,hold,squeeze",
+        help="the procedures of a trial, in order, as the marks name them (tap,hold,squeeze)",
+    )
+    bag.add_argument("--overwrite", action="store_true", help="replace files already in --out")
+    bag.set_defaults(handler=run_bag)
 
 
 def _attributes(names: tuple[str, ...], values: Any) -> dict[str, Any]:
@@ -131,4 +153,27 @@ def run_export(args: argparse.Namespace) -> int:
     out = write_folder(dataset, args.out, overwrite=args.overwrite)
     summary = summarize(dataset)
     print(json.dumps({"out": str(out), "spec": f"folder:{out}", **summary}, indent=2))
+    return 0
+
+
+def run_bag(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from app.data import rosbag
+    from app.data.folder import write_folder
+    from app.data.sources import open_dataset
+
+    recordings = [rosbag.Recording.parse(r) for r in args.recordings]
+    procedures = tuple(p.strip() for p in args.procedures.split(",") if p.strip())
+    if not procedures:
+        raise ValueError("--procedures names no procedure")
+    out = Path(args.out)
+    topics, _ = rosbag.read_messages(recordings[0].path, ())
+    if rosbag.find_topic(topics, rosbag.FRAMES) is not None:
+        rosbag.write_biotac_from_bags(recordings, out, procedures, args.overwrite)
+        spec = f"biotac:{out}"
+    else:
+        write_folder(rosbag.samples_from_bags(recordings), out, overwrite=args.overwrite)
+        spec = f"folder:{out}"
+    print(json.dumps({"out": str(out), "spec": spec, **summarize(open_dataset(spec))}, indent=2))
     return 0

@@ -1,0 +1,141 @@
+"""ROS 2 bags to datasets: bags written as ``ros2 bag record`` writes them (the messages the
+robot publishes, serialized by rclpy, in mcap and sqlite3) from the real BioTac pilot
+recordings, read by ``tactile-zsl dataset bag`` into ``biotac:`` and ``folder:`` datasets
+that hold exactly the recorded frames, phases and samples."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rclpy.serialization import serialize_message
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+from std_msgs.msg import String
+
+from app.cli import main
+from app.data.biotac import load_biotac, read_biotac_h5
+from app.data.folder import load_folder
+from app.ros2.arrays import fingers_of, frames_of, multiarray
+
+from .conftest import PILOT
+
+ARRAY, TEXT = "std_msgs/msg/Float32MultiArray", "std_msgs/msg/String"
+NS = "/left_hand/tactile_zsl"
+
+
+def write_bag(path: Path, messages: list[tuple[str, str, int, object]], storage: str) -> Path:
+    """A rosbag2 bag of (topic, type, time in ns, rclpy message)."""
+    typestore = get_typestore(Stores.ROS2_KILTED)
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    with Writer(path, version=9, storage_plugin=plugin) as writer:
+        connections = {}
+        for topic, msgtype, stamp, msg in messages:
+            if topic not in connections:
+                connections[topic] = writer.add_connection(topic, msgtype, typestore=typestore)
+            writer.write(connections[topic], stamp, serialize_message(msg))
+    return path
+
+
+def recorded(trials, marks: bool = True, start_ns: int = 10**18):
+    """The messages of a robot replaying ``trials`` at 100 Hz with procedure marks, and
+    the trial the bag should give for each (frames from 100 before its first phase)."""
+    messages, expected, t = [], [], start_ns
+    for trial in trials:
+        frames = frames_of(trial)
+        phases = trial.phase_bounds()[0]
+        mark_at = {}
+        for (s, e), name in zip(phases, ("tap", "hold", "squeeze"), strict=True):
+            mark_at[s], mark_at[e] = name, "rest"
+        for k, frame in enumerate(frames):
+            if marks and k in mark_at:
+                messages.append((f"{NS}/procedure", TEXT, t - 1000, String(data=mark_at[k])))
+            messages.append((f"{NS}/frames", ARRAY, t, multiarray(frame)))
+            t += 10_000_000
+        if marks:
+            messages.append((f"{NS}/procedure", TEXT, t, String(data="end")))
+        origin = phases[0][0] - 100
+        expected.append(
+            (frames[origin : phases[-1][1]], [[s - origin, e - origin] for s, e in phases])
+        )
+        t += 10**9
+    return messages, expected
+
+
+@pytest.fixture(scope="module")
+def pilot_trials():
+    if not (PILOT / "cork.h5").is_file():
+        pytest.skip(f"BioTac pilot data not found at {PILOT.resolve()}")
+    return {
+        name: [t for _, t in sorted(read_biotac_h5(PILOT / f"{name}.h5").items())[:2]]
+        for name in ("cork", "metal_bar")
+    }
+
+
+def test_bags_of_frames_and_marks_become_a_biotac_dataset_of_those_trials(
+    pilot_trials, tmp_path, capsys
+):
+    bags, expected = [], {}
+    for name, storage in (("cork", "mcap"), ("metal_bar", "sqlite3")):
+        messages, expected[name] = recorded(pilot_trials[name])
+        bags.append(f"{name}={write_bag(tmp_path / name, messages, storage)}")
+    out = tmp_path / "dataset"
+    assert main(["dataset", "bag", "--out", str(out), *bags]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["spec"] == f"biotac:{out}" and summary["trials"] == 4
+    assert summary["object_names"] == ["cork", "metal_bar"]
+
+    dataset = load_biotac(out)
+    for trial, label in zip(dataset.trials, dataset.labels, strict=True):
+        frames, phases = expected[dataset.class_names[label]].pop(0)
+        assert [list(p) for p in trial.phases] == phases
+        for got, want in zip(trial.fingers, fingers_of(frames), strict=True):
+            for channel, values in want.items():
+                assert np.array_equal(getattr(got, channel), values), channel
+
+
+def test_a_bag_of_frames_alone_is_one_trial_whose_phases_are_found(pilot_trials, tmp_path):
+    messages, _ = recorded(pilot_trials["cork"][:1], marks=False)
+    bag = write_bag(tmp_path / "cork_touch", messages, "mcap")
+    out = tmp_path / "dataset"
+    assert main(["dataset", "bag", "--out", str(out), f"cork={bag}"]) == 0
+    (trial,) = load_biotac(out).trials
+    assert trial.phases is None
+    assert np.array_equal(frames_of(trial), frames_of(pilot_trials["cork"][0]))
+    assert trial.phase_bounds() == pilot_trials["cork"][0].phase_bounds()
+
+
+def test_bags_of_samples_become_a_folder_dataset(tmp_path, capsys):
+    rng = np.random.default_rng(0)
+    touches = {name: rng.normal(size=(3, 8, 30)).astype(np.float32) for name in ("cup", "foam")}
+    bags = []
+    for name, x in touches.items():
+        messages = [(f"{NS}/samples", ARRAY, 10**18 + k, multiarray(s)) for k, s in enumerate(x)]
+        messages.append((f"{NS}/samples", ARRAY, 10**18 + 9, multiarray(x[:2])))  # a batch
+        bags.append(f"{name}={write_bag(tmp_path / name, messages, 'sqlite3')}")
+    out = tmp_path / "dataset"
+    assert main(["dataset", "bag", "--out", str(out), *bags]) == 0
+    assert json.loads(capsys.readouterr().out)["spec"] == f"folder:{out}"
+    dataset = load_folder(out)
+    want = np.concatenate([np.concatenate([x, x[:2]]) for x in touches.values()])
+    assert np.array_equal(dataset.samples, want)
+    assert [dataset.class_names[i] for i in dataset.labels] == ["cup"] * 5 + ["foam"] * 5
+    assert len(np.unique(dataset.trials)) == 10
+
+
+def test_bags_that_cannot_become_a_dataset_are_refused_by_name(pilot_trials, tmp_path, capsys):
+    messages, _ = recorded(pilot_trials["cork"][:1])
+    unended = write_bag(tmp_path / "unended", messages[:-1], "mcap")
+    out = str(tmp_path / "out")
+    assert main(["dataset", "bag", "--out", out, f"cork={unended}"]) == 2
+    assert "the last trial has no 'end' mark" in capsys.readouterr().err
+    no_hold = [m for m in messages if not (m[1] == TEXT and m[3].data == "hold")]
+    partial = write_bag(tmp_path / "no_hold", no_hold, "mcap")
+    assert main(["dataset", "bag", "--out", out, f"cork={partial}"]) == 2
+    assert "trial 0 lacks hold" in capsys.readouterr().err
+    assert main(["dataset", "bag", "--out", out, str(unended)]) == 2
+    assert "give each bag as OBJECT=PATH" in capsys.readouterr().err
+    assert main(["dataset", "bag", "--out", out, f"cork={tmp_path / 'nowhere'}"]) == 2
+    assert "no bag there" in capsys.readouterr().err
