@@ -60,6 +60,12 @@ KINDS = (
 )
 #: kinds whose unmentioned attributes are estimated from each split's known classes
 ESTIMATED = {"sentence+estimated": "sentence", "tuned sentence+estimated": "tuned sentence"}
+#: kind -> the kind it is paired against beside ``vector``
+PAIRED = {
+    **ESTIMATED,
+    "sentence+embedding": "sentence",
+    "sentence": "tuned sentence",
+}
 
 
 def read_descriptions(path: Path = DESCRIPTIONS) -> dict[int, dict[str, str]]:
@@ -208,10 +214,14 @@ def summary(per_split: list[dict]) -> dict:
                 "vs_vector_ci95": list(metrics.mean_interval(diff)),
                 "ratio_to_vector": float(np.mean(values) / np.mean(ref)),
             }
-            if kind == "sentence+embedding":  # what the embedding adds to the values read
-                diff = metrics.paired_differences(values, [s["sentence"][fig] for s in per_split])
-                out[kind][fig]["vs_sentence"] = float(np.nanmean(diff))
-                out[kind][fig]["vs_sentence_ci95"] = list(metrics.mean_interval(diff))
+            # paired against the reading they add to: what the embedding or the estimates
+            # add to the values read, and the frozen lexicon against the tuned one
+            base = PAIRED.get(kind)
+            if base is not None:
+                diff = metrics.paired_differences(values, [s[base][fig] for s in per_split])
+                key = "vs_" + base.replace(" ", "_")
+                out[kind][fig][key] = float(np.nanmean(diff))
+                out[kind][fig][key + "_ci95"] = list(metrics.mean_interval(diff))
     return out
 
 
@@ -355,10 +365,17 @@ def main(argv: list[str] | None = None) -> int:
                 f"{f['vs_vector']:+.3f} [{dlo:+.3f}, {dhi:+.3f}]",
             ]
         print(f"| {k} | " + " | ".join(cells) + " |")
-    f = report["summary"]["sentence+embedding"]["zsl"]
-    lo, hi = f["vs_sentence_ci95"]
-    print(f"\nsentence+embedding against sentence, zsl: {f['vs_sentence']:+.3f} "
-          f"[{lo:+.3f}, {hi:+.3f}]")  # fmt: skip
+    print()
+    for kind, base in PAIRED.items():
+        key = "vs_" + base.replace(" ", "_")
+        for fig in ("zsl", "gzsl_h"):
+            f = report["summary"][kind].get(fig)
+            if f is not None:
+                lo, hi = f[key + "_ci95"]
+                print(f"{kind} against {base}, {fig}: {f[key]:+.3f} [{lo:+.3f}, {hi:+.3f}]")
+    t = report["targets"]
+    print(f"zsl by sentence+estimated / by vector: {t['zsl_sentence+estimated_over_vector']:.3f}; "
+          f"agreement: {t['agreement_sentence+estimated']:.3f} ({t['goal']})")  # fmt: skip
     return 0
 
 
