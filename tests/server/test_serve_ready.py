@@ -82,5 +82,6 @@ def warm_before_any_description(url: str, log: Path) -> None:
     wait_for(lambda: WARM in log.read_text(), 120, "the sentence-embedding model loaded")
     text = log.read_text()
     assert text.index(READY) < text.index(WARM)
+    assert "\r" not in text and "Loading weights" not in text, text  # its bars neither
     r = httpx.post(f"{url}/v1/attributes/interpret", json={"text": "soft and squishy"}, timeout=30)
     assert r.status_code == 200 and r.json()["values"], r.text
