@@ -452,7 +452,7 @@ class RecognitionOut(BaseModel):
     )
     input_outlier: bool | None = Field(
         description="The input lies outside what the model was trained on: one of its "
-        "channels' level or spread is more than `input_outlier_score`'s threshold, 2 "
+        "channels' level or spread is more than `input_outlier_score`'s threshold, 2.5 "
         "training IQRs, beyond the training data's range of that channel. A sensor that "
         "reads zeros, saturates, is scaled wrongly or has a dead channel; the answer is "
         "still given, but should not be trusted. Missing procedures do not count. Null "
@@ -463,8 +463,8 @@ class RecognitionOut(BaseModel):
     input_outlier_score: float | None = Field(
         description="How far the input lies outside the training data, in training "
         "interquartile ranges beyond the range of its farthest channel statistic: 0 within "
-        "every channel's training range; above 2 the input is an outlier "
-        "(`input_outlier`). Held-out real samples score above 2 in under 1 % of cases "
+        "every channel's training range; above 2.5 the input is an outlier "
+        "(`input_outlier`). About 1 % of held-out real samples score above it "
         "(docs/results/input-health/). Null where `input_outlier` is.",
         examples=[0.0],
     )

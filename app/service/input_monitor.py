@@ -26,7 +26,7 @@ import threading
 
 import numpy as np
 
-from app.framework.input_health import InputProfile
+from app.framework.input_health import OUTLIER_THRESHOLD, InputProfile
 from app.framework.results import RecognitionBatch
 from app.service.polling import Poller
 
@@ -60,11 +60,12 @@ class InputMonitor:
         statistics = batch.input_statistics
         if statistics is None:
             return
-        # a sample's verdict: its answer's, where each answer is one sample; else its group's
+        # a sample's verdict: its answer's, where each answer is one sample; else its own
+        # (a trial's fingers, fused touches: the answer is an outlier where any sample is)
         flags = (
             batch.input_outlier
             if len(batch.input_outlier) == len(statistics)
-            else np.full(len(statistics), outliers > 0)
+            else profile.score_features(statistics) > OUTLIER_THRESHOLD
         )
         with self._lock:
             if profile is not self._profile:

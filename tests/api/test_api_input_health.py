@@ -55,7 +55,7 @@ def test_the_schema_documents_the_fields(client):
     for name in ("input_outlier", "input_outlier_score"):
         assert name in schema["properties"] and name in schema["required"]
         assert "training" in schema["properties"][name]["description"]
-    assert str(int(OUTLIER_THRESHOLD)) in schema["properties"]["input_outlier"]["description"]
+    assert f"{OUTLIER_THRESHOLD:g} " in schema["properties"]["input_outlier"]["description"]
 
 
 def test_metrics_count_outliers(client, dataset):
@@ -96,3 +96,28 @@ def test_metrics_show_a_drifting_channel_over_the_window(tmp_path, base_model):
         assert rate == 0.5
         drift, rate = drift_after(sound[4:])
         assert drift.max() < 2.0 and rate == 0.0
+
+
+def test_the_window_keeps_each_sample_of_fused_answers(base_model):
+    """Touches fused into one answer: the answer counts once among the outliers, and the
+    window keeps each touch with its own verdict."""
+    from app.service.input_monitor import InputMonitor
+    from app.service.metrics import Metrics
+
+    model, dataset = base_model
+    x = dataset.samples[:3].copy()
+    x[1] = 0.0
+    batch = model.recognize_batch(x, groups=np.array([0, 0, 1]))
+    assert batch.input_outlier.tolist() == [True, False]
+    metrics = Metrics()
+    monitor = InputMonitor(metrics, window=4)
+    monitor.observe(batch, model.input_profile_)
+    monitor.refresh()
+    assert metrics.input_outliers._value.get() == 1.0
+    assert metrics.input_window_samples._value.get() == 3.0
+    assert metrics.input_outlier_rate._value.get() == pytest.approx(1 / 3)
+    # a window of 4 keeps the last 4 samples
+    monitor.observe(model.recognize_batch(dataset.samples[3:6]), model.input_profile_)
+    monitor.refresh()
+    assert metrics.input_window_samples._value.get() == 4.0
+    assert metrics.input_outlier_rate._value.get() == 0.0
