@@ -5,6 +5,7 @@ leaves it and runs beside each other do not hear each other."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import queue
@@ -13,16 +14,45 @@ import subprocess
 import threading
 import time
 import uuid
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import httpx
 import numpy as np
 
-from app.testing.harness import tactile_zsl
+from app.testing.harness import STARTUP_TIMEOUT, free_port, tactile_zsl, wait_for
 
 READY_TIMEOUT = 60.0
+
+
+@contextlib.contextmanager
+def serving(data_dir: Path, env: dict[str, str]) -> Iterator[str]:
+    """A real ``tactile-zsl serve`` (its embedded worker too) on a free port, with ``env``
+    (``TACTILE_DATASET``, ...) over this process's environment; yields its URL."""
+    port = free_port()
+    env = {
+        **os.environ,
+        "TACTILE_DATA_DIR": str(data_dir),
+        "TACTILE_WORKER_POLL_SECONDS": "0.1",
+        "TACTILE_MODEL_POLL_SECONDS": "0.2",
+        **env,
+    }
+    with open(data_dir / "serve.log", "wb") as log:
+        proc = subprocess.Popen(
+            [*tactile_zsl(), "serve", "--processes", "1", "--port", str(port)],
+            env=env,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+        )
+    url = f"http://127.0.0.1:{port}"
+    try:
+        wait_for(lambda: httpx.get(f"{url}/readyz").status_code == 200, STARTUP_TIMEOUT, "serve")
+        yield url
+    finally:
+        proc.terminate()
+        proc.wait(60)
 
 
 def local_ros_environment(domain_id: int | None = None) -> int:
@@ -35,21 +65,49 @@ def local_ros_environment(domain_id: int | None = None) -> int:
 
 
 class RosClient:
-    """rclpy, initialised, and one node spun in a thread: the robot's side."""
+    """rclpy, initialised, and one node spun in a thread: the robot's side. Its callbacks
+    run in that thread, between waits; ``destroy`` hands publishers and subscriptions to it
+    to destroy there (rclpy's executor fails on one destroyed while it waits on it)."""
 
     def __init__(self) -> None:
         import rclpy
-        from rclpy.executors import MultiThreadedExecutor
+        from rclpy.executors import SingleThreadedExecutor
 
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
         self.node = rclpy.create_node(f"robot_{os.getpid()}", context=self.context)
-        self.executor = MultiThreadedExecutor(context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self._thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self._doomed: queue.Queue[Any] = queue.Queue()
+        self._stopping = threading.Event()
+        self._thread = threading.Thread(target=self._spin, daemon=True)
         self._thread.start()
 
+    def _spin(self) -> None:
+        from rclpy.subscription import Subscription
+
+        while not self._stopping.is_set():
+            self.executor.spin_once(timeout_sec=0.02)
+            while not self._doomed.empty():
+                entity, done = self._doomed.get()
+                destroy = (
+                    self.node.destroy_subscription
+                    if isinstance(entity, Subscription)
+                    else self.node.destroy_publisher
+                )
+                destroy(entity)
+                done.set()
+
+    def destroy(self, *entities: Any) -> None:
+        """Destroy publishers and subscriptions of ``node`` in the spinning thread."""
+        for entity in entities:
+            done = threading.Event()
+            self._doomed.put((entity, done))
+            done.wait(10)
+
     def close(self) -> None:
+        self._stopping.set()
+        self._thread.join(10)
         self.executor.shutdown()
         self.node.destroy_node()
         self.context.try_shutdown()
@@ -128,7 +186,10 @@ class BridgeProcess:
                 time.sleep(0.2)  # the answers' reliable match settles on the bridge's side too
                 return
             time.sleep(0.05)
-        raise AssertionError(f"the bridge was not ready in {timeout} s:\n{self.output()}")
+        raise AssertionError(
+            f"the bridge was not ready in {timeout} s (diagnostics {self.diagnostics}):\n"
+            + self.output()
+        )
 
     def publish_samples(self, x: Any) -> None:
         from app.ros2.arrays import multiarray
@@ -176,10 +237,7 @@ class BridgeProcess:
         return self.log.read_text(errors="replace")[-3000:]
 
     def stop(self) -> int:
-        for sub in self._subs:
-            self.client.node.destroy_subscription(sub)
-        for pub in (self.samples, self.frames, self.procedures, self.enrol_pub):
-            self.client.node.destroy_publisher(pub)
+        self.client.destroy(*self._subs, self.samples, self.frames, self.procedures, self.enrol_pub)
         self.popen.terminate()
         try:
             return self.popen.wait(20)
@@ -203,6 +261,17 @@ class BridgeProcess:
                 }
 
 
+@dataclass
+class Replay:
+    """A replayed trial: the trials the bridge should answer (one per procedure), the
+    frames published, and when each procedure's ``rest`` mark was published
+    (``time.perf_counter()``)."""
+
+    expected: list[dict[str, Any]]
+    frames: int
+    completed: list[float]
+
+
 def replay_trial(
     bridge: BridgeProcess,
     trial: Any,
@@ -210,15 +279,14 @@ def replay_trial(
     period: float,
     rest_frames: int = 100,
     pause: float = 0.0,
-) -> tuple[list[dict[str, Any]], int]:
+) -> Replay:
     """Publish a recorded ``RawTrial`` as a robot does: its frames every ``period`` seconds
     (0.01: the pilot's recorded rate), a procedure's name on ``~/procedure`` as its phase
     starts (the phases the project's ``PhaseRule`` finds in finger 0's pdc), ``rest`` as it
     ends, ``end`` after the last; 150 frames of rest lead in (``pause``: seconds of quiet
     around each mark; the bridge places marks by their stamps without it). Returns the
     trial as the bridge assembles it after each procedure (its JSON form, the bridge
-    keeping ``rest_frames`` frames of rest): what it answers; and the number of frames
-    published."""
+    keeping ``rest_frames`` frames of rest): what it answers."""
     from app.ros2.arrays import fingers_of, frames_of
 
     frames = frames_of(trial)
@@ -228,10 +296,13 @@ def replay_trial(
         marks[start], marks[end] = name, "rest"
     first, last = max(0, phases[0][0] - 150), min(len(frames), phases[-1][1] + 10)
     due = time.perf_counter()
+    completed = []  # when each procedure's closing mark went out
     for k in range(first, last):
         if k in marks:
             time.sleep(pause)
             bridge.procedure(marks[k])
+            if marks[k] == "rest":
+                completed.append(time.perf_counter())
             time.sleep(pause)
             due = time.perf_counter()
         bridge.publish_frame(frames[k])
@@ -246,4 +317,4 @@ def replay_trial(
         shifted = [[s - origin, e - origin] if j <= i else None for j, (s, e) in enumerate(phases)]
         fingers = [{k: v.tolist() for k, v in f.items()} for f in fingers_of(frames[origin:end])]
         expected.append({"fingers": fingers, "phases": shifted})
-    return expected, last - first
+    return Replay(expected, last - first, completed)

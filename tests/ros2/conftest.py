@@ -6,10 +6,8 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
 from pathlib import Path
 
-import httpx
 import pytest
 
 from app.testing.ros2 import local_ros_environment
@@ -18,8 +16,7 @@ DOMAIN = local_ros_environment()
 
 rclpy = pytest.importorskip("rclpy", reason="the ros2 extra is not installed")
 
-from app.testing.harness import STARTUP_TIMEOUT, free_port, tactile_zsl, wait_for  # noqa: E402
-from app.testing.ros2 import BridgeProcess, RosClient  # noqa: E402
+from app.testing.ros2 import BridgeProcess, RosClient, serving  # noqa: E402
 from app.testing.service import BEST_PARAMS, QUICK_DATASET  # noqa: E402
 
 PILOT = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "biotac_pilot"
@@ -34,30 +31,9 @@ def ros() -> RosClient:
 
 
 def serve(data_dir: Path, env: dict[str, str]):
-    """A real ``tactile-zsl serve`` (its embedded worker too) on a free port; its URL."""
-    port = free_port()
-    env = {
-        **os.environ,
-        "TACTILE_DATA_DIR": str(data_dir),
-        "TACTILE_WORKER_POLL_SECONDS": "0.1",
-        "TACTILE_MODEL_POLL_SECONDS": "0.2",
-        **env,
-    }
-    log = open(data_dir / "serve.log", "wb")  # noqa: SIM115 - closed with the process
-    proc = subprocess.Popen(
-        [*tactile_zsl(), "serve", "--processes", "1", "--port", str(port)],
-        env=env,
-        stdout=log,
-        stderr=subprocess.STDOUT,
-    )
-    url = f"http://127.0.0.1:{port}"
-    try:
-        wait_for(lambda: httpx.get(f"{url}/readyz").status_code == 200, STARTUP_TIMEOUT, "serve")
+    """A real ``tactile-zsl serve`` (``app.testing.ros2.serving``): yields its URL."""
+    with serving(data_dir, env) as url:
         yield url
-    finally:
-        proc.terminate()
-        proc.wait(60)
-        log.close()
 
 
 @pytest.fixture(scope="module")

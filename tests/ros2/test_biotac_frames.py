@@ -51,10 +51,10 @@ def test_replayed_recordings_get_the_answers_http_gives_after_each_procedure(pil
     bridge = bridge_factory("--url", url)
     published, right = 0, 0
     for name, trial in held.items():
-        expected, n_frames = replay_trial(bridge, trial, procedures, PERIOD)
-        published += n_frames
+        replay = replay_trial(bridge, trial, procedures, PERIOD)
+        published += replay.frames
         answers = [a.body for a in bridge.next_answers(len(procedures), timeout=120)]
-        assert answers == [http_answer(url, t) for t in expected], name
+        assert answers == [http_answer(url, t) for t in replay.expected], name
         used = [a["results"][0]["procedures_used"] for a in answers]
         assert used == [list(procedures[: i + 1]) for i in range(len(procedures))]
         assert answers[0]["results"][0]["next_procedure"] in procedures[1:]
@@ -99,8 +99,8 @@ def test_the_model_file_answers_replayed_frames_as_the_service(
         assert client.sync_model()
     procedures = tuple(httpx.get(f"{url}/v1/models/active").json()["procedures"])
     bridge = bridge_factory("--model", str(model_file))
-    expected, n_frames = replay_trial(bridge, held["glass_bottle"], procedures, PERIOD)
+    replay = replay_trial(bridge, held["glass_bottle"], procedures, PERIOD)
     answers = [a.body for a in bridge.next_answers(len(procedures), timeout=120)]
     bridge.wait_diagnostics(lambda d: d["answered"] == str(len(procedures)))
-    assert bridge.diagnostics["frames"] == str(n_frames), "frames were lost on the way"
-    assert answers == [http_answer(url, t) for t in expected]
+    assert bridge.diagnostics["frames"] == str(replay.frames), "frames were lost on the way"
+    assert answers == [http_answer(url, t) for t in replay.expected]
