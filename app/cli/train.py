@@ -85,7 +85,8 @@ def run(args: argparse.Namespace) -> int:
         f"training '{model.method}' on {dataset.name}: {what}, {dataset.n_classes} classes",
         file=sys.stderr,
     )
-    model.fit(dataset, progress=not args.quiet)
+    # "auto" fits the method its probe chooses and returns that method's model
+    model = model.fit(dataset, progress=not args.quiet)
     digest = bundle.save(model, args.out)
     summary = {k: v for k, v in model.metrics.items() if k != "params"}
     print(json.dumps({"bundle": args.out, "sha256": digest, "metrics": summary}, indent=2))

@@ -21,6 +21,9 @@ METHODS: dict[str, str] = {
     "best": "app.methods.best:BestRecognizer",
     # class prototypes in a discriminant space with contact modes (app/methods/prototypes.py)
     "prototypes": "app.methods.prototypes:PrototypeRecognizer",
+    # whichever of best and prototypes measures better on a probe of the training data
+    # (app/methods/choice.py); its fit returns the winner's recognizer
+    "auto": "app.methods.choice:MethodChoice",
 }
 
 

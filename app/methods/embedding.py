@@ -92,7 +92,8 @@ class SubclassEmbedding:
         whose coordinates give the distances the full model's marginal gives."""
         cov = self.covariance_[np.ix_(features, features)]
         vals, vecs = np.linalg.eigh(cov)
-        proj = vecs / np.sqrt(np.maximum(vals, 1e-12 * vals.max()))
+        # a block of constant features has no variance at all: floor it as a tiny one
+        proj = vecs / np.sqrt(np.maximum(vals, max(1e-12 * vals.max(), 1e-12)))
         return self.center_[features], proj.astype(np.float32)
 
     def get_state(self) -> dict[str, np.ndarray]:

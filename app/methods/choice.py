@@ -1,0 +1,197 @@
+"""``auto``: the method that measures best on a probe of the training data itself.
+
+No candidate holds everywhere (docs/RESULTS.md, docs/BENCHMARKS.md): ``prototypes`` keeps
+shrinkage LDA's accuracy on thousands of simulated objects where ``best``'s forest falls
+apart, and ``best`` detects novel PHAC-2 objects better. So a fit first measures each
+candidate on its own training data and then fits the winner on all of it:
+
+1. up to ``probe_classes`` classes are drawn at random;
+2. each of ``probe_folds`` folds sets apart ``probe_novel`` of them as pseudo-novel objects,
+   whole (the next ones in the draw, so that folds share none while they last), holds out
+   one whole trial of each remaining class, and fits every candidate on the rest;
+3. a candidate scores its held-out trials' known accuracy plus the AUROC of its novelty
+   score between those trials and the pseudo-novel objects' samples, averaged over folds;
+4. the best score wins (ties go to the earlier candidate), and is fitted on everything.
+
+The probe's fits leave out what it does not measure (``best``'s per-procedure models).
+
+The choice rests on measurement, never on the catalogue's size: a probe is as large as the
+catalogue up to ``probe_classes``. Raw trials are featurized once for the probe (by the
+first candidate's featurizer) and the winner is fitted on the raw trials.
+
+``fit`` returns the winner's fitted recognizer (a ``BestRecognizer`` or a
+``PrototypeRecognizer``), not this object: its bundles load as that method, and its
+``metrics["chosen_by"]`` holds the probe's figures (so ``GET /v1/models/active`` shows them).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any, ClassVar
+
+import numpy as np
+from sklearn.metrics import roc_auc_score
+
+from app.data.biotac_dataset import BioTacDataset
+from app.data.dataset import TactileDataset
+from app.framework.errors import FrameworkError
+from app.framework.params import Constraint, Hyperparameters, between, check, integer
+from app.framework.recognizer import TactileRecognizer
+
+log = logging.getLogger(__name__)
+
+CANDIDATES = ("prototypes", "best")
+# parts a probe does not measure, left out of its fits: answers from some procedures
+PROBE_ONLY_PARAMS = {"best": {"by_procedure": False}}
+
+
+class MethodChoice(Hyperparameters):
+    """Chooses among ``candidates`` by a probe of the training data (module docstring).
+
+    Parameters
+    ----------
+    seed : int, default 0
+        Draws the probe's classes and held-out trials, and seeds every candidate.
+    candidates : tuple of str, default ("prototypes", "best")
+        Registered method names, in order of preference on a tie (both perfect, as on
+        objects far apart): ``prototypes`` first, since it fits and serves at a fraction of
+        ``best``'s memory (docs/BENCHMARKS.md).
+    probe_classes : int, default 100
+        At most this many classes enter the probe.
+    probe_novel : float, default 0.2
+        The share of the probe's classes held out whole as pseudo-novel objects.
+    probe_folds : int, default 3
+        Folds, each with its own pseudo-novel classes and one held-out trial per class.
+    n_jobs : int or None, default 1
+        Passed to each candidate.
+    params : dict or None, default None
+        Each candidate's own hyper-parameters, by method name.
+    """
+
+    method: ClassVar[str] = "auto"
+    # every candidate shares these (checked in tests/methods/test_choice.py), so a service
+    # can ask them of this class before its first model exists
+    novel_part_separable: ClassVar[bool] = True
+    learns_classes_from_samples: ClassVar[bool] = True
+    graded_attributes: ClassVar[bool] = True
+    attributes_separable: ClassVar[bool] = True
+    learns_known_incrementally: ClassVar[bool] = True
+
+    _parameter_constraints: ClassVar[dict[str, Constraint]] = {
+        "probe_classes": integer(3),
+        "probe_novel": between(0.0, 1.0),
+        "probe_folds": integer(1),
+    }
+
+    def __init__(
+        self,
+        seed: int = 0,
+        candidates: tuple[str, ...] | list[str] = CANDIDATES,
+        probe_classes: int = 100,
+        probe_novel: float = 0.2,
+        probe_folds: int = 3,
+        n_jobs: int | None = 1,
+        params: dict[str, dict[str, Any]] | None = None,
+    ) -> None:
+        self.seed = seed
+        self.candidates = candidates
+        self.probe_classes = probe_classes
+        self.probe_novel = probe_novel
+        self.probe_folds = probe_folds
+        self.n_jobs = n_jobs
+        self.params = params
+
+    def _validate_params(self) -> None:
+        from app.framework.registry import METHODS
+
+        super()._validate_params()
+        check(len(self.candidates) >= 1, "candidates must name at least one method")
+        unknown = [c for c in self.candidates if c not in METHODS or c == self.method]
+        check(
+            not unknown,
+            f"candidates must be registered methods other than 'auto', got {unknown}",
+        )
+        extra = sorted(set(self.params or {}) - set(self.candidates))
+        check(not extra, f"params name methods that are not candidates: {extra}")
+
+    def _make(self, name: str, probe: bool = False) -> TactileRecognizer:
+        from app.framework.registry import make_method
+
+        params = {**(self.params or {}).get(name, {})}
+        if probe:
+            params.update(PROBE_ONLY_PARAMS.get(name, {}))
+        return make_method(name, seed=self.seed, n_jobs=self.n_jobs, **params)
+
+    def fit(self, dataset: TactileDataset | BioTacDataset, progress: bool = False) -> Any:
+        """The winning candidate fitted on ``dataset`` (see the module docstring)."""
+        self._validate_params()
+        if not isinstance(dataset, TactileDataset | BioTacDataset):
+            raise FrameworkError(
+                "fit takes a TactileDataset (fixed-shape samples) or a BioTacDataset (raw "
+                f"trials), got {type(dataset).__name__}"
+            )
+        t0 = time.perf_counter()
+        scores = self.probe(dataset) if len(self.candidates) > 1 else {}
+        winner = max(self.candidates, key=lambda c: scores.get(c, {}).get("score", 0.0))
+        probe_s = time.perf_counter() - t0
+        log.info("auto: %s chosen by the probe (%s) in %.1f s", winner, scores, probe_s)
+        model = self._make(winner).fit(dataset, progress=progress)
+        choice = {"method": winner, "probe": scores, "probe_seconds": round(probe_s, 1)}
+        model.metrics = {**model.metrics, "chosen_by": choice}  # kept in its bundle
+        return model
+
+    def probe(self, dataset: TactileDataset | BioTacDataset) -> dict[str, dict[str, float]]:
+        """Each candidate's probe figures: ``known_acc``, ``nd_auroc`` and their sum
+        ``score``, means over the folds; empty when the data hold no probe (fewer than
+        three classes with two trials or more)."""
+        if isinstance(dataset, BioTacDataset):
+            from app.framework.tactile_image import featurize_dataset
+
+            featurizer = self._make(self.candidates[0])._new_featurizer().fit(dataset.trials)
+            dataset = featurize_dataset(dataset, featurizer, augment=False)
+        rng = np.random.default_rng(self.seed)
+        n_trials = np.array(
+            [len(np.unique(dataset.trials[dataset.labels == c])) for c in range(dataset.n_classes)]
+        )
+        eligible = np.flatnonzero(n_trials >= 2)
+        if len(eligible) < 3:
+            return {}
+        drawn = rng.permutation(eligible)[: self.probe_classes]
+        n_novel = max(1, int(round(self.probe_novel * len(drawn))))
+        figures: dict[str, list[tuple[float, float]]] = {c: [] for c in self.candidates}
+        for fold in range(self.probe_folds):
+            # each fold sets apart the next classes as novel, so that folds share none
+            novel = np.roll(drawn, -fold * n_novel)[:n_novel]
+            known = np.setdiff1d(drawn, novel)
+            probe = dataset.select_classes(np.r_[known, novel])
+            is_novel = probe.labels >= len(known)
+            held = _one_trial_each(probe.trials, probe.labels, ~is_novel, rng)
+            train = probe.subset(np.flatnonzero(~held & ~is_novel)).select_classes(
+                np.arange(len(known))
+            )
+            x_known, y_known = probe.samples[held], probe.labels[held]
+            x_novel = probe.samples[is_novel]
+            truth = np.r_[np.zeros(len(x_known)), np.ones(len(x_novel))]
+            for name in self.candidates:
+                model = self._make(name, probe=True).fit(train)
+                acc = float(np.mean(model.known_proba(x_known).argmax(axis=1) == y_known))
+                score = np.r_[model.novelty_score(x_known), model.novelty_score(x_novel)]
+                figures[name].append((acc, float(roc_auc_score(truth, score))))
+        out = {}
+        for name, folds in figures.items():
+            acc, auroc = np.mean(folds, axis=0)
+            out[name] = {"known_acc": float(acc), "nd_auroc": float(auroc)}
+            out[name]["score"] = float(acc + auroc)
+        return out
+
+
+def _one_trial_each(
+    trials: np.ndarray, labels: np.ndarray, among: np.ndarray, rng: np.random.Generator
+) -> np.ndarray:
+    """(N,) bool: one whole trial, drawn at random, of each class of the rows ``among``."""
+    held = np.zeros(len(trials), bool)
+    for c in np.unique(labels[among]):
+        rows = among & (labels == c)
+        held |= rows & (trials == rng.choice(np.unique(trials[rows])))
+    return held
