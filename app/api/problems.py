@@ -100,9 +100,10 @@ ABOUT_THE_MODEL = (NotFittedError, UnsupportedOperationError, BundleError)
 
 
 @contextlib.contextmanager
-def blame(field: str) -> Iterator[None]:
+def blame(field: str, one: bool = False) -> Iterator[None]:
     """Framework errors about the request raised inside name ``field`` (e.g. 'sample'
-    rather than 'samples')."""
+    rather than 'samples'). ``one``: the framework saw ``field`` as a batch of one, so its
+    "sample 0" and "cell [0][3][4]" are ``field`` and ``field[3][4]``."""
     try:
         yield
     except FrameworkError as exc:
@@ -110,6 +111,9 @@ def blame(field: str) -> Iterator[None]:
             exc.field = exc.field.replace("trials", field, 1)
         elif not isinstance(exc, ABOUT_THE_MODEL):
             exc.field = field
+        if one and isinstance(exc, NonFiniteInputError) and exc.args:
+            said = str(exc.args[0]).replace("cell [0]", f"cell {field}")
+            exc.args = (re.sub(r"\bsample 0\b", field, said), *exc.args[1:])
         raise
 
 

@@ -85,6 +85,23 @@ def test_one_nan_cell_is_named_by_its_place(client, dataset, body):
     assert "cell [1][3][4] is NaN" in detail and "procedure 'squeeze'" in detail
 
 
+def test_a_nan_cell_in_an_enrolment_is_named_where_it_was_sent(client, dataset, sample):
+    cid = register(client, dataset, "mug")["class"]["id"]
+    sample[3][4] = "__NaN__"
+    one = json.dumps({"sample": sample}).replace('"__NaN__"', "NaN")
+    r = client.post(
+        f"/v1/classes/{cid}/samples", content=one, headers={"content-type": "application/json"}
+    )
+    assert "cell sample[3][4] is NaN" in problem(r, 422, "sample")["detail"]
+    two = {"name": "cup", "attributes": ["soft"], "samples": [dataset.samples[1].tolist(), sample]}
+    raw = json.dumps(two).replace('"__NaN__"', "NaN")
+    r = client.post("/v1/classes", content=raw, headers={"content-type": "application/json"})
+    detail = problem(r, 422, "samples[1]")["detail"]
+    assert detail.startswith(
+        "samples[1]: procedure 'squeeze' is partly missing: cell samples[1][3][4]"
+    )
+
+
 def test_one_null_cell_is_named_as_json_names_it(client, sample):
     sample[3][4] = None
     found = problem(client.post("/v1/recognize", json={"samples": [sample]}), 422)

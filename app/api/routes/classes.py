@@ -243,7 +243,7 @@ def _samples_for(body: ClassCreate, model: LoadedModel) -> list:
     kept = []
     for i, data in enumerate(body.samples):
         x = one_sample(data, rec.input_shape, f"samples[{i}]")
-        with blame(f"samples[{i}]"):
+        with blame(f"samples[{i}]", one=True):
             kept.append(rec.validate_samples(x)[0])
     return kept
 

@@ -169,7 +169,7 @@ def _read_and_recognize(body: SampleCreate, model: LoadedModel) -> tuple[Any, di
         )
     else:
         x = one_sample(body.sample, rec.input_shape)
-        with blame("sample"):
+        with blame("sample", one=True):
             x = rec.validate_samples(x)  # NaN and infinity become a named 422
         kept = x[0]
     answer = rec.recognize_batch(x, groups=np.zeros(len(x), np.int64))
