@@ -9,6 +9,7 @@ import json
 import numpy as np
 import pytest
 
+from app.api.sample_input import explain, is_one_sample
 from tests.service_fixtures import npy, problem, register
 
 NPY = {"Content-Type": "application/x-npy"}
@@ -202,3 +203,23 @@ def test_a_raw_trial_for_a_model_of_samples_is_the_documented_409(client, datase
             "this model takes samples of shape [32, 30] (`input_kind` `samples` of "
             'GET /v1/models/active), not raw BioTac trials: send {"samples": [...]}'
         ), found
+
+
+def test_a_flat_sample_is_told_apart_from_a_list_of_them():
+    """PHAC-2's layout (a flat vector, procedures as slices): the same rules by shape."""
+    shape, procedures = (8,), ("squeeze", "hold")
+    flat, per = [0.1] * 8, [[0.1] * 4, None]
+    assert is_one_sample(flat, shape, procedures) and is_one_sample(per, shape, procedures)
+    assert not is_one_sample([flat], shape, procedures)
+    assert not is_one_sample([per, flat], shape, procedures)
+    squeezed = [0.1] * 4 + [None] * 4
+    assert explain({"sample": squeezed}, shape, procedures, partial=False) == [
+        {
+            "field": "sample",
+            "reason": "enrolment takes whole samples: procedure 'hold' is missing (null); send "
+            "the sample once every procedure is done (POST /v1/recognize answers from some)",
+        }
+    ]
+    (wrap,) = explain({"samples": flat}, shape, procedures, partial=False)
+    assert wrap["reason"].endswith("wrap one sample in a list")
+    assert explain({"samples": flat}, shape, procedures, partial=True) == []  # taken alone
