@@ -237,7 +237,7 @@ def markdown(results: dict[str, Any], images: dict[str, list[str]] | None = None
         "",
         "Published paper: the averages of its tables, on its own protocol (6000 augmented "
         "32 × 30 samples, known test samples sharing trials with training): "
-        + "; ".join(f"`{f}` {PAPER_SOURCE[f]}" for f in PAPER_SOURCE if f in paper)
+        + "; ".join(f"`{f}` {PAPER_SOURCE[f]}" for f in PAPER_SOURCE if f in paper and f in figures)
         + ". The paper's reference [38] (attribute-based haptic ZSL) averages 0.36 (Table VII)."
         if paper
         else "The paper reports no figures for this number of novel objects.",
