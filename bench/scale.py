@@ -140,9 +140,10 @@ def measure(
     sim_peak = _peak_gb()
     _reset_peak()  # the kernel's high-water mark from here on is the fit's
     t = time.perf_counter()
-    model = make_method(method, **{"seed": seed, **(params or {})})
-    model.fit(train, progress=True)
+    # "auto" returns the model of the method its probe chose
+    model = make_method(method, **{"seed": seed, **(params or {})}).fit(train, progress=True)
     out: dict = {"objects": n, "separation": separation, "fit_s": time.perf_counter() - t}
+    out["chosen_by"] = model.metrics.get("chosen_by")
     out["n_jobs"] = getattr(model, "n_jobs", None)
     out["method"], out["modes"] = method, modes
     out["params"] = params or {}
