@@ -229,9 +229,8 @@ class ModelFileBackend:
     def _current(self):
         try:
             rec, fresh = self._file.load()
-            if fresh:
-                self._meta = self._read_meta()
-            self._warning = None
+            if fresh:  # a readable file replaced the one that was not
+                self._meta, self._warning = self._read_meta(), None
             return rec
         except (ValueError, OSError) as exc:  # BundleError is a ValueError
             if self._file.model is None:

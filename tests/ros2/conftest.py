@@ -64,6 +64,8 @@ def bridge_factory(ros, tmp_path):
         return bridge
 
     yield start
-    for bridge in started:
-        assert bridge.popen.poll() is None, f"the bridge died:\n{bridge.output()}"
-        assert bridge.stop() == 0, bridge.output()
+    alive = [bridge.popen.poll() is None for bridge in started]
+    codes = [bridge.stop() for bridge in started]  # every one stopped before any check
+    for bridge, was_alive, code in zip(started, alive, codes, strict=True):
+        assert was_alive, f"the bridge died:\n{bridge.output()}"
+        assert code == 0, bridge.output()

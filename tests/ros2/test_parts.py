@@ -132,3 +132,14 @@ def test_messages_take_their_layout_or_the_models_shape():
     (finger,) = fingers_of(frame[None, :1])
     assert finger["pdc"].tolist() == [0] and finger["electrodes"].shape == (1, 19)
     assert finger["pac"][0].tolist() == list(range(3, 25))
+
+
+def test_the_command_refuses_bad_options_by_name(capsys, tmp_path):
+    from app.cli import main
+
+    assert main(["ros2", "--url", "http://127.0.0.1:9", "--timeout", "0"]) == 2
+    assert "--timeout must be > 0" in capsys.readouterr().err
+    assert main(["ros2", "--model", str(tmp_path / "m.bundle"), "--api-key", "k"]) == 2
+    assert "--api-key goes with --url" in capsys.readouterr().err
+    assert main(["ros2", "--model", str(tmp_path / "absent.bundle")]) == 2
+    assert "no model bundle at" in capsys.readouterr().err

@@ -21,7 +21,7 @@ from app.testing.service import names_of, quick_dataset, unused_vectors
 
 pytestmark = pytest.mark.slow
 
-ERROR = 2  # diagnostic_msgs/DiagnosticStatus.ERROR
+WARN, ERROR = 1, 2  # diagnostic_msgs/DiagnosticStatus levels
 
 
 def http_answer(url: str, samples: np.ndarray) -> dict:
@@ -145,6 +145,16 @@ def test_a_model_file_answers_as_the_service_and_is_read_again_after_an_enrolmen
     assert after.body == http_answer(samples_service, sent[0])
     assert after.body["model_version"] >= job["model_version"]
     offline.wait_diagnostics(lambda d: d["model_version"] == str(after.body["model_version"]))
+
+    # a replacement that cannot be read: the model read before answers on, with a warning
+    broken = tmp_path / "broken.bundle"
+    broken.write_bytes(b"not a bundle")
+    broken.replace(model_file)
+    offline.publish_samples(sent[0])
+    (still,) = offline.next_answers(1)
+    assert still.body == after.body
+    warned = offline.wait_diagnostics(lambda d: d["level"] == WARN)
+    assert "cannot be read" in warned["message"]
 
 
 class SlowProxy:
