@@ -99,8 +99,9 @@ class Settings(BaseSettings):
         0,
         ge=0,
         description="Memory a full refit (a promotion, a withdrawal from the known part) may "
-        "take: it runs in a child process of its own, stopped above this many MiB (its jobs "
-        "fail with that reason; the active model stays). 0: half of the machine's memory.",
+        "take: it runs in a child process of its own whose data segment the kernel caps at "
+        "this many MiB (its jobs fail with that reason; the active model stays). 0: half of "
+        "the container's cgroup memory limit, else of the machine's memory.",
     )
     keep_versions: int = Field(
         100,

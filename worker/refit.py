@@ -169,9 +169,12 @@ def _fit(method: str, params: dict[str, Any], folder: str, memory_limit_bytes: i
         raise SystemExit(1) from None
 
 
-#: how libraries say an allocation was refused (torch's CPU allocator, OpenBLAS, C's errno)
+#: how libraries say an allocation was refused (torch's CPU allocator, OpenBLAS, C's
+#: errno, the dynamic loader mapping a library under a limit its imports do not fit in)
 _MEMORY_WORDS = re.compile(
-    r"can't allocate memory|memory allocation|cannot allocate memory|out of memory", re.I
+    r"can't allocate memory|memory allocation|cannot allocate memory|out of memory"
+    r"|cannot map zero-fill pages|failed to map segment",
+    re.I,
 )
 
 
