@@ -319,7 +319,7 @@ async def validation_exception_handler(
     errors = readable_errors(exc.errors())
     model = request.app.state.service.holder.current
     about_samples = model is not None and any(e["field"].startswith("sample") for e in errors)
-    partial = request.url.path in PARTIAL_SAMPLE_ROUTES
+    partial = request.url.path.endswith(PARTIAL_SAMPLE_ROUTES)  # under any root path
     by_shape = []
     if about_samples:  # a sample's shape says more than the value pydantic stopped at
         from app.api.sample_input import explain  # it raises Problem: imported here
@@ -341,7 +341,7 @@ async def validation_exception_handler(
 
 
 # the routes whose samples may lack procedures (null rows); enrolment takes whole samples
-PARTIAL_SAMPLE_ROUTES = frozenset({"/v1/recognize", "/v1/describe"})
+PARTIAL_SAMPLE_ROUTES = ("/v1/recognize", "/v1/describe")
 
 
 def _within(field: str, named: set[str]) -> bool:
