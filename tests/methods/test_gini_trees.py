@@ -171,11 +171,8 @@ def _proxy(y: np.ndarray, go_left: np.ndarray, k: int) -> float:
     """``sum_c L_c^2 / n_L + sum_c R_c^2 / n_R``, which orders splits as their Gini gain
     does, in the grower's floating-point operations: splits of equal gain (common on small
     data) are then told apart by the same rounding, so the same one is kept."""
-    counts_left = np.bincount(y[go_left], minlength=k)
-    counts_right = np.bincount(y[~go_left], minlength=k)
-    return int((counts_left**2).sum()) / int(go_left.sum()) + int((counts_right**2).sum()) / int(
-        (~go_left).sum()
-    )
+    left, right = (np.bincount(y[side], minlength=k) for side in (go_left, ~go_left))
+    return int((left**2).sum()) / int(left.sum()) + int((right**2).sum()) / int(right.sum())
 
 
 def _reference_tree(x, y, k, tries, seed, small_node):
