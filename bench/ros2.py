@@ -216,6 +216,17 @@ def plot(report: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def write(report: dict, out: Path) -> None:
+    """``ros2.json`` (stamped with the machine and the commit), the raw latencies beside it,
+    and ``ros2.png``."""
+    stamped = {k: v for k, v in report.items() if k != "raw"}
+    stamped["machine"] = machine()
+    stamped["note"] = "measured on a machine shared with other work: compare paths of one run"
+    (out / "ros2.json").write_text(json.dumps(stamped, indent=2))
+    (out / "ros2_raw_latencies.json").write_text(json.dumps(report["raw"]))
+    plot(report, out / "ros2.png")
+
+
 def parse(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="bench.ros2", description=__doc__.split("\n\n")[0])
     p.add_argument("--dataset", default="simulated", help="the service's dataset spec")
@@ -264,17 +275,13 @@ def main(argv: list[str] | None = None) -> int:
                     print(mode, json.dumps(result))
                 report["raw"]["http"] = http_latencies(url, samples)
                 report["http"] = percentiles(report["raw"]["http"])
+            write(report, out)  # what is measured so far stays if the pilot part fails
             if args.pilot_trials:
                 report["pilot"] = pilot(client, work, args.pilot_trials)
                 print("pilot", json.dumps(report["pilot"]))
+                write(report, out)
     finally:
         client.close()
-    report["machine"] = machine()
-    report["note"] = "measured on a machine shared with other work: compare paths of one run"
-    plot(report, out / "ros2.png")
-    raw = report.pop("raw")
-    (out / "ros2.json").write_text(json.dumps(report, indent=2))
-    (out / "ros2_raw_latencies.json").write_text(json.dumps(raw))
     print("| path | p50 ms | p99 ms |\n|---|---|---|")
     print(f"| HTTP | {report['http']['p50_ms']} | {report['http']['p99_ms']} |")
     for mode in ("service", "in_process"):

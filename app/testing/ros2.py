@@ -47,8 +47,15 @@ def serving(data_dir: Path, env: dict[str, str]) -> Iterator[str]:
             stderr=subprocess.STDOUT,
         )
     url = f"http://127.0.0.1:{port}"
+
+    def ready() -> bool:
+        if proc.poll() is not None:
+            tail = (data_dir / "serve.log").read_text(errors="replace")[-3000:]
+            raise AssertionError(f"serve exited with {proc.returncode}:\n{tail}")
+        return httpx.get(f"{url}/readyz").status_code == 200
+
     try:
-        wait_for(lambda: httpx.get(f"{url}/readyz").status_code == 200, STARTUP_TIMEOUT, "serve")
+        wait_for(ready, STARTUP_TIMEOUT, f"serve (its log: {data_dir / 'serve.log'})")
         yield url
     finally:
         proc.terminate()
