@@ -144,14 +144,17 @@ class MarkOrder:
 
     A mark that comes before the frames published after it waits for the first of them;
     one that comes after such frames is placed ``late`` frames back. Marks wait at most
-    ``wait`` seconds of no frames at all (a sensor that stopped streaming). Stamps are the
-    publishers' clocks: a mark and its frames should come from one host's clock."""
+    ``wait`` seconds of no frames at all (a sensor that stopped streaming), seen at two
+    flushes in a row with no frame between: a bridge stalled that long (a busy process)
+    finds frames waiting, and the first flush after the stall runs before them. Stamps are
+    the publishers' clocks: a mark and its frames should come from one host's clock."""
 
     def __init__(self, wait: float = 1.0, keep: int = 10_000) -> None:
         self.wait = wait
         self._stamps: deque[int] = deque(maxlen=keep)  # of the frames received last
         self._pending: deque[tuple[int, str]] = deque()
         self._last_frame = 0.0
+        self._armed = False  # the last flush found the marks due: the next one follows them
 
     def frame(self, stamp: int, now: float) -> list[str]:
         """The marks due before a frame stamped ``stamp``, in order; it is recorded."""
@@ -159,7 +162,7 @@ class MarkOrder:
         while self._pending and self._pending[0][0] <= stamp:
             due.append(self._pending.popleft()[1])
         self._stamps.append(stamp)
-        self._last_frame = now
+        self._last_frame, self._armed = now, False
         return due
 
     def mark(self, name: str, stamp: int) -> list[tuple[str, int]]:
@@ -175,9 +178,15 @@ class MarkOrder:
         return [(name, late)]
 
     def flush(self, now: float) -> list[str]:
-        """Marks that waited ``wait`` seconds without a frame: follow them as they are."""
+        """Marks that waited ``wait`` seconds without a frame, at this flush and the one
+        before with no frame between: follow them as they are."""
         if not self._pending or now - self._last_frame < self.wait:
+            self._armed = False
             return []
+        if not self._armed:
+            self._armed = True
+            return []
+        self._armed = False
         due = [name for _, name in self._pending]
         self._pending.clear()
         return due

@@ -98,7 +98,11 @@ def test_a_mark_is_placed_among_frames_by_its_stamp_whichever_comes_first():
     assert order.mark("rest", 19) == [("rest", 2)]  # two frames overtook it
     assert order.mark("end", 30) == []
     assert order.flush(now=0.5) == []  # frames may still come
-    assert order.flush(now=1.5) == ["end"]
+    assert order.flush(now=1.5) == []  # a stalled bridge may find frames waiting: once more
+    assert order.frame(25, now=1.6) == []  # it did: not yet, and the wait starts again
+    assert order.flush(now=1.7) == []
+    assert order.flush(now=2.7) == []
+    assert order.flush(now=2.8) == ["end"]
 
     a = TrialAssembler(rest_frames=5)
     for f in frames(4):
