@@ -4,6 +4,8 @@ or the recognizer interface. Only the standard library may be imported here."""
 
 from __future__ import annotations
 
-# the service uses the method that measured better on the mixed known/novel
-# figure (gzsl_h, docs/RESULTS.md); the paper pipeline stays selectable as "paper".
-DEFAULT_METHOD = "best"
+# the service fits whichever of best and prototypes measures better on a probe of its own
+# training data (app/methods/choice.py): best's figures on PHAC-2, shrinkage LDA's on
+# thousands of simulated objects (docs/RESULTS.md, docs/BENCHMARKS.md); each method, and
+# the paper pipeline ("paper"), stays selectable by name.
+DEFAULT_METHOD = "auto"

@@ -66,7 +66,7 @@ def test_methods_of_0_1_attributes_refuse_graded_values_before_training(method):
 
 def test_the_methods_that_take_graded_values_are_named():
     graded = sorted(m for m in METHODS if method_class(m).graded_attributes)
-    assert graded == ["best", "paper", "paper-fgmm", "prototypes"]
+    assert graded == ["auto", "best", "paper", "paper-fgmm", "prototypes"]
 
 
 def test_evaluation_splits_refuse_datasets_without_attributes():

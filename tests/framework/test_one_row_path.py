@@ -34,6 +34,8 @@ FAST = {
     "dap": dict(n_estimators=30, C=0.1, n_jobs=1),
     "eszsl": dict(n_estimators=30, n_jobs=1),
     "prototypes": {},
+    # the model of the method its probe chose
+    "auto": dict(probe_folds=1, params={"best": dict(n_estimators=40, tuning_rounds=1)}),
 }
 
 
