@@ -74,6 +74,8 @@ def test_recognize_refuses_samples_for_a_raw_trial_model_and_trials_for_a_sample
                 "train",
                 "--dataset",
                 "simulated:6",
+                "--method",
+                "best",
                 "--param",
                 "n_estimators=20",
                 "--param",
