@@ -28,7 +28,7 @@ def tracked_changes() -> str:
 
 def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
     done = run("--sizes", "12,24,40", "--max", "24", "--novel", "12", "--trials", "4",
-               "--separation", "phac2", "--param", "procedure_estimators=7",
+               "--separation", "phac2", "--method", "best", "--param", "procedure_estimators=7",
                "--out", str(tmp_path))  # fmt: skip
     assert done.returncode == 0, done.stderr[-3000:]
     report = json.loads((tmp_path / "scale.json").read_text())
