@@ -5,8 +5,6 @@ object from two raw trials and recognising its other trials once the job succeed
 
 from __future__ import annotations
 
-import os
-import subprocess
 from pathlib import Path
 
 import httpx
@@ -14,7 +12,7 @@ import numpy as np
 import pytest
 
 from app.data.biotac import read_biotac_h5, write_biotac_h5
-from app.testing.harness import STARTUP_TIMEOUT, free_port, tactile_zsl, wait_for
+from app.testing.harness import serving
 
 pytestmark = pytest.mark.slow
 
@@ -47,28 +45,8 @@ def pilot_split(tmp_path_factory):
 def service(pilot_split, tmp_path_factory):
     folder = pilot_split[0]
     data_dir = tmp_path_factory.mktemp("biotac-service")
-    port = free_port()
-    env = {
-        **os.environ,
-        "TACTILE_DATA_DIR": str(data_dir),
-        "TACTILE_DATASET": f"biotac:{folder}",
-        "TACTILE_WORKER_POLL_SECONDS": "0.1",
-        "TACTILE_MODEL_POLL_SECONDS": "0.2",
-    }
-    with open(data_dir / "serve.log", "wb") as log:
-        proc = subprocess.Popen(
-            [*tactile_zsl(), "serve", "--processes", "1", "--port", str(port)],
-            env=env,
-            stdout=log,
-            stderr=subprocess.STDOUT,
-        )
-    url = f"http://127.0.0.1:{port}"
-    try:
-        wait_for(lambda: httpx.get(f"{url}/readyz").status_code == 200, STARTUP_TIMEOUT, "serve")
+    with serving(data_dir, {"TACTILE_DATASET": f"biotac:{folder}"}) as url:
         yield url
-    finally:
-        proc.terminate()
-        proc.wait(60)
 
 
 def recognize(url: str, trials: list) -> list[str]:

@@ -3,6 +3,7 @@ for the reliability tests and the bench/ scripts: start, SIGKILL, restart, inspe
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import random
@@ -11,6 +12,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -177,6 +179,41 @@ class Cluster:
     @property
     def sqlalchemy_url(self) -> str:
         return self.database_url or f"sqlite:///{(self.data_dir / 'tactile.db').resolve()}"
+
+
+@contextlib.contextmanager
+def serving(data_dir: Path, env: dict[str, str]) -> Iterator[str]:
+    """A real ``tactile-zsl serve`` (its embedded worker too) on a free port, with ``env``
+    (``TACTILE_DATASET``, ...) over this process's environment; yields its URL."""
+    port = free_port()
+    env = {
+        **os.environ,
+        "TACTILE_DATA_DIR": str(data_dir),
+        "TACTILE_WORKER_POLL_SECONDS": "0.1",
+        "TACTILE_MODEL_POLL_SECONDS": "0.2",
+        **env,
+    }
+    with open(data_dir / "serve.log", "wb") as log:
+        proc = subprocess.Popen(
+            [*tactile_zsl(), "serve", "--processes", "1", "--port", str(port)],
+            env=env,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+        )
+    url = f"http://127.0.0.1:{port}"
+
+    def ready() -> bool:
+        if proc.poll() is not None:
+            tail = (data_dir / "serve.log").read_text(errors="replace")[-3000:]
+            raise AssertionError(f"serve exited with {proc.returncode}:\n{tail}")
+        return httpx.get(f"{url}/readyz").status_code == 200
+
+    try:
+        wait_for(ready, STARTUP_TIMEOUT, f"serve (its log: {data_dir / 'serve.log'})")
+        yield url
+    finally:
+        proc.terminate()
+        proc.wait(60)
 
 
 def wait_jobs_settled(url: str, timeout: float) -> dict[str, int]:

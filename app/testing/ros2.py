@@ -5,7 +5,6 @@ leaves it and runs beside each other do not hear each other."""
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import queue
@@ -14,52 +13,17 @@ import subprocess
 import threading
 import time
 import uuid
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import httpx
 import numpy as np
 
-from app.testing.harness import STARTUP_TIMEOUT, free_port, tactile_zsl, wait_for
+from app.testing.harness import serving as serving  # re-exported for tests/ros2
+from app.testing.harness import tactile_zsl
 
 READY_TIMEOUT = 60.0
-
-
-@contextlib.contextmanager
-def serving(data_dir: Path, env: dict[str, str]) -> Iterator[str]:
-    """A real ``tactile-zsl serve`` (its embedded worker too) on a free port, with ``env``
-    (``TACTILE_DATASET``, ...) over this process's environment; yields its URL."""
-    port = free_port()
-    env = {
-        **os.environ,
-        "TACTILE_DATA_DIR": str(data_dir),
-        "TACTILE_WORKER_POLL_SECONDS": "0.1",
-        "TACTILE_MODEL_POLL_SECONDS": "0.2",
-        **env,
-    }
-    with open(data_dir / "serve.log", "wb") as log:
-        proc = subprocess.Popen(
-            [*tactile_zsl(), "serve", "--processes", "1", "--port", str(port)],
-            env=env,
-            stdout=log,
-            stderr=subprocess.STDOUT,
-        )
-    url = f"http://127.0.0.1:{port}"
-
-    def ready() -> bool:
-        if proc.poll() is not None:
-            tail = (data_dir / "serve.log").read_text(errors="replace")[-3000:]
-            raise AssertionError(f"serve exited with {proc.returncode}:\n{tail}")
-        return httpx.get(f"{url}/readyz").status_code == 200
-
-    try:
-        wait_for(ready, STARTUP_TIMEOUT, f"serve (its log: {data_dir / 'serve.log'})")
-        yield url
-    finally:
-        proc.terminate()
-        proc.wait(60)
 
 
 def local_ros_environment(domain_id: int | None = None) -> int:
