@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -184,27 +185,29 @@ class ModelFileBackend:
     def recognize(self, samples: np.ndarray) -> dict[str, Any]:
         from app.api.routes.recognize import Body, takes_kind
 
-        with self._lock:
-            rec = self._current()
-            try:
-                takes_kind(rec, Body(samples, None, 1))
-                with blame("samples"):
-                    batch = rec.recognize_batch(samples, self.top_k)
-            except Problem as exc:
-                return problem_body(exc.status_code, str(exc.detail), RECOGNIZE, exc.errors)
-            except FrameworkError as exc:
-                return framework_problem(exc, RECOGNIZE)
-            return self._answer(batch)
+        def run(rec: Any) -> Any:
+            takes_kind(rec, Body(samples, None, 1))
+            with blame("samples"):
+                return rec.recognize_batch(samples, self.top_k)
+
+        return self._answered(run)
 
     def recognize_trial(self, trial: dict[str, Any]) -> dict[str, Any]:
         from app.api import trials
 
+        def run(rec: Any) -> Any:
+            parsed = trials.one(trial, "trials", 0)
+            with blame("trials"):
+                return rec.recognize_trials([parsed], self.top_k)
+
+        return self._answered(run)
+
+    def _answered(self, run: Callable[[Any], Any]) -> dict[str, Any]:
+        """``run(model)``'s answer as HTTP's body, or the problem HTTP would give."""
         with self._lock:
             rec = self._current()
             try:
-                parsed = trials.one(trial, "trials", 0)
-                with blame("trials"):
-                    batch = rec.recognize_trials([parsed], self.top_k)
+                batch = run(rec)
             except Problem as exc:
                 return problem_body(exc.status_code, str(exc.detail), RECOGNIZE, exc.errors)
             except FrameworkError as exc:
