@@ -169,7 +169,10 @@ class Service:
             if self.popen.poll() is not None:
                 raise RuntimeError(f"serve exited with {self.popen.returncode}:\n{self.tail()}")
             try:
-                if httpx.get(f"{self.url}/readyz", timeout=2).status_code == 200:
+                # ready once every API process serves: the first to answer /readyz may come
+                # before the others, which "serving on … with N API processes" waits for
+                ready = httpx.get(f"{self.url}/readyz", timeout=2).status_code == 200
+                if ready and self.processes() is not None:
                     return
             except httpx.TransportError:
                 pass

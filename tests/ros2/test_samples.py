@@ -234,7 +234,9 @@ def test_a_full_queue_answers_each_input_in_its_place(samples_service, bridge_fa
     refused = [i for i, a in enumerate(answers) if a.get("status") == 503]
     kept = [i for i in range(len(samples)) if i not in refused]
     assert len(kept) >= 2 and len(refused) >= 4, answers
-    assert max(kept) < min(refused), "the refused are the inputs that came to a full queue"
+    # the first inputs fill the queue; later ones are refused while it is full, and one may
+    # find a place freed meanwhile (the proxy delays each answer by 0.5 s, not forever)
+    assert kept[:2] == [0, 1], answers
     assert all("queue of 2 inputs was full" in answers[i]["detail"] for i in refused)
     for i in kept:
         assert answers[i] == http_answer(samples_service, samples[i])
