@@ -35,7 +35,8 @@ async def describe(
     registered: a person checks the `suggested` attributes and registers the object with
     them; with `same_object`, several touches of the object give one description too. Takes
     the samples (or raw trials: one description per trial) as `POST /v1/recognize` does.
-    Only methods that predict attributes from a sample answer (`best` does; otherwise 409).
+    Only methods that predict attributes from a sample answer (`best` and `prototypes`, either
+    of which the default `auto` serves, do; otherwise 409).
     On objects the model was never trained on these predictions are far from certain:
     docs/RESULTS.md measures them."""
     model, service = recognizing

@@ -250,7 +250,7 @@ def _valid(adapter: TypeAdapter[Any], raw: str, otherwise: Any) -> Any:
 def takes_kind(rec: TactileRecognizer, body: Body) -> None:
     """A 409 for samples sent to a model of raw trials: its featurizer makes its samples,
     and answers must come from what the robot touched, not from images made elsewhere.
-    (Trials sent to a model of samples are refused by the model itself.)"""
+    (``read_body`` refuses trials sent to a model of samples, before reading them.)"""
     if body.samples is not None and rec.input_kind == RAW_TRIALS:
         raise Problem(
             409,
