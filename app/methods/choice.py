@@ -116,12 +116,15 @@ class MethodChoice(Hyperparameters):
         check(not extra, f"params name methods that are not candidates: {extra}")
 
     def _make(self, name: str, probe: bool = False) -> TactileRecognizer:
-        from app.framework.registry import make_method
+        from app.framework.registry import method_class
 
-        params = {**(self.params or {}).get(name, {})}
+        cls = method_class(name)
+        shared = {"seed": self.seed, "n_jobs": self.n_jobs}  # where the method takes them
+        params = {k: v for k, v in shared.items() if k in cls._get_param_names()}
+        params.update((self.params or {}).get(name, {}))
         if probe:
             params.update(PROBE_ONLY_PARAMS.get(name, {}))
-        return make_method(name, seed=self.seed, n_jobs=self.n_jobs, **params)
+        return cls(**params)
 
     def fit(self, dataset: TactileDataset | BioTacDataset, progress: bool = False) -> Any:
         """The winning candidate fitted on ``dataset`` (see the module docstring)."""

@@ -108,3 +108,11 @@ def test_on_phac2_the_probe_measures_the_forest_ahead(phac2_path):
     probe = MethodChoice(seed=0, probe_folds=2).probe(dataset)
     assert probe["best"]["score"] > probe["prototypes"]["score"], probe
     assert MethodChoice(seed=0, probe_folds=2).probe(dataset) == probe  # by its seed
+
+
+def test_a_candidate_without_threads_gets_only_the_settings_it_takes():
+    """``paper`` takes a seed but no ``n_jobs``: the choice passes it what it has."""
+    model = MethodChoice(candidates=("paper",), params={"paper": {"encoder_epochs": 1}})._make(
+        "paper"
+    )
+    assert model.get_params()["seed"] == 0 and model.get_params()["encoder_epochs"] == 1
