@@ -98,6 +98,7 @@ class TactileClient:
         same_object: bool = False,
         target_confidence: float | None = None,
         min_model_version: int | None = None,
+        known_kept: float | None = None,
     ) -> dict[str, Any]:
         """Recognise one sample or a batch (N, *input shape); with ``same_object``, the
         samples are touches of one object and get one answer, their evidence fused. A
@@ -105,11 +106,15 @@ class TactileClient:
         procedures it used and ``next_procedure``, null once its probability reaches
         ``target_confidence`` (None: the model's default). ``min_model_version``: the
         ``model_version`` of an enrolment job waited for, so that the answer includes it
-        whichever API process gives it (offline, the model file answers as it is)."""
+        whichever API process gives it (offline, the model file answers as it is).
+        ``known_kept``: the novelty operating point, the share of known touches the
+        threshold kept at fit (None: the service's, else the model's own)."""
         x = np.asarray(samples, dtype=np.float32)
         params: dict[str, Any] = {"same_object": same_object}
         if target_confidence is not None:
             params["target_confidence"] = target_confidence
+        if known_kept is not None:
+            params["known_kept"] = known_kept
         if min_model_version is not None:
             params["min_model_version"] = min_model_version
         try:
@@ -125,7 +130,7 @@ class TactileClient:
             x = model.validate_samples(x, partial=True)
             groups = np.zeros(len(x), np.int64) if same_object else None
             target = TARGET_CONFIDENCE if target_confidence is None else target_confidence
-            batch = model.recognize_batch(x, self.offline_top_k, groups, target)
+            batch = model.recognize_batch(x, self.offline_top_k, groups, target, known_kept)
             return self._offline_answer(batch, meta)
         return {**r.json(), "source": "service"}
 

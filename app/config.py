@@ -73,6 +73,16 @@ class Settings(BaseSettings):
     )
     top_k: int = Field(3, ge=1, description="Scores returned per recognised sample.")
     batch_limit: int = Field(1024, ge=1, description="Most samples in one recognize request.")
+    known_kept: float | None = Field(
+        None,
+        gt=0,
+        lt=1,
+        description="The novelty operating point of every answer: the threshold that kept "
+        "this share of held-out known touches known when the model was fitted (read off its "
+        "calibration curve); a request's own `known_kept` overrides it. Unset, each model "
+        "answers at its own threshold: 0.90 of known touches kept for `prototypes`, the "
+        "paper's balanced point (Sect. VI-B) for `best`.",
+    )
     input_window: int = Field(
         256,
         ge=1,

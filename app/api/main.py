@@ -60,7 +60,11 @@ def create_app(
     keys = KeyRing(sessions, settings.api_keys, settings.api_key_refresh_seconds)
     job_metrics = JobMetricsPoller(metrics, sessions) if process_index == 0 else None
     recognition = RecognitionService(
-        metrics, settings.top_k, settings.batch_limit, input_window=settings.input_window
+        metrics,
+        settings.top_k,
+        settings.batch_limit,
+        input_window=settings.input_window,
+        known_kept=settings.known_kept,
     )
     # any process may answer a scrape: each computes its input gauges on a timer
     input_drift = InputDriftPoller(recognition.inputs) if process_index is not None else None

@@ -321,11 +321,13 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
             )
         return trial_images(self.featurizer_, trials)
 
-    def recognize_trials(self, trials: Any, top_k: int = 3) -> RecognitionBatch:
+    def recognize_trials(
+        self, trials: Any, top_k: int = 3, known_kept: float | None = None
+    ) -> RecognitionBatch:
         """One answer per raw trial, from the images of all its fingers together (the
         ``groups`` fusion of ``recognize_batch``). Errors as ``trial_samples``."""
         images, index = self.trial_samples(trials)
-        return self.recognize_batch(images, top_k, groups=index)
+        return self.recognize_batch(images, top_k, groups=index, known_kept=known_kept)
 
     def attribute_proba_trials(self, trials: Any) -> np.ndarray:
         """(n_trials, M): ``attribute_proba`` of each trial, the mean over its fingers."""
@@ -458,10 +460,11 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
         top_k: int = 3,
         groups: np.ndarray | None = None,
         target_confidence: float = TARGET_CONFIDENCE,
+        known_kept: float | None = None,
     ) -> list[Recognition]:
         """Fig. 1: ND(x) routes each sample (or each group, see ``recognize_batch``) to
         FC_Y or FC_Z."""
-        return self.recognize_batch(samples, top_k, groups, target_confidence).answers()
+        return self.recognize_batch(samples, top_k, groups, target_confidence, known_kept).answers()
 
     def recognize_batch(
         self,
@@ -469,6 +472,7 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
         top_k: int = 3,
         groups: np.ndarray | None = None,
         target_confidence: float = TARGET_CONFIDENCE,
+        known_kept: float | None = None,
     ) -> RecognitionBatch:
         """``recognize`` as arrays (the service's hot path): one row per sample.
 
@@ -484,9 +488,16 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
         one to do next: None once its top probability reaches ``target_confidence`` or no
         procedure is left (``next_procedure``), and never before ``MIN_PROCEDURES`` were done
         where the model has that many.
+
+        ``known_kept`` routes by another operating point than the model's own threshold:
+        the threshold that kept that share of held-out known samples known when the model
+        was fitted (``threshold_keeping``).
         """
         if not 0.0 < float(target_confidence) <= 1.0:
             raise FrameworkError(f"target_confidence must lie in (0, 1], got {target_confidence}")
+        threshold = (
+            self.novelty_threshold if known_kept is None else self.threshold_keeping(known_kept)
+        )
         x, used = self._checked(samples)
         if used is None:
             scores, known_p, novel_p = self._all_scores(x)
@@ -498,7 +509,7 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
             scores, known_p, novel_p = fuse_groups(g, scores, known_p, novel_p)
             if used is not None:
                 used = group_mean(used.astype(np.float64), g, int(g.max()) + 1) > 0
-        batch = self._batch(scores, known_p, novel_p, top_k)
+        batch = self._batch(scores, known_p, novel_p, top_k, threshold)
         self._add_input_health(batch, x, g)
         if used is None:
             return self._complete(batch)
@@ -509,6 +520,20 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
             next_procedure=self._next_procedures(known_p, used, ask),
         )
         return batch
+
+    def threshold_keeping(self, known_kept: float) -> float:
+        """The novelty threshold that kept the share ``known_kept`` (in (0, 1)) of held-out
+        known samples known when the model was fitted, read off its calibration curve
+        (``novelty_tuning``); a sample scoring above it is novel. The model's own
+        ``novelty_threshold`` is one point of the same curve."""
+        if not 0.0 < float(known_kept) < 1.0:
+            raise FrameworkError(f"known_kept must lie in (0, 1), got {known_kept}")
+        if self.novelty_tuning is None:
+            raise UnsupportedOperationError(
+                f"this {type(self).__name__} holds no calibration of its novelty scores: "
+                "it answers at its own threshold only (known_kept cannot move it)"
+            )
+        return self.novelty_tuning.threshold_keeping(float(known_kept))
 
     def input_outlier_score(self, samples: Any) -> np.ndarray:
         """(N,) how far each sample lies outside the training data's channel ranges, in
@@ -557,13 +582,15 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
         known_p: np.ndarray,
         novel_p: np.ndarray | None,
         top_k: int,
+        threshold: float | None = None,
     ) -> RecognitionBatch:
-        """The answers from the scores: route each row by its novelty score, rank the top
-        k of the classifier that answers it. One row takes ``_one_row``: the same bits,
-        without the machinery for many rows (about half the cost for one sample)."""
+        """The answers from the scores: route each row by its novelty score (novel above
+        ``threshold``, by default the model's), rank the top k of the classifier that
+        answers it. One row takes ``_one_row``: the same bits, without the machinery for
+        many rows (about half the cost for one sample)."""
         if len(scores) == 1:
-            return self._one_row(scores, known_p, novel_p, top_k)
-        return self._rows(scores, known_p, novel_p, top_k)
+            return self._one_row(scores, known_p, novel_p, top_k, threshold)
+        return self._rows(scores, known_p, novel_p, top_k, threshold)
 
     def _one_row(
         self,
@@ -571,6 +598,7 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
         known_p: np.ndarray,
         novel_p: np.ndarray | None,
         top_k: int,
+        threshold: float | None = None,
     ) -> RecognitionBatch:
         """``_rows`` for a batch of one row, bit for bit (``one_row_batch``)."""
         reg = self.registry
@@ -579,7 +607,7 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
             known_p,
             novel_p,
             top_k,
-            self.novelty_threshold,
+            self.novelty_threshold if threshold is None else threshold,
             reg.known_names,
             reg.novel_names,
         )
@@ -590,6 +618,7 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
         known_p: np.ndarray,
         novel_p: np.ndarray | None,
         top_k: int,
+        threshold: float | None = None,
     ) -> RecognitionBatch:
         """``_batch`` for any number of rows (``rows_batch``; the reference ``_one_row``
         must match)."""
@@ -599,7 +628,7 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
             known_p,
             novel_p,
             top_k,
-            self.novelty_threshold,
+            self.novelty_threshold if threshold is None else threshold,
             reg.known_names,
             reg.novel_names,
         )

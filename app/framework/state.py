@@ -25,6 +25,13 @@ class NoveltyTuning:
     val_novel_at_threshold: float
     auroc: float = float("nan")
 
+    def threshold_keeping(self, kept: float) -> float:
+        """The lowest threshold of the curve that keeps at least the share ``kept`` of the
+        held-out known samples known (the highest where none keeps that many): an operating
+        point read off the curve, to its resolution (``thresholds``: up to 200 quantiles)."""
+        i = int(np.searchsorted(self.known_kept, kept, side="left"))
+        return float(self.thresholds[min(i, len(self.thresholds) - 1)])
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "thresholds": self.thresholds.tolist(),

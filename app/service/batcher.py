@@ -28,6 +28,7 @@ class _Request:
     model: LoadedModel
     samples: np.ndarray  # validated (n, *input_shape)
     top_k: int
+    known_kept: float | None  # the operating point the answer is routed by (None: the model's)
     answer: asyncio.Future
 
 
@@ -38,10 +39,10 @@ class RecognitionBatcher:
         self._draining = False  # only touched on the event loop: no lock needed
 
     async def recognize(
-        self, model: LoadedModel, samples: np.ndarray, top_k: int
+        self, model: LoadedModel, samples: np.ndarray, top_k: int, known_kept: float | None = None
     ) -> RecognitionBatch:
         loop = asyncio.get_running_loop()
-        request = _Request(model, samples, top_k, loop.create_future())
+        request = _Request(model, samples, top_k, known_kept, loop.create_future())
         self._queue.append(request)
         if not self._draining:
             self._draining = True
@@ -53,10 +54,11 @@ class RecognitionBatcher:
             await asyncio.sleep(0)  # requests parsed in this loop iteration join the first pass
             while self._queue:
                 batch = self._take()
-                # one pass per model snapshot and top_k: a swap mid-queue changes no answer
-                groups: dict[tuple[int, int], list[_Request]] = {}
+                # one pass per model snapshot, top_k and operating point: a swap mid-queue
+                # changes no answer
+                groups: dict[tuple[int, int, float | None], list[_Request]] = {}
                 for r in batch:
-                    groups.setdefault((id(r.model), r.top_k), []).append(r)
+                    groups.setdefault((id(r.model), r.top_k, r.known_kept), []).append(r)
                 for group in groups.values():
                     self._pass(group)
                 await asyncio.sleep(0)  # let new requests in between passes
@@ -76,7 +78,9 @@ class RecognitionBatcher:
         first = group[0]
         x = np.concatenate([r.samples for r in group]) if len(group) > 1 else first.samples
         try:
-            results = first.model.recognizer.recognize_batch(x, first.top_k)
+            results = first.model.recognizer.recognize_batch(
+                x, first.top_k, known_kept=first.known_kept
+            )
         except Exception as exc:
             for r in group:
                 if not r.answer.done():  # a caller that went away is not answered

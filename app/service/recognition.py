@@ -33,8 +33,10 @@ class RecognitionService:
         coalesce: int = 64,
         batcher: RecognitionBatcher | None = None,
         input_window: int = 256,
+        known_kept: float | None = None,
     ) -> None:
         self.metrics = metrics
+        self.known_kept = known_kept  # the service's operating point; None: each model's own
         self.inputs = InputMonitor(metrics, input_window)
         self.top_k = top_k
         self.batch_limit = batch_limit
@@ -54,22 +56,30 @@ class RecognitionService:
         samples: np.ndarray | list,
         n: int,
         target_confidence: float | None = None,
+        known_kept: float | None = None,
     ) -> RecognitionBatch:
         """Recognise ``n`` samples with ``model``, the caller's snapshot to the end; a
-        ``target_confidence`` other than the model's default (None) runs alone."""
+        ``target_confidence`` other than the model's default (None) runs alone. Novel
+        above the threshold keeping ``known_kept`` of known touches (None: the service's
+        ``known_kept``, else the model's own threshold)."""
         rec = model.recognizer
+        kept = self.known_kept if known_kept is None else known_kept
+        if kept is not None:
+            rec.threshold_keeping(kept)  # a model without a calibration curve says so here
         if target_confidence is not None:
             return self._counted(
                 model,
                 await run_in_threadpool(
-                    rec.recognize_batch, samples, self.top_k, None, target_confidence
+                    rec.recognize_batch, samples, self.top_k, None, target_confidence, kept
                 ),
             )
         if n <= self.coalesce:
             x = rec.validate_samples(samples, partial=True)
-            results = await self.batcher.recognize(model, x, self.top_k)
+            results = await self.batcher.recognize(model, x, self.top_k, kept)
         else:
-            results = await run_in_threadpool(rec.recognize_batch, samples, self.top_k)
+            results = await run_in_threadpool(
+                rec.recognize_batch, samples, self.top_k, known_kept=kept
+            )
         return self._counted(model, results)
 
     async def recognize_object(
@@ -77,28 +87,35 @@ class RecognitionService:
         model: LoadedModel,
         samples: np.ndarray | list,
         target_confidence: float | None = None,
+        known_kept: float | None = None,
     ) -> RecognitionBatch:
         """One answer for all ``samples``, touches of one object, their evidence fused."""
         groups = np.zeros(len(samples), np.int64)
         rec = model.recognizer
         target = TARGET_CONFIDENCE if target_confidence is None else target_confidence
+        kept = self.known_kept if known_kept is None else known_kept
         return self._counted(
             model,
-            await run_in_threadpool(rec.recognize_batch, samples, self.top_k, groups, target),
+            await run_in_threadpool(rec.recognize_batch, samples, self.top_k, groups, target, kept),
         )
 
     async def recognize_trials(
-        self, model: LoadedModel, trials: list, same_object: bool = False
+        self,
+        model: LoadedModel,
+        trials: list,
+        same_object: bool = False,
+        known_kept: float | None = None,
     ) -> RecognitionBatch:
         """One answer per raw trial from all its fingers (with ``same_object``, one for all
         the trials): featurized by the model's own featurizer."""
         rec = model.recognizer
+        kept = self.known_kept if known_kept is None else known_kept
 
         def run() -> RecognitionBatch:
             images, groups = rec.trial_samples(trials)
             if same_object:
                 groups = np.zeros_like(groups)
-            return rec.recognize_batch(images, self.top_k, groups)
+            return rec.recognize_batch(images, self.top_k, groups, known_kept=kept)
 
         return self._counted(model, await run_in_threadpool(run))
 

@@ -12,16 +12,18 @@ from app.service.holder import LoadedModel
 
 
 class Echo:
-    """A stand-in recognizer that answers each sample with (its name, the sample's tag)."""
+    """A stand-in recognizer that answers each sample with (its name, the sample's tag, top_k,
+    and the operating point it was asked for where one was)."""
 
     def __init__(self, name: str, fail: bool = False) -> None:
         self.name, self.fail, self.calls = name, fail, []
 
-    def recognize_batch(self, x: np.ndarray, top_k: int):
+    def recognize_batch(self, x: np.ndarray, top_k: int, known_kept: float | None = None):
         self.calls.append(len(x))
         if self.fail:
             raise RuntimeError("boom")
-        return [(self.name, float(v), top_k) for v in x[:, 0]]
+        extra = () if known_kept is None else (known_kept,)
+        return [(self.name, float(v), top_k, *extra) for v in x[:, 0]]
 
 
 def test_answers_go_back_to_their_requests_in_shared_passes():
@@ -40,7 +42,7 @@ def test_answers_go_back_to_their_requests_in_shared_passes():
     assert len(echo.calls) < 40 and max(echo.calls) <= 64  # passes were shared, and capped
 
 
-def test_each_model_snapshot_and_top_k_gets_its_own_pass():
+def test_each_model_snapshot_top_k_and_operating_point_gets_its_own_pass():
     old, new = Echo("old"), Echo("new")
     batcher = RecognitionBatcher()
 
@@ -49,10 +51,13 @@ def test_each_model_snapshot_and_top_k_gets_its_own_pass():
             batcher.recognize(LoadedModel(1, old, {}), np.zeros((1, 1)), 3),
             batcher.recognize(LoadedModel(2, new, {}), np.ones((1, 1)), 3),
             batcher.recognize(LoadedModel(2, new, {}), np.ones((1, 1)), 5),
+            batcher.recognize(LoadedModel(2, new, {}), np.ones((1, 1)), 3, 0.95),
         )
 
-    a, b, c = asyncio.run(main())
-    assert a == [("old", 0.0, 3)] and b == [("new", 1.0, 3)] and c == [("new", 1.0, 5)]
+    a, b, c, d = asyncio.run(main())
+    assert a == [("old", 0.0, 3)] and b == [("new", 1.0, 3)]
+    assert c == [("new", 1.0, 5)] and d == [("new", 1.0, 3, 0.95)]
+    assert new.calls == [1, 1, 1]
 
 
 def test_a_failing_pass_fails_its_requests_and_the_batcher_recovers():

@@ -188,6 +188,7 @@ def test_touches_of_one_object_get_one_fused_answer(client, dataset):
     assert [p["name"] for p in spec["parameters"]] == [
         "same_object",
         "target_confidence",
+        "known_kept",
         "min_model_version",
     ]
 
@@ -304,3 +305,51 @@ def test_waiting_for_a_version_shares_one_load_and_holds_no_request_thread(
         r = client.post("/v1/recognize?min_model_version=2", content=x, headers=NPY)
         assert r.status_code == 200 and r.json()["model_version"] == 2
         assert client.get(f"/v1/jobs/{created.json()['job']['id']}").status_code == 200
+
+
+def test_known_kept_moves_the_operating_point_of_one_answer(client, app, dataset):
+    """A request's ``known_kept`` routes its answers by the threshold that kept that share
+    of held-out known touches: a lower share calls more samples novel; the answer without
+    it is the model's own; a share outside (0, 1) is a 422 naming the parameter."""
+    x = dataset.samples[:64]
+    rec = app.state.service.holder.current.recognizer
+    low_t, high_t = rec.threshold_keeping(0.05), rec.threshold_keeping(0.99)
+    assert low_t < high_t
+
+    def novel(**params) -> int:
+        r = client.post("/v1/recognize", content=npy(x), headers=NPY, params=params)
+        assert r.status_code == 200, r.text
+        return sum(res["is_novel"] for res in r.json()["results"])
+
+    scores = rec.novelty_score(x)
+    assert novel(known_kept=0.05) == int((scores > low_t).sum())
+    assert novel(known_kept=0.99) == int((scores > high_t).sum())
+    assert novel() == int((scores > rec.novelty_threshold).sum())
+    assert novel(known_kept=0.05) > novel(known_kept=0.99)
+    one = client.post("/v1/recognize", content=npy(x[0]), headers=NPY, params={"known_kept": 0.05})
+    assert one.json()["results"][0]["is_novel"] == bool(scores[0] > low_t)  # through the batcher
+    for bad in ("0", "1", "1.5", "much"):
+        r = client.post(
+            "/v1/recognize", content=npy(x[:1]), headers=NPY, params={"known_kept": bad}
+        )
+        assert "a share in (0, 1)" in problem(r, 422, "known_kept")["detail"], r.text
+
+
+def test_the_service_wide_known_kept_is_each_answers_default(tmp_path, base_model):
+    from fastapi.testclient import TestClient
+
+    from app.api.main import create_app
+    from app.testing.service import quick_settings
+
+    settings = quick_settings(tmp_path / "data").model_copy(update={"known_kept": 0.05})
+    with TestClient(create_app(settings, trainer=lambda: base_model)) as c:
+        rec = c.app.state.service.holder.current.recognizer
+        x = base_model[1].samples[:32]
+        scores = rec.novelty_score(x)
+        body = c.post("/v1/recognize", content=npy(x), headers=NPY).json()
+        flagged = [res["is_novel"] for res in body["results"]]
+        assert flagged == (scores > rec.threshold_keeping(0.05)).tolist()
+        own = c.post("/v1/recognize", content=npy(x), headers=NPY, params={"known_kept": 0.99})
+        assert [res["is_novel"] for res in own.json()["results"]] == (
+            scores > rec.threshold_keeping(0.99)
+        ).tolist()

@@ -195,6 +195,27 @@ def test_the_kept_share_is_a_setting():
         PrototypeRecognizer(known_kept=1.5).fit(train)
 
 
+def test_an_answer_takes_another_operating_point_without_a_refit(plain):
+    """``known_kept`` on an answer reads the threshold off the model's calibration curve:
+    the model's own share gives about its own threshold, a higher share keeps more unseen
+    known trials known and detects fewer unseen objects, and a share outside (0, 1) is
+    refused by name."""
+    model, x, _, xn, *_ = plain
+    curve = model.novelty_tuning
+    own = model.threshold_keeping(model.known_kept)
+    step = np.diff(curve.thresholds).max()  # the curve's resolution
+    assert abs(own - model.novelty_threshold) <= step
+    novel = {q: model.recognize_batch(x, known_kept=q).is_novel.mean() for q in (0.5, 0.99)}
+    detected = {q: model.recognize_batch(xn, known_kept=q).is_novel.mean() for q in (0.5, 0.99)}
+    assert novel[0.99] < novel[0.5] and detected[0.99] <= detected[0.5], (novel, detected)
+    assert 1 - novel[0.5] >= 0.4 and 1 - novel[0.99] >= 0.95, novel
+    default = model.recognize_batch(x[:5])
+    assert (default.is_novel == (model.novelty_score(x[:5]) > model.novelty_threshold)).all()
+    for bad in (0.0, 1.0, 1.5):
+        with pytest.raises(FrameworkError, match="known_kept must lie in"):
+            model.recognize_batch(x[:1], known_kept=bad)
+
+
 def test_missing_procedures_are_answered_by_the_same_models_marginal(plain):
     model, x, y, *_ = plain
     assert model.answers_from_some_procedures

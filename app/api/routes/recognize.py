@@ -75,6 +75,13 @@ MIN_MODEL_VERSION = (
     "rolled back); a 503 when this process cannot load it, or has not loaded it within "
     "`TACTILE_MODEL_WAIT_SECONDS` (30 s by default; its `Retry-After` says when to ask again)."
 )
+KNOWN_KEPT = (
+    "The novelty operating point of this answer: a sample is novel above the threshold that "
+    "kept this share of held-out known touches known when the model was fitted (read off the "
+    "model's calibration curve, up to 200 points). Higher keeps more known touches known and "
+    "detects fewer novel ones. Default: the service's `TACTILE_KNOWN_KEPT`, else the model's "
+    "own threshold (`metrics.nd_known_kept` in `GET /v1/models/active` says what it kept)."
+)
 # recognize reads its query by hand too: FastAPI's parameter machinery cost ~25 µs a request
 # (bench/side_by_side.py measures the route against the framework's floor)
 RECOGNIZE_EXTRA = {
@@ -101,6 +108,13 @@ RECOGNIZE_EXTRA = {
             "at least, needs no further procedure (`next_procedure` null); otherwise "
             "`next_procedure` names the one to do next. The default was chosen on PHAC-2's "
             "development splits (docs/RESULTS.md).",
+        },
+        {
+            "name": "known_kept",
+            "in": "query",
+            "required": False,
+            "schema": {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1},
+            "description": KNOWN_KEPT,
         },
         {
             "name": "min_model_version",
@@ -155,6 +169,7 @@ async def answer(request: Request) -> bytes:
         model = await _serving_at_least(request, wanted)
     same_object = _same_object(request)
     target = _target_confidence(request)
+    kept = _known_kept(request)
     rec = model.recognizer
     body = await read_body(
         request, rec.input_shape, service.batch_limit, rec.procedures, rec.input_kind
@@ -162,13 +177,13 @@ async def answer(request: Request) -> bytes:
     takes_kind(rec, body)
     if body.trials is not None:
         with blame("trials"):
-            results = await service.recognize_trials(model, body.trials, same_object)
+            results = await service.recognize_trials(model, body.trials, same_object, kept)
     else:
         with blame("samples"):
             if same_object:
-                results = await service.recognize_object(model, body.samples, target)
+                results = await service.recognize_object(model, body.samples, target, kept)
             else:
-                results = await service.recognize(model, body.samples, body.n, target)
+                results = await service.recognize(model, body.samples, body.n, target, kept)
     return service.to_json(model, results)
 
 
@@ -236,6 +251,17 @@ def _target_confidence(request: Request) -> float | None:
             f"target_confidence: a probability in (0, 1] is needed (got {raw!r})",
             "target_confidence",
         )
+    return value
+
+
+def _known_kept(request: Request) -> float | None:
+    """The request's ``known_kept``, None when it gives none (the service's or model's)."""
+    raw = _query(request, "known_kept")
+    if raw is None:
+        return None
+    value = _valid(_CONFIDENCE, raw, float("nan"))
+    if not 0.0 < value < 1.0:
+        raise Problem(422, f"known_kept: a share in (0, 1) is needed (got {raw!r})", "known_kept")
     return value
 
 
