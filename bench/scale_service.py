@@ -135,11 +135,12 @@ def check_model(path: Path, known) -> None:
 
 # --------------------------------------------------------------------------- service
 class Service:
-    """``tactile-zsl serve`` on a folder dataset and a bundle, its store in ``root``, on a
-    free port, with every setting at its default."""
+    """``tactile-zsl serve --dataset SPEC`` (with ``--model FILE`` where given, else it fits
+    its default method on first start), its store in ``root``, on a free port, with every
+    setting at its default."""
 
     def __init__(
-        self, root: Path, dataset_dir: Path, model: Path, processes: int | None = None
+        self, root: Path, dataset: str, model: Path | None, processes: int | None = None
     ) -> None:
         from app.testing.harness import free_port, tactile_zsl
 
@@ -147,7 +148,7 @@ class Service:
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         env = {k: v for k, v in os.environ.items() if not k.startswith("TACTILE_")}
-        args = ["serve", "--dataset", f"folder:{dataset_dir}", "--model", str(model)]
+        args = ["serve", "--dataset", dataset] + ([] if model is None else ["--model", str(model)])
         args += ["--data-dir", str(root / "store"), "--port", str(self.port)]
         args += [] if processes is None else ["--processes", str(processes)]
         self.log_path = root / "serve.log"
@@ -616,7 +617,7 @@ def main(argv: list[str] | None = None) -> int:
         write_folder(known, root / "dataset")
         say(f"starting tactile-zsl serve (log: {root / 'serve.log'}) ...")
         t = time.perf_counter()
-        service = Service(root, root / "dataset", model, args.processes)
+        service = Service(root, f"folder:{root / 'dataset'}", model, args.processes)
         service.wait_ready(STARTUP_TIMEOUT_S)
         startup = time.perf_counter() - t
         processes = service.processes()
