@@ -24,8 +24,8 @@ processes. Measured:
   samples one at a time over one kept-alive connection (median, p90, worst).
 
 The JSON (``serve_ready.json`` in ``--out``) holds every figure, the machine and the commit;
-the service's log is kept beside it as ``serve.log``; a Markdown table goes to stdout and
-progress to stderr.
+the service's log is kept beside it as ``serve.log``, and ``serve_ready.png`` draws each
+process's memory against the goal; a Markdown table goes to stdout and progress to stderr.
 """
 
 from __future__ import annotations
@@ -113,6 +113,34 @@ def table(report: dict) -> str:
     return "\n".join(lines)
 
 
+def plot(report: dict, path: Path) -> None:
+    """Each process's resident memory and peak, beside the API processes' goal."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = report["processes"]
+    labels = [f"{p['role'].split(' ')[0]} {p['pid']}" for p in rows]
+    y = range(len(rows))
+    fig, ax = plt.subplots(figsize=(7, 0.6 * len(rows) + 1.6))
+    ax.barh(y, [p["VmHWM"] for p in rows], color="0.8", label="peak (VmHWM)")
+    ax.barh(y, [p["VmRSS"] for p in rows], color="tab:blue", label="resident once ready")
+    ax.axvline(GOALS["api_process_gb"], color="tab:red", ls="--", label="goal per API process")
+    ax.set_yticks(list(y), labels)
+    ax.invert_yaxis()
+    ax.set_xlabel("GB")
+    ax.set_title(
+        f"serve --dataset {report['dataset']} (model {report['model']['method']})\n"
+        f"ready in {report['ready_s']:.0f} s (goal {GOALS['ready_s']:.0f} s)",
+        fontsize=10,
+    )
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def parse(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--dataset", default="simulated:30000", help="the dataset spec served")
@@ -196,6 +224,7 @@ def main(argv: list[str] | None = None) -> int:
         "api_process_gb": bool(api) and max(api) <= GOALS["api_process_gb"],
     }
     (args.out / "serve_ready.json").write_text(json.dumps(report, indent=2))
+    plot(report, args.out / "serve_ready.png")
     print(table(report))
     return 0
 

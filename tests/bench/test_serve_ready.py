@@ -37,6 +37,7 @@ def test_a_tiny_service_fits_its_default_and_reports_each_process(tmp_path):
     assert 0 < r["median"] <= r["p90"] <= r["worst"]
     assert report["met"]["ready_s"] and report["met"]["api_process_gb"]
     assert "| ready after |" in done.stdout and (tmp_path / "serve.log").is_file()
+    assert (tmp_path / "serve_ready.png").read_bytes()[:4] == b"\x89PNG"
 
 
 def test_bad_arguments_exit_2_with_a_message(tmp_path):
