@@ -14,7 +14,8 @@ run = functools.partial(run_bench, "bench.operating_points", timeout=600)
 
 def test_each_stated_share_is_measured_on_trials_and_objects_it_never_saw(tmp_path):
     done = run("--dataset", "simulated:30", "--novel", "4", "--splits", "2", "--seed", "3",
-               "--method", "prototypes", "--shares", "0.5,0.99", "--out", str(tmp_path))  # fmt: skip
+               "--method", "prototypes", "--shares", "0.5,0.99",
+               "--out", str(tmp_path))  # fmt: skip
     assert done.returncode == 0, done.stderr[-4000:]
     report = json.loads((tmp_path / "operating_points.json").read_text())
     assert report["splits"] == 2 and report["shares"] == [0.5, 0.99]
