@@ -12,7 +12,7 @@ out whole, 2 trials of every known object held out; each split's method seed
 ``split_method_seed``). The method is fitted once a split on the known objects' training
 trials; its threshold for every share is read off the calibration curve it stored at fit,
 so no figure here was tuned on the trials or objects it is measured on. Per share, and for
-the model's own threshold (``own``): ``kept`` (held-out known trials called known),
+the model's own threshold (``share`` null, first): ``kept`` (held-out known trials called known),
 ``detected`` (novel objects' trials called novel), each as the mean over splits with its
 95 % interval. ``operating_points.json`` in ``--out`` holds every split's figures, the
 machine and the commit; ``operating_points.png`` draws kept and detected against the stated
@@ -59,24 +59,30 @@ def one_split(dataset, split, method: str, seed: int, kept_shares: list[float]) 
         "fit_s": time.perf_counter() - t,
         "points": {},
     }
-    for q in [None, *kept_shares]:
-        out["points"]["own" if q is None else f"{q:g}"] = {
+    out["points"] = [
+        {
+            "share": q,
             "kept": float(1 - model.recognize_batch(known, known_kept=q).is_novel.mean()),
             "detected": float(model.recognize_batch(novel, known_kept=q).is_novel.mean()),
         }
+        for q in [None, *kept_shares]
+    ]
     return out
 
 
-def summary(splits: list[dict]) -> dict:
+def summary(splits: list[dict]) -> list[dict]:
+    """Per operating point (``share`` None: the model's own threshold, first), each figure's
+    mean over the splits and its 95 % interval."""
     from app.evaluation.metrics import mean_interval
 
-    out = {}
-    for point in splits[0]["points"]:
-        out[point] = {}
+    out = []
+    for j, point in enumerate(splits[0]["points"]):
+        entry = {"share": point["share"]}
         for fig in ("kept", "detected"):
-            values = [s["points"][point][fig] for s in splits]
+            values = [s["points"][j][fig] for s in splits]
             low, high = mean_interval(values, bounds=(0.0, 1.0))
-            out[point][fig] = {"mean": float(np.mean(values)), "low": low, "high": high}
+            entry[fig] = {"mean": float(np.mean(values)), "low": low, "high": high}
+        out.append(entry)
     return out
 
 
@@ -88,8 +94,9 @@ def table(report: dict) -> str:
         "| stated share kept | known kept [95 %] | novel detected [95 %] |",
         "| --- | --- | --- |",
     ]
-    for point, f in report["summary"].items():
+    for f in report["summary"]:
         k, d = f["kept"], f["detected"]
+        point = "the model's own" if f["share"] is None else f"{f['share']:g}"
         lines.append(
             f"| {point} | {k['mean']:.3f} [{k['low']:.3f}, {k['high']:.3f}] | "
             f"{d['mean']:.3f} [{d['low']:.3f}, {d['high']:.3f}] |"
@@ -103,7 +110,7 @@ def plot(report: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    points = {float(p): f for p, f in report["summary"].items() if p != "own"}
+    points = {f["share"]: f for f in report["summary"] if f["share"] is not None}
     q = np.array(sorted(points))
     fig, ax = plt.subplots(figsize=(6, 4.2))
     ax.plot([q.min(), 1], [q.min(), 1], color="0.6", ls=":", label="kept = stated")
