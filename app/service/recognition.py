@@ -63,9 +63,7 @@ class RecognitionService:
         above the threshold keeping ``known_kept`` of known touches (None: the service's
         ``known_kept``, else the model's own threshold)."""
         rec = model.recognizer
-        kept = self.known_kept if known_kept is None else known_kept
-        if kept is not None:
-            rec.threshold_keeping(kept)  # a model without a calibration curve says so here
+        kept = self._kept(known_kept)
         if target_confidence is not None:
             return self._counted(
                 model,
@@ -93,7 +91,7 @@ class RecognitionService:
         groups = np.zeros(len(samples), np.int64)
         rec = model.recognizer
         target = TARGET_CONFIDENCE if target_confidence is None else target_confidence
-        kept = self.known_kept if known_kept is None else known_kept
+        kept = self._kept(known_kept)
         return self._counted(
             model,
             await run_in_threadpool(rec.recognize_batch, samples, self.top_k, groups, target, kept),
@@ -109,7 +107,7 @@ class RecognitionService:
         """One answer per raw trial from all its fingers (with ``same_object``, one for all
         the trials): featurized by the model's own featurizer."""
         rec = model.recognizer
-        kept = self.known_kept if known_kept is None else known_kept
+        kept = self._kept(known_kept)
 
         def run() -> RecognitionBatch:
             images, groups = rec.trial_samples(trials)
@@ -118,6 +116,11 @@ class RecognitionService:
             return rec.recognize_batch(images, self.top_k, groups, known_kept=kept)
 
         return self._counted(model, await run_in_threadpool(run))
+
+    def _kept(self, known_kept: float | None) -> float | None:
+        """The share of known touches an answer is routed by: the request's, else the
+        service's; None answers at the model's own threshold."""
+        return self.known_kept if known_kept is None else known_kept
 
     def _counted(self, model: LoadedModel, results: RecognitionBatch) -> RecognitionBatch:
         best = results.top_index[:, 0]
