@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.data.sources import DatasetSpecError
 from bench.scale import machine
 from bench.scale_service import MemoryWatch, Service, recognise_latency, say
 
@@ -154,26 +155,30 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
         p.error("--processes must be at least 1")
     if args.recognise < 1:
         p.error("--recognise must be at least 1")
-    from app.data.sources import DatasetSpecError, open_dataset
-
-    try:
-        args.samples = open_dataset(args.dataset)  # a bad spec fails here, not in serve
+    try:  # a bad spec fails here, not in serve
+        args.samples = drawn_samples(args.dataset, args.recognise)
     except (DatasetSpecError, FileNotFoundError, ValueError) as exc:
         p.error(f"--dataset {args.dataset}: {exc}")
     return args
+
+
+def drawn_samples(spec: str, n: int) -> np.ndarray:
+    """``n`` samples of the dataset ``spec`` names, drawn at random (seed 0), to recognise
+    once the service serves; the dataset itself is not held while the service starts."""
+    from app.data.sources import open_dataset
+
+    dataset = open_dataset(spec)
+    if not hasattr(dataset, "samples"):
+        raise ValueError("raw trials are not sent one sample at a time")
+    rows = np.random.default_rng(0).choice(len(dataset.samples), size=min(n, len(dataset.samples)))
+    return np.asarray(dataset.samples[rows])
 
 
 def main(argv: list[str] | None = None) -> int:
     from app.client import TactileClient
 
     args = parse(argv)
-    dataset, args.samples = args.samples, None
-    if not hasattr(dataset, "samples"):
-        raise SystemExit(f"--dataset {args.dataset}: raw trials are not sent one sample at a time")
-    rng = np.random.default_rng(0)
-    rows = rng.choice(len(dataset.samples), size=min(args.recognise, len(dataset.samples)))
-    samples = np.asarray(dataset.samples[rows])
-    del dataset  # not held while the service starts
+    samples = args.samples
     args.out.mkdir(parents=True, exist_ok=True)
     root = Path(tempfile.mkdtemp(prefix="serve-ready-"))
     service = watch = None
