@@ -518,6 +518,9 @@ def main(argv: list[str] | None = None) -> int:
         slopes = exponents(records)
         report = {
             "machine": machine(),
+            "seed": args.seed,
+            "novel": args.novel,
+            "trials": args.trials,
             "separation": args.separation,
             "method": args.method,
             "modes": args.modes,

@@ -51,6 +51,7 @@ def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
     stamp = report["machine"]  # the tree's changes beside the commit
     assert stamp["dirty"] == bool(stamp["changed"]) == bool(tracked_changes())
     assert report["separation"] == "phac2"
+    assert (report["novel"], report["trials"], report["seed"]) == (12, 4, 0)  # what made it
     assert report["params"] == {"procedure_estimators": 7}  # the value read as JSON
     assert done.stdout.startswith("| objects | fit_s |") and "| exponent |" in done.stdout
     assert "| by_procedure_s |" in done.stdout.splitlines()[0]
