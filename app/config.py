@@ -113,6 +113,13 @@ class Settings(BaseSettings):
         "this many MiB (its jobs fail with that reason; the active model stays). 0: half of "
         "the container's cgroup memory limit, else of the machine's memory.",
     )
+    refit_seconds: float = Field(
+        4 * 3600,
+        ge=0,
+        description="Wall-clock seconds a refit (a full one, or an attribute rebuild) may "
+        "run in its child process: past them the child is killed with any process it "
+        "started, its jobs fail with that reason and the active model stays. 0: no limit.",
+    )
     keep_versions: int = Field(
         100,
         ge=0,

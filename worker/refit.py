@@ -23,6 +23,8 @@ the file's bytes, its array archive's and the arrays at once).
 
 from __future__ import annotations
 
+import faulthandler
+import hashlib
 import itertools
 import multiprocessing
 import os
@@ -32,6 +34,7 @@ import resource
 import signal
 import tempfile
 import traceback
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -56,6 +59,10 @@ class RefitError(RuntimeError):
 
 class RefitMemoryError(RefitError):
     """The refit's child process went over its memory limit and was stopped."""
+
+
+class RefitTimeoutError(RefitError):
+    """The refit's child process ran past its wall-clock limit and was killed."""
 
 
 def default_memory_limit(root: Path = CGROUP_ROOT, proc_cgroup: Path = PROC_CGROUP) -> int:
@@ -103,97 +110,266 @@ def fit_in_child(
     params: dict[str, Any],
     dataset: TactileDataset | BioTacDataset,
     memory_limit_bytes: int,
+    seconds: float = 0.0,
 ) -> TactileRecognizer:
     """``make_method(method, **params).fit(dataset)`` in a child process whose data
-    segment may not grow past ``memory_limit_bytes``, read back from its bundle;
-    RefitMemoryError when it ran out of that memory, RefitError when it failed otherwise
+    segment may not grow past ``memory_limit_bytes`` and which may run ``seconds`` of wall
+    clock (0: no limit), read back from its bundle; RefitMemoryError when it ran out of that
+    memory, RefitTimeoutError when it ran out of time, RefitError when it failed otherwise
     (with its exception's last line)."""
+    what = f"the refit of {len(dataset.class_names)} known classes"
+    return run_in_child(_fit, (method, params), dataset, memory_limit_bytes, seconds, what=what)
+
+
+def attributes_in_child(
+    model: TactileRecognizer,
+    dataset: TactileDataset | BioTacDataset,
+    memory_limit_bytes: int,
+    seconds: float = 0.0,
+) -> TactileRecognizer:
+    """``model.with_attributes(dataset)`` in a child process under the same limits as
+    ``fit_in_child``, and with its errors. ``model`` goes to the child as a split bundle
+    written one row block at a time; the new model's arrays that are byte for byte
+    ``model``'s (everything but the attribute parts) come back as ``model``'s own arrays, not
+    as copies, as an attribute rebuild in this process would share them."""
+    what = f"the attribute refit of {len(dataset.class_names)} known classes"
+    return run_in_child(_with_attributes, (), dataset, memory_limit_bytes, seconds, what, model)
+
+
+def run_in_child(
+    task: Callable[..., TactileRecognizer],
+    args: tuple,
+    dataset: TactileDataset | BioTacDataset,
+    memory_limit_bytes: int,
+    seconds: float = 0.0,
+    what: str = "the refit",
+    base: TactileRecognizer | None = None,
+) -> TactileRecognizer:
+    """``task(dataset, base, *args)`` (a module-level function, which the spawned child
+    imports) in a child process of its own process group, whose data segment may not grow
+    past ``memory_limit_bytes``, killed with its group after ``seconds`` (0: never); the
+    model it returns, read back. ``what`` names the work in error messages. ``base``: a
+    model the child reads from a split bundle, whose arrays the returned model shares
+    where they are unchanged."""
     context = multiprocessing.get_context("spawn")
     with tempfile.TemporaryDirectory(prefix="tactile-refit-") as tmp:
         folder = Path(tmp)
+        (folder / "parts").mkdir()
         with open(folder / "dataset.pickle", "wb") as f:  # written as it goes: no copy here
             pickle.dump(dataset, f, protocol=pickle.HIGHEST_PROTOCOL)
+        mine: dict[Any, np.ndarray] = {}  # the base's arrays by part
+        if base is not None:
+            (folder / "base").write_bytes(_write_split(base, folder / "parts", mine))
         child = context.Process(
-            target=_fit, args=(method, params, tmp, memory_limit_bytes), name="tactile-refit"
+            target=_child,
+            args=(task, args, tmp, memory_limit_bytes),
+            name="tactile-refit",
         )
         child.start()
-        child.join()
-        error = folder / "error.txt"
-        head = folder / "model" / "head"
-        if child.exitcode == 0 and head.is_file():
-            return _load_split(folder / "model")
-        if error.is_file():
-            kind, why = error.read_text().split("\n", 1)[0].split(" ", 1)
-        else:  # ended by a library or a signal: its last words, if any
-            stderr = folder / "stderr.txt"
-            said = (
-                stderr.read_text(errors="replace").strip().splitlines() if stderr.is_file() else []
+        try:
+            child.join(seconds if seconds > 0 else None)
+            timed_out = child.exitcode is None
+        finally:  # past its time, or this thread interrupted: the child and its own children
+            _kill_group(child)
+            child.join()
+        if timed_out:
+            raise RefitTimeoutError(
+                f"{what} ran past its time limit of {_duration(seconds)} "
+                f"(TACTILE_REFIT_SECONDS) and was stopped; the active model stays. Raise "
+                "TACTILE_REFIT_SECONDS (0: no limit) to let it finish"
             )
-            why = said[-1] if said else f"exit code {child.exitcode}"
-            kind = "memory" if _MEMORY_WORDS.search(why) else "error"
-        if kind == "memory" or child.exitcode == -signal.SIGKILL:
+        if child.exitcode == 0 and (folder / "model").is_file():
+            return _read_split(folder / "model", folder / "parts", mine)
+        kind, why = _failure(folder, child.exitcode)
+        if kind == "memory":
             raise RefitMemoryError(
-                f"the refit of {len(dataset.class_names)} known classes went over its memory "
-                f"limit of {memory_limit_bytes / 2**20:.0f} MiB (TACTILE_REFIT_MEMORY_LIMIT_MB)"
-                f" and was stopped ({why}); the active model stays"
+                f"{what} went over its memory limit of {memory_limit_bytes / 2**20:.0f} MiB "
+                f"(TACTILE_REFIT_MEMORY_LIMIT_MB) and was stopped ({why}); the active model "
+                "stays. Raise TACTILE_REFIT_MEMORY_LIMIT_MB to give it more"
             )
         raise RefitError(f"the refit's process failed: {why}")
 
 
-def _fit(method: str, params: dict[str, Any], folder: str, memory_limit_bytes: int) -> None:
+def _kill_group(child: multiprocessing.process.BaseProcess) -> None:
+    """SIGKILL to the child's process group (it leads one from its first statement: what
+    it started dies with it), and to the child itself, which may not lead it yet."""
+    if child.pid is None:
+        return
+    try:
+        os.killpg(child.pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass  # no group by that id: the child has not made it yet, or it is gone
+    if child.exitcode is None:
+        child.kill()
+
+
+def _duration(seconds: float) -> str:
+    if seconds >= 3600:
+        return f"{seconds / 3600:g} h ({seconds:g} s)"
+    return f"{seconds:g} s"
+
+
+def _failure(folder: Path, exitcode: int | None) -> tuple[str, str]:
+    """("memory" or "error", why) of a child that ended without a model: its own report,
+    else what a library printed before it ended the process, else how it ended."""
+    error = folder / "error.txt"
+    if error.is_file():
+        kind, why = error.read_text().split("\n", 1)[0].split(" ", 1)
+        return kind, why
+    stderr = folder / "stderr.txt"
+    said = stderr.read_text(errors="replace").splitlines()[-200:] if stderr.is_file() else []
+    said = [line.strip() for line in said if line.strip()]
+    how = f"exit code {exitcode}"
+    if exitcode is not None and exitcode < 0:
+        how = f"ended by {signal.Signals(-exitcode).name}"
+    # a C++ library's std::bad_alloc thrown where nothing catches it (faiss in a parallel
+    # region) aborts with "terminate called after throwing an instance of 'std::bad_alloc'";
+    # OpenBLAS prints "Memory allocation still failed after 10 retries, giving up."
+    memory = [line for line in said if _MEMORY_WORDS.search(line)]
+    if memory:
+        return "memory", f"{memory[-1]}; {how}"
+    if exitcode == -signal.SIGKILL:
+        # not ours (a timeout is told apart before): the kernel's out-of-memory killer
+        return "memory", f"{how}, as the kernel's out-of-memory killer ends a process"
+    fatal = [line for line in said if line.startswith("Fatal Python error")]
+    last = fatal[-1] if fatal else (said[-1] if said else "")
+    return "error", f"{last}; {how}" if last else how
+
+
+def _child(
+    task: Callable[..., TactileRecognizer],
+    args: tuple,
+    folder: str,
+    memory_limit_bytes: int,
+) -> None:
+    os.setpgid(0, 0)  # a group of its own, which a timeout kills whole
+    # the libraries a fit loads, before the limit: they count against it all the same (their
+    # memory is data already), but faiss's library crashed while it loaded under a limit it
+    # did not fit in (SIGSEGV, at 500 MiB), where an allocation refused later is an error
+    import faiss  # noqa: F401
+
+    import app.framework.registry  # noqa: F401
+
     resource.setrlimit(resource.RLIMIT_DATA, (memory_limit_bytes, memory_limit_bytes))
     out = Path(folder)
     # what a library prints before it exits without a Python exception (OpenBLAS: "Memory
-    # allocation still failed after 10 retries, giving up.") stays for the parent to read
+    # allocation still failed after 10 retries, giving up.") stays for the parent to read,
+    # and so does the Python stack of a crash (faulthandler)
     with open(out / "stderr.txt", "wb") as err:
         os.dup2(err.fileno(), 2)
+    faulthandler.enable()
     try:
-        from app.framework.registry import make_method
-
         with open(out / "dataset.pickle", "rb") as f:
             dataset = pickle.load(f)
-        model = make_method(method, **params).fit(dataset)
-        del dataset
-        head, parts = bundle.split(model)
-        partial = out / "model.partial"
-        partial.mkdir()
-        for sha, blob in parts.items():
-            (partial / sha).write_bytes(blob)
-        (partial / "head").write_bytes(head)
-        partial.rename(out / "model")
+        base = None
+        if (out / "base").is_file():
+            base = _read_split(out / "base", out / "parts", {}, freeze=True)
+        model = task(dataset, base, *args)
+        del dataset, base
+        head = _write_split(model, out / "parts", None)
+        (out / "model.partial").write_bytes(head)
+        (out / "model.partial").rename(out / "model")
     except BaseException as exc:  # the parent reads the reason; the exit code says it failed
         kind = "memory" if _out_of_memory(exc) else "error"
+        said = str(exc).strip()
+        if not said:  # numpy's MemoryError from deep inside may say nothing: say where
+            frames = [
+                f for f in traceback.extract_tb(exc.__traceback__) if "<frozen" not in f.filename
+            ]
+            said = f"in {frames[-1].filename}:{frames[-1].lineno}" if frames else ""
         (out / "error.txt").write_text(
-            f"{kind} {type(exc).__name__}: {exc}\n" + traceback.format_exc(limit=-3)
+            f"{kind} {type(exc).__name__}: {said}\n" + traceback.format_exc(limit=-3)
         )
         raise SystemExit(1) from None
 
 
+def _fit(
+    dataset: TactileDataset | BioTacDataset,
+    base: TactileRecognizer | None,
+    method: str,
+    params: dict[str, Any],
+) -> TactileRecognizer:
+    from app.framework.registry import make_method
+
+    return make_method(method, **params).fit(dataset)
+
+
+def _with_attributes(
+    dataset: TactileDataset | BioTacDataset, base: TactileRecognizer | None
+) -> TactileRecognizer:
+    return base.with_attributes(dataset)
+
+
 #: how libraries say an allocation was refused (torch's CPU allocator, OpenBLAS, C's
-#: errno, the dynamic loader mapping a library under a limit its imports do not fit in)
+#: errno, the dynamic loader mapping a library under a limit its imports do not fit in,
+#: C++'s std::bad_alloc, which faiss raises as MemoryError or wraps in its own error)
 _MEMORY_WORDS = re.compile(
     r"can't allocate memory|memory allocation|cannot allocate memory|out of memory"
-    r"|cannot map zero-fill pages|failed to map segment",
+    r"|cannot map zero-fill pages|failed to map segment|bad_alloc",
     re.I,
 )
 
 
 def _out_of_memory(exc: BaseException) -> bool:
-    """An allocation refused: Python's and numpy's MemoryError, numba's, and torch's
-    RuntimeError from its CPU allocator."""
+    """An allocation refused: Python's and numpy's MemoryError (faiss's std::bad_alloc
+    among them), numba's, torch's RuntimeError from its CPU allocator, and an error whose
+    message names std::bad_alloc (faiss's, from a parallel region)."""
     return isinstance(exc, MemoryError) or bool(_MEMORY_WORDS.search(str(exc)))
 
 
-def _load_split(folder: Path) -> TactileRecognizer:
-    """The model of a split bundle written as files, decoding one part at a time, and
-    gathering an array stored in row blocks straight into one array."""
+def _write_split(
+    model: TactileRecognizer, parts: Path, mine: dict[Any, np.ndarray] | None
+) -> bytes:
+    """``model`` as a split bundle's head, its parts written into ``parts`` one row block
+    at a time (``bundle.split`` would hold every part's bytes at once) as ``.npy`` files
+    named by their SHA-256; a part already there is not written again. ``mine``, where
+    given, gets each part's array or row block of ``model`` by its SHA-256, and each array
+    stored in row blocks by the tuple of theirs (what ``_read_split`` shares)."""
+    manifest, arrays = bundle._contents(model)
+    refs: dict[str, str | list[str]] = {}
+    for name in [n for n, a in arrays.items() if np.asanyarray(a).nbytes >= bundle.PART_MIN_BYTES]:
+        shas = []
+        array = np.asanyarray(arrays.pop(name))
+        for block in bundle.row_blocks(array):
+            data = bundle._npy(block)
+            sha = hashlib.sha256(data).hexdigest()
+            if not (parts / sha).is_file():
+                (parts / sha).write_bytes(data)
+            if mine is not None:
+                mine[sha] = block
+            shas.append(sha)
+            del data
+        if mine is not None and len(shas) > 1:
+            mine[tuple(shas)] = array
+        refs[name] = shas[0] if len(shas) == 1 else shas
+    manifest["parts"] = refs
+    if any(isinstance(ref, list) for ref in refs.values()):
+        manifest["format_version"] = max(manifest["format_version"], bundle.GROWN_FORMAT_VERSION)
+    return bundle._zip(manifest, arrays)
+
+
+def _read_split(
+    head: Path, parts: Path, mine: dict[Any, np.ndarray], freeze: bool = False
+) -> TactileRecognizer:
+    """The model of a split bundle written as files (``_write_split``), decoding one part at
+    a time, and gathering an array stored in row blocks straight into one array. A part, or
+    a list of row blocks, in ``mine`` is the array found there, not a copy. ``freeze``: the arrays
+    read-only (``bundle.unchangeable``), so that a model derived from this one shares them
+    instead of copying them."""
 
     def part(sha: str) -> np.ndarray:
-        return bundle.decode_part((folder / sha).read_bytes())
+        if sha in mine:
+            return mine[sha]
+        array = bundle.decode_part((parts / sha).read_bytes())
+        if freeze:
+            bundle.freeze(array)
+        return array
 
     def join(shas: list[str]) -> np.ndarray:
+        if tuple(shas) in mine:
+            return mine[tuple(shas)]
         first = part(shas[0])
         rest = (part(sha) for sha in shas[1:])
         return gathered(itertools.chain([first], rest), len(first) * len(shas))
 
-    return bundle.from_bytes((folder / "head").read_bytes(), part=part, join=join)
+    return bundle.from_bytes(head.read_bytes(), part=part, join=join)

@@ -41,7 +41,7 @@ from app.store.enums import ClassKind, JobKind, JobStatus, Origin, SampleForm, V
 from app.store.models import Job, ModelVersion, Sample
 from app.store.repo import ClassState
 from app.store.vocabulary import Vocabulary, describes
-from worker.refit import default_memory_limit, fit_in_child
+from worker.refit import attributes_in_child, default_memory_limit, fit_in_child
 
 # enrolled samples get trial ids far above any dataset's, one trial per sample
 ENROLLED_TRIAL_OFFSET = 1_000_000_000
@@ -336,11 +336,15 @@ def build(
         Rebuild.KNOWN_GROWN,
     ):
         if plan.rebuild is Rebuild.FULL:
-            # off the serving path: a child process under a memory limit (worker/refit.py)
+            # off the serving path: a child process under memory and time limits
+            # (worker/refit.py)
             limit = settings.refit_memory_limit_mb * 2**20 or default_memory_limit()
-            model = fit_in_child(settings.method, settings.method_params, known, limit)
-        elif plan.rebuild is Rebuild.ATTRIBUTES:
-            model = model.with_attributes(known)
+            model = fit_in_child(
+                settings.method, settings.method_params, known, limit, settings.refit_seconds
+            )
+        elif plan.rebuild is Rebuild.ATTRIBUTES:  # refits parts on every sample: as a full one
+            limit = settings.refit_memory_limit_mb * 2**20 or default_memory_limit()
+            model = attributes_in_child(model, known, limit, settings.refit_seconds)
         elif plan.rebuild is Rebuild.KNOWN_GROWN:
             model = _grown(plan, model.without_novel_classes())
         else:

@@ -1,23 +1,34 @@
-"""worker/refit.py: a full refit in a child process under a memory limit — the same model as
-a fit in process, a clear error when it is killed for memory or fails, nothing else taken
-down."""
+"""worker/refit.py: a full refit (or an attribute rebuild) in a child process under memory
+and time limits — the same model as in process, a clear error when it is stopped for memory
+or time or fails, nothing else taken down."""
 
 from __future__ import annotations
 
 import dataclasses
 import os
+import re
+import signal
+import subprocess
+import threading
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from app.data.simulator import simulate_dataset
+from app.framework import bundle
 from app.framework.registry import make_method
+from tests.service_fixtures import add_sample, job, register
 from worker.refit import (
     RefitError,
     RefitMemoryError,
+    RefitTimeoutError,
+    attributes_in_child,
     cgroup_memory_limit,
     default_memory_limit,
     fit_in_child,
+    run_in_child,
 )
 
 PARAMS = {"n_estimators": 10, "tuning_rounds": 1, "seed": 3}
@@ -51,7 +62,8 @@ def test_a_refit_that_grows_past_its_memory_limit_is_stopped_with_a_clear_error(
     assert fit_in_child("paper", quick, flat, limit).registry.known_names
     with pytest.raises(RefitMemoryError, match="over its memory limit of 1000 MiB") as stopped:
         fit_in_child("paper", {**quick, "mlp_hidden": 100_000}, flat, limit)
-    assert "can't allocate memory" in str(stopped.value)
+    # torch's allocator refusing the weights, or an import after them refused its memory
+    assert re.search(r"can't allocate memory|\(MemoryError: in ", str(stopped.value))
 
 
 def test_a_refit_that_fails_says_why(dataset):
@@ -84,3 +96,134 @@ def test_the_default_limit_is_half_of_the_containers_memory_where_a_cgroup_sets_
     proc.write_text("5:cpu,cpuacct:/docker/abc\n4:memory:/docker/abc\n0::/\n")
     assert cgroup_memory_limit(v1, proc) == 2**30
     assert physical == os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2
+
+
+# Tasks for ``run_in_child``: module-level, so that the spawned child imports them.
+
+
+def _sleeps_with_a_child(dataset, base, pid_file: str):
+    """Starts a process of its own, then never finishes."""
+    started = subprocess.Popen(["sleep", "600"])
+    Path(pid_file).write_text(str(started.pid))
+    time.sleep(600)
+
+
+def _grows_a_faiss_index(dataset, base):
+    """Adds vectors to a faiss index until faiss's allocation fails (std::bad_alloc)."""
+    import faiss
+
+    index = faiss.IndexFlatL2(64)
+    block = np.ones((16384, 64), np.float32)
+    while True:
+        index.add(block)
+
+
+def _allocates_with_numpy(dataset, base):
+    return np.ones((2**30,), np.float32)  # 4 GiB
+
+
+def _is_killed(dataset, base):
+    """Ends as the kernel's out-of-memory killer ends a process."""
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def _running(pid: int) -> bool:
+    """Whether the process lives (a zombie, which a container's init may leave, does not)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return False
+    return state != "Z"
+
+
+def test_a_refit_past_its_time_limit_is_killed_with_what_it_started(dataset, tmp_path):
+    """Past ``seconds`` the child is killed with its process group (what it started, here a
+    ``sleep``, dies with it), and the error names the limit and the setting."""
+    pid_file = tmp_path / "pid"
+    with pytest.raises(RefitTimeoutError, match="time limit of 20 s") as stopped:
+        run_in_child(_sleeps_with_a_child, (str(pid_file),), dataset, default_memory_limit(), 20)
+    assert "Raise TACTILE_REFIT_SECONDS (0: no limit)" in str(stopped.value)
+    started = int(pid_file.read_text())
+    for _ in range(100):  # killed at once; reaped by init as soon as it gets to it
+        if not _running(started):
+            break
+        time.sleep(0.1)
+    assert not _running(started)
+
+
+def test_faiss_std_bad_alloc_is_a_memory_stop(dataset):
+    """faiss allocates with C++'s ``new``: under the limit it throws std::bad_alloc, which
+    stops the refit for memory, not as a failure of another kind."""
+    limit = 1000 * 2**20
+    with pytest.raises(RefitMemoryError, match="memory limit of 1000 MiB") as stopped:
+        run_in_child(_grows_a_faiss_index, (), dataset, limit)
+    assert "bad_alloc" in str(stopped.value)
+    assert "Raise TACTILE_REFIT_MEMORY_LIMIT_MB" in str(stopped.value)
+
+
+def test_numpys_memory_error_and_a_kill_for_memory_are_memory_stops(dataset):
+    limit = 1000 * 2**20
+    with pytest.raises(RefitMemoryError, match="Unable to allocate 4.00 GiB"):
+        run_in_child(_allocates_with_numpy, (), dataset, limit)
+    with pytest.raises(RefitMemoryError, match="SIGKILL, as the kernel's out-of-memory killer"):
+        run_in_child(_is_killed, (), dataset, limit)
+
+
+def test_an_attribute_refit_in_a_child_is_the_one_in_process_sharing_the_rest(dataset):
+    """``attributes_in_child`` gives the model ``with_attributes`` gives here, and its
+    arrays that the attribute refit leaves as they were are the base model's own."""
+    base = make_method("best", **PARAMS).fit(dataset)
+    rng = np.random.default_rng(0)
+    wider = dataclasses.replace(
+        dataset,
+        attribute_names=(*dataset.attribute_names, "sticky"),
+        class_attributes=np.concatenate(
+            [dataset.class_attributes, rng.integers(0, 2, (dataset.n_classes, 1))], axis=1
+        ).astype(np.float32),
+    )
+    child = attributes_in_child(base, wider, default_memory_limit())
+    here = base.with_attributes(wider)
+    x = dataset.samples[::3]
+    assert child.registry.attribute_names == here.registry.attribute_names
+    assert np.array_equal(child.attribute_proba(x), here.attribute_proba(x))
+    assert np.array_equal(child.recognize_batch(x).top_index, here.recognize_batch(x).top_index)
+    _, mine = bundle._contents(base)
+    _, new = bundle._contents(child)
+    assert np.shares_memory(new["known/reference"], mine["known/reference"])
+    assert not np.shares_memory(new["attributes/weights"], mine["attributes/weights"])
+
+
+def test_a_promotion_whose_refit_runs_out_of_time_fails_clearly_and_the_model_stays(
+    client, app, worker, dataset
+):
+    """A refit past ``refit_seconds`` (here a real promotion's fit, stopped after 2 s, less
+    than the child takes to start) fails its jobs with that reason; the active model
+    answers throughout, the class stays novel, and with time enough it is promoted."""
+    settings = app.state.service.settings
+    settings.promotion_threshold = 2
+    settings.grow_fraction = 0  # every promotion refits
+    cid = register(client, dataset, "heavy")["class"]["id"]
+    worker.run_once()
+    add_sample(client, cid, dataset.samples[0] + 0.01)
+    worker.run_once()
+    active = client.get("/v1/models/active").json()["version"]
+    settings.refit_seconds = 2
+    last = add_sample(client, cid, dataset.samples[1] + 0.01)
+    finished = []
+    round_ = threading.Thread(target=lambda: finished.append(worker.run_once()))
+    round_.start()
+    answers = []
+    while round_.is_alive():  # the refit's child runs meanwhile
+        r = client.post("/v1/recognize", json={"samples": [dataset.samples[2].tolist()]})
+        answers.append((r.status_code, r.json().get("model_version")))
+    round_.join()
+    assert finished == [1] and set(answers) == {(200, active)}
+    failed = job(client, last["job"]["id"])
+    assert failed["status"] == "failed"
+    assert "RefitTimeoutError" in failed["error"] and "time limit of 2 s" in failed["error"]
+    assert client.get("/v1/models/active").json()["version"] == active
+    assert client.get(f"/v1/classes/{cid}").json()["kind"] == "novel"
+    settings.refit_seconds = 0  # no limit
+    add_sample(client, cid, dataset.samples[2] + 0.01)
+    assert worker.run_once() == 1
+    assert client.get(f"/v1/classes/{cid}").json()["kind"] == "known"
