@@ -46,7 +46,8 @@ STEPS = {
     "model_from_one_bundle_file": ("", "model = bundle.load(folder + '/model.bundle')"),
     "model_from_split_files": (
         "",
-        "from pathlib import Path; model = refit._load_split(Path(folder) / 'model')",
+        "from pathlib import Path; m = Path(folder) / 'model'; "
+        "model = refit._read_split(m / 'head', m, {})",
     ),
 }
 
