@@ -34,7 +34,12 @@ import httpx
 import numpy as np
 
 from app.framework import bundle
-from app.framework.recognizer import TARGET_CONFIDENCE, TactileRecognizer
+from app.framework.recognizer import (
+    ABSTAIN,
+    TARGET_CONFIDENCE,
+    TactileRecognizer,
+    check_outliers,
+)
 
 UNREACHABLE_STATUS = frozenset({502, 503, 504})
 
@@ -99,6 +104,7 @@ class TactileClient:
         target_confidence: float | None = None,
         min_model_version: int | None = None,
         known_kept: float | None = None,
+        outliers: str | None = None,
     ) -> dict[str, Any]:
         """Recognise one sample or a batch (N, *input shape); with ``same_object``, the
         samples are touches of one object and get one answer, their evidence fused. A
@@ -108,9 +114,14 @@ class TactileClient:
         ``model_version`` of an enrolment job waited for, so that the answer includes it
         whichever API process gives it (offline, the model file answers as it is).
         ``known_kept``: the novelty operating point, the share of known touches the
-        threshold kept at fit (None: the service's, else the model's own)."""
+        threshold kept at fit (None: the service's, else the model's own). ``outliers``:
+        what an input outlier's answer is, ``"abstain"`` (no class named, ``kind``
+        ``"input_outlier"``) or ``"answer"`` (the model's guess, flagged); None: the
+        service's, offline ``"abstain"``."""
         x = np.asarray(samples, dtype=np.float32)
         params: dict[str, Any] = {"same_object": same_object}
+        if outliers is not None:
+            params["outliers"] = check_outliers(outliers)
         if target_confidence is not None:
             params["target_confidence"] = target_confidence
         if known_kept is not None:
@@ -131,7 +142,7 @@ class TactileClient:
             groups = np.zeros(len(x), np.int64) if same_object else None
             target = TARGET_CONFIDENCE if target_confidence is None else target_confidence
             batch = model.recognize_batch(x, self.offline_top_k, groups, target, known_kept)
-            return self._offline_answer(batch, meta)
+            return self._offline_answer(batch, meta, outliers)
         return {**r.json(), "source": "service"}
 
     def explore(
@@ -165,30 +176,37 @@ class TactileClient:
             name = answer["next_procedure"]
         return {**answer, "model_version": result["model_version"], "procedures_done": done}
 
-    def recognize_trials(self, trials: Any, same_object: bool = False) -> dict[str, Any]:
+    def recognize_trials(
+        self, trials: Any, same_object: bool = False, outliers: str | None = None
+    ) -> dict[str, Any]:
         """Recognise raw BioTac trials (``RawTrial``s or their JSON form), one answer per
         trial from all its fingers (with ``same_object``, one for all of them); offline,
-        the model file's own featurizer makes the images."""
+        the model file's own featurizer makes the images. ``outliers`` as ``recognize``."""
         body = [_json_trial(t) for t in trials]
+        params: dict[str, Any] = {"same_object": same_object}
+        if outliers is not None:
+            params["outliers"] = check_outliers(outliers)
         try:
-            r = self._send(
-                "POST", "/v1/recognize", json={"trials": body}, params={"same_object": same_object}
-            )
+            r = self._send("POST", "/v1/recognize", json={"trials": body}, params=params)
         except ServiceUnreachable as exc:
             model, meta = self._offline_model(exc)
             images, groups = model.trial_samples(body)
             if same_object:
                 groups = np.zeros_like(groups)
             return self._offline_answer(
-                model.recognize_batch(images, top_k=self.offline_top_k, groups=groups), meta
+                model.recognize_batch(images, top_k=self.offline_top_k, groups=groups),
+                meta,
+                outliers,
             )
         return {**r.json(), "source": "service"}
 
     @staticmethod
-    def _offline_answer(batch: Any, meta: dict[str, Any]) -> dict[str, Any]:
+    def _offline_answer(
+        batch: Any, meta: dict[str, Any], outliers: str | None = None
+    ) -> dict[str, Any]:
         return {
             "model_version": meta.get("version"),
-            "results": batch.records(meta.get("class_ids", {})),
+            "results": batch.records(meta.get("class_ids", {}), outliers or ABSTAIN),
             "source": "offline",
         }
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
@@ -82,6 +82,13 @@ class Settings(BaseSettings):
         "calibration curve); a request's own `known_kept` overrides it. Unset, each model "
         "answers at its own threshold: 0.90 of known touches kept for `prototypes`, the "
         "paper's balanced point (Sect. VI-B) for `best`.",
+    )
+    outliers: Literal["abstain", "answer"] = Field(
+        "abstain",
+        description="What an answer to an input outlier (a sensor reading zeros, saturated or "
+        "with a dead channel: `input_outlier` true) is: `abstain` names no object (`kind` "
+        "`input_outlier`, `class_name` null); `answer` gives the model's guess, flagged. A "
+        "request's own `outliers` overrides it.",
     )
     input_window: int = Field(
         256,

@@ -185,7 +185,7 @@ def run_split(dataset, split, seed: int, by_kind: dict[str, np.ndarray], text_em
             p = softmax(np.log(np.clip(p, 1e-300, None)) + extra)
         figures = {"zsl": metrics.accuracy(yn, p.argmax(axis=1))}
         if kind != "sentence+embedding":
-            answers = m.recognize(np.concatenate([xk, xn]), top_k=1)
+            answers = m.recognize(np.concatenate([xk, xn]), top_k=1, outliers="answer")
             true = [known_names[j] for j in yk] + [names[j] for j in yn]
             is_known = np.r_[np.ones(len(xk), bool), np.zeros(len(xn), bool)]
             figures["gzsl_h"] = metrics.gzsl_figures(

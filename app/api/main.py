@@ -65,6 +65,7 @@ def create_app(
         settings.batch_limit,
         input_window=settings.input_window,
         known_kept=settings.known_kept,
+        outliers=settings.outliers,
     )
     # any process may answer a scrape: each computes its input gauges on a timer
     input_drift = InputDriftPoller(recognition.inputs) if process_index is not None else None

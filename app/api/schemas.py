@@ -423,15 +423,28 @@ class ScoreOut(BaseModel):
 class RecognitionOut(BaseModel):
     """One sample's answer. The novelty detector routes it to the known classes or, when
     it is novel and novel classes are registered, to those; the answer is the most
-    probable class of that group."""
+    probable class of that group. An input outlier (`input_outlier` true: a broken
+    sensor) is not answered as an object unless the request asks `outliers=answer`: its
+    `kind` is `input_outlier`, its class null and its `top_k` empty."""
 
-    class_id: int | None = Field(description="The store's id of the answered class.")
-    class_name: str
-    kind: ClassKind = Field(description="Whether the answered class is known or novel.")
-    is_novel: bool = Field(
+    class_id: int | None = Field(
+        description="The store's id of the answered class; null for an abstention "
+        "(`kind` `input_outlier`)."
+    )
+    class_name: str | None = Field(
+        description="The answered class; null for an abstention (`kind` `input_outlier`): "
+        "the input is no evidence about any object."
+    )
+    kind: Literal["known", "novel", "input_outlier"] = Field(
+        description="Whether the answered class is known or novel; `input_outlier` where "
+        "the input lies outside what the model was trained on (`input_outlier`) and the "
+        "answer abstains (the default; `outliers=answer` gives the model's guess instead)."
+    )
+    is_novel: bool | None = Field(
         description="The novelty detector's verdict: the sample is unlike every known class. "
         "While no novel class is registered, a novel sample is still answered with the closest "
-        "known class (`kind` `known`): a cue to register the object."
+        "known class (`kind` `known`): a cue to register the object. Null for an abstention "
+        "(`kind` `input_outlier`): it claims neither a known nor a novel object."
     )
     novelty_score: float = Field(
         description="How unlike the known classes the sample is; above the model's tuned "
@@ -454,10 +467,12 @@ class RecognitionOut(BaseModel):
         description="The input lies outside what the model was trained on: one of its "
         "channels' level or spread is more than `input_outlier_score`'s threshold, 2.5 "
         "training IQRs, beyond the training data's range of that channel. A sensor that "
-        "reads zeros, saturates, is scaled wrongly or has a dead channel; the answer is "
-        "still given, but should not be trusted. Missing procedures do not count. Null "
-        "where the model was fitted before input profiles (not measured); fitting it again "
-        "measures it. For a trial or `same_object`, true when any of its samples is.",
+        "reads zeros, saturates, is scaled wrongly or has a dead channel; the answer then "
+        "abstains (`kind` `input_outlier`, no class) unless the request asks "
+        "`outliers=answer`, which gives the model's guess, not to be trusted. Missing "
+        "procedures do not count. Null where the model was fitted before input profiles "
+        "(not measured); fitting it again measures it. For a trial or `same_object`, true "
+        "when any of its samples is.",
         examples=[False],
     )
     input_outlier_score: float | None = Field(

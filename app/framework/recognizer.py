@@ -66,9 +66,13 @@ from app.framework.raw_input import (
     trial_images,
 )
 from app.framework.results import (
+    ABSTAIN,
+    INPUT_OUTLIER,
+    OUTLIER_POLICIES,
     ClassScore,
     Recognition,
     RecognitionBatch,
+    check_outliers,
     one_row_batch,
     ranked,
     rows_batch,
@@ -83,8 +87,11 @@ from app.framework.some_procedures import (
 from app.framework.state import ClassRegistry, NoveltyTuning
 
 __all__ = [
+    "ABSTAIN",
     "FUSION_RULE",
+    "INPUT_OUTLIER",
     "MIN_PROCEDURES",
+    "OUTLIER_POLICIES",
     "RAW_TRIALS",
     "SAMPLES",
     "TARGET_CONFIDENCE",
@@ -95,6 +102,7 @@ __all__ = [
     "RecognitionBatch",
     "TactileRecognizer",
     "check_groups",
+    "check_outliers",
     "fuse_groups",
     "group_mean",
     "ranked",
@@ -461,10 +469,14 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
         groups: np.ndarray | None = None,
         target_confidence: float = TARGET_CONFIDENCE,
         known_kept: float | None = None,
+        outliers: str = ABSTAIN,
     ) -> list[Recognition]:
         """Fig. 1: ND(x) routes each sample (or each group, see ``recognize_batch``) to
-        FC_Y or FC_Z."""
-        return self.recognize_batch(samples, top_k, groups, target_confidence, known_kept).answers()
+        FC_Y or FC_Z. An input outlier's answer names no class unless ``outliers`` is
+        ``"answer"`` (``app.framework.results``)."""
+        check_outliers(outliers)
+        batch = self.recognize_batch(samples, top_k, groups, target_confidence, known_kept)
+        return batch.answers(outliers)
 
     def recognize_batch(
         self,

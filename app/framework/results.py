@@ -5,6 +5,15 @@
 ``one_row_batch`` build a batch from the scores a recognizer computed: each row is routed
 by its novelty score to the known-class or the novel-class probabilities, and the top k of
 those are ranked by ``ranked`` (a stable order: among equal values the lower index first).
+
+A broken sensor is not answered as an object. An answer whose input is an outlier
+(``input_outlier``, ``app.framework.input_health``: all zeros, a saturated sensor, a dead
+channel) abstains by default (``outliers="abstain"``): its ``kind`` is ``"input_outlier"``,
+``class_name`` (and ``class_id``) None, ``is_novel`` None (it claims neither a known nor a
+novel object) and ``top_k`` empty; its novelty score, input health and procedures stay.
+``outliers="answer"`` gives the model's guess as for any other input (``kind`` ``known``
+or ``novel``), ``input_outlier`` still true. A model without an input profile never
+abstains (its answers' ``input_outlier`` is None).
 """
 
 from __future__ import annotations
@@ -16,6 +25,22 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+#: what an answer to an input outlier is: ``"abstain"`` (the default: no object named) or
+#: ``"answer"`` (the model's guess, flagged ``input_outlier``)
+ABSTAIN, ANSWER = "abstain", "answer"
+OUTLIER_POLICIES = (ABSTAIN, ANSWER)
+#: the ``kind`` of an answer that abstained because its input is an outlier
+INPUT_OUTLIER = "input_outlier"
+
+
+def check_outliers(outliers: str) -> str:
+    """``outliers`` when it is one of ``OUTLIER_POLICIES``; ValueError naming them else."""
+    if outliers not in OUTLIER_POLICIES:
+        raise ValueError(
+            f"outliers must be one of {', '.join(map(repr, OUTLIER_POLICIES))}, got {outliers!r}"
+        )
+    return outliers
+
 
 class ClassScore(NamedTuple):
     class_name: str
@@ -23,11 +48,12 @@ class ClassScore(NamedTuple):
 
 
 class Recognition(NamedTuple):
-    """The answer for one sample."""
+    """The answer for one sample; one that abstained on an input outlier names no class
+    (``class_name`` None, ``kind`` ``"input_outlier"``, ``is_novel`` None, no ``top_k``)."""
 
-    class_name: str
-    kind: str  # "known" | "novel"
-    is_novel: bool
+    class_name: str | None
+    kind: str  # "known" | "novel" | "input_outlier"
+    is_novel: bool | None
     novelty_score: float
     top_k: tuple[ClassScore, ...]
     procedures_used: tuple[str, ...] = ()
@@ -120,25 +146,28 @@ class RecognitionBatch:
         """(N,) bool: the answer is a novel class (FC_Z), not a known one (FC_Y)."""
         return self.top_index[:, 0] >= self.n_known
 
-    def records(self, class_ids: Mapping[str, int | None] | None = None) -> list[dict[str, Any]]:
+    def records(
+        self, class_ids: Mapping[str, int | None] | None = None, outliers: str = ABSTAIN
+    ) -> list[dict[str, Any]]:
         """The answers as JSON-ready dicts, in the shape of ``POST /v1/recognize``'s results;
         with ``class_ids`` (class name → the store's id) every class named carries its
-        ``class_id`` too. Built straight from the arrays: building pydantic models first cost
-        more than the forward pass of a sample."""
+        ``class_id`` too. An input outlier's answer abstains unless ``outliers`` is
+        ``"answer"`` (the module docstring). Built straight from the arrays: building
+        pydantic models first cost more than the forward pass of a sample."""
         names = self.class_names
         label = (
             [{"class_name": n} for n in names]
             if class_ids is None
             else [{"class_id": class_ids.get(n), "class_name": n} for n in names]
         )
-        return self.labelled_records(label, self.class_kinds)
+        return self.labelled_records(label, self.class_kinds, outliers)
 
     def labelled_records(
-        self, label: Sequence[Mapping[str, Any]], kinds: Sequence[str]
+        self, label: Sequence[Mapping[str, Any]], kinds: Sequence[str], outliers: str = ABSTAIN
     ) -> list[dict[str, Any]]:
         """``records`` from each class's label dict and kind, which a caller answering many
         batches of one model (the service) builds once."""
-        return [
+        out = [
             {
                 **label[idx[0]],
                 "kind": kinds[idx[0]],
@@ -164,10 +193,27 @@ class RecognitionBatch:
                 strict=True,
             )
         ]
+        for i in self._abstaining(outliers):
+            record = out[i]
+            record.update(dict.fromkeys(label[0], None))
+            record.update(kind=INPUT_OUTLIER, is_novel=None, top_k=[])
+        return out
 
-    def answers(self) -> list[Recognition]:
+    def _abstaining(self, outliers: str) -> list[int]:
+        """The rows whose answer abstains under ``outliers``: the input outliers, unless
+        ``outliers`` is ``"answer"``."""
+        if outliers is not ABSTAIN and check_outliers(outliers) == ANSWER:
+            return []
+        flags = self.input_outlier
+        if flags is None or not flags.any():
+            return []
+        return np.flatnonzero(flags).tolist()
+
+    def answers(self, outliers: str = ABSTAIN) -> list[Recognition]:
+        """The answers as ``Recognition`` objects; an input outlier's abstains unless
+        ``outliers`` is ``"answer"`` (the module docstring)."""
         names, kinds = self.class_names, self.class_kinds
-        return [
+        out = [
             Recognition(
                 names[idx[0]],
                 kinds[idx[0]],
@@ -189,6 +235,9 @@ class RecognitionBatch:
                 strict=True,
             )
         ]
+        for i in self._abstaining(outliers):
+            out[i] = out[i]._replace(class_name=None, kind=INPUT_OUTLIER, is_novel=None, top_k=())
+        return out
 
 
 def rows_batch(

@@ -22,6 +22,7 @@ import numpy as np
 from app.api.problems import Problem, blame, framework_problem, problem_body
 from app.framework import bundle
 from app.framework.errors import FrameworkError
+from app.framework.results import ABSTAIN, check_outliers
 
 RECOGNIZE, CLASSES = "/v1/recognize", "/v1/classes"
 
@@ -160,13 +161,16 @@ class ModelFileBackend:
     sync renames a new one over it); ``<file>.json`` beside it (written by
     ``TactileClient.sync_model``) names its version and class ids when it describes this
     very file. A changed file that cannot be read leaves the model read before answering,
-    with a warning in the diagnostics."""
+    with a warning in the diagnostics. ``outliers``: what an input outlier's answer is, as
+    the service's ``TACTILE_OUTLIERS``: ``"abstain"`` (no class: ``kind``
+    ``"input_outlier"``) or ``"answer"`` (the model's guess, flagged)."""
 
-    def __init__(self, path: str | Path, top_k: int = 3) -> None:
+    def __init__(self, path: str | Path, top_k: int = 3, outliers: str = ABSTAIN) -> None:
         if top_k < 1:
             raise ValueError(f"top_k must be at least 1, got {top_k}")
         self.path = Path(path)
         self.top_k = top_k
+        self.outliers = check_outliers(outliers)
         self._file = bundle.BundleFile(self.path)
         self._file.load()  # a model that cannot be read is the caller's error, at once
         self._meta: dict[str, Any] = self._read_meta()
@@ -247,7 +251,7 @@ class ModelFileBackend:
     def _answer(self, batch: Any) -> dict[str, Any]:
         return {
             "model_version": self._meta.get("version"),
-            "results": batch.records(self._meta.get("class_ids", {})),
+            "results": batch.records(self._meta.get("class_ids", {}), self.outliers),
         }
 
     def _read_meta(self) -> dict[str, Any]:

@@ -16,7 +16,12 @@ import numpy as np
 import orjson
 from fastapi.concurrency import run_in_threadpool
 
-from app.framework.recognizer import TARGET_CONFIDENCE, RecognitionBatch
+from app.framework.recognizer import (
+    ABSTAIN,
+    TARGET_CONFIDENCE,
+    RecognitionBatch,
+    check_outliers,
+)
 from app.service.batcher import RecognitionBatcher
 from app.service.holder import LoadedModel
 from app.service.input_monitor import InputMonitor
@@ -34,9 +39,12 @@ class RecognitionService:
         batcher: RecognitionBatcher | None = None,
         input_window: int = 256,
         known_kept: float | None = None,
+        outliers: str = ABSTAIN,
     ) -> None:
         self.metrics = metrics
         self.known_kept = known_kept  # the service's operating point; None: each model's own
+        # what an input outlier's answer is by default: "abstain" (no object) or "answer"
+        self.outliers = check_outliers(outliers)
         self.inputs = InputMonitor(metrics, input_window)
         self.top_k = top_k
         self.batch_limit = batch_limit
@@ -136,17 +144,25 @@ class RecognitionService:
         self.inputs.observe(results, rec.input_profile_, _channel_names(rec))
         return results
 
-    def to_json(self, model: LoadedModel, results: RecognitionBatch) -> bytes:
+    def to_json(
+        self, model: LoadedModel, results: RecognitionBatch, outliers: str | None = None
+    ) -> bytes:
         """The RecognizeResponse body (the schema documents it) of ``results``, answered
         by ``model``: ``{"model_version", "results"}``, each result what
-        ``RecognitionBatch.records(model.class_ids)`` gives (a test holds them equal)."""
+        ``RecognitionBatch.records(model.class_ids, outliers)`` gives (a test holds them
+        equal); ``outliers`` None: the service's."""
         return orjson.dumps(
-            {"model_version": model.version, "results": self.records(model, results)}
+            {"model_version": model.version, "results": self.records(model, results, outliers)}
         )
 
-    def records(self, model: LoadedModel, results: RecognitionBatch) -> list[dict[str, Any]]:
-        """``results.records(model.class_ids)``, from labels built once per model."""
-        return results.labelled_records(*self._model_labels(model, results))
+    def records(
+        self, model: LoadedModel, results: RecognitionBatch, outliers: str | None = None
+    ) -> list[dict[str, Any]]:
+        """``results.records(model.class_ids, outliers)``, from labels built once per
+        model; an input outlier's answer abstains unless ``outliers`` (None: the
+        service's ``outliers``) is ``"answer"``."""
+        label, kinds = self._model_labels(model, results)
+        return results.labelled_records(label, kinds, outliers or self.outliers)
 
     def _model_labels(self, model: LoadedModel, results: RecognitionBatch) -> tuple[list, list]:
         cached = self._labels

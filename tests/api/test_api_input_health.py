@@ -121,3 +121,85 @@ def test_the_window_keeps_each_sample_of_fused_answers(base_model):
     monitor.refresh()
     assert metrics.input_window_samples._value.get() == 4.0
     assert metrics.input_outlier_rate._value.get() == 0.0
+
+
+def broken_of(x: np.ndarray) -> np.ndarray:
+    """Zeros, a saturated sensor and one dead channel, made from sound sample ``x``."""
+    dead = x.copy()
+    dead[4] = 0.0
+    return np.stack([np.zeros_like(x), np.full_like(x, float(np.abs(x).max()) * 1e3), dead])
+
+
+def abstained(result: dict) -> bool:
+    """The answer names no object: it abstained on an input outlier."""
+    return (
+        result["kind"] == "input_outlier"
+        and result["class_name"] is None
+        and result["class_id"] is None
+        and result["is_novel"] is None
+        and result["top_k"] == []
+        and result["input_outlier"] is True
+    )
+
+
+def test_a_broken_sensor_is_not_answered_as_an_object(client, dataset):
+    sound = dataset.samples[:2]
+    broken = broken_of(sound[0])
+    x = np.concatenate([sound, broken])
+    r = client.post("/v1/recognize", json={"samples": x.tolist()})
+    assert r.status_code == 200
+    results = RecognizeResponse.model_validate(r.json()).model_dump()["results"]
+    assert [abstained(a) for a in results] == [False, False, True, True, True]
+    assert all(a["kind"] in ("known", "novel") and a["class_name"] for a in results[:2])
+    # .npy bodies, one sample alone, and touches fused with one broken among them
+    r = client.post("/v1/recognize", content=npy(broken), headers=NPY)
+    assert [abstained(a) for a in r.json()["results"]] == [True, True, True]
+    r = client.post("/v1/recognize", content=npy(broken[2]), headers=NPY)
+    assert abstained(r.json()["results"][0])
+    r = client.post(
+        "/v1/recognize",
+        json={"samples": [sound[0].tolist(), broken[2].tolist()]},
+        params={"same_object": True},
+    )
+    assert abstained(r.json()["results"][0])
+
+    # the model's guess on request, flagged; sound samples answered alike either way
+    r = client.post("/v1/recognize", json={"samples": x.tolist()}, params={"outliers": "answer"})
+    guessed = r.json()["results"]
+    assert all(a["kind"] in ("known", "novel") and a["class_name"] for a in guessed)
+    assert [a["input_outlier"] for a in guessed] == [False, False, True, True, True]
+    assert guessed[:2] == results[:2]
+    r = client.post("/v1/recognize", json={"samples": x.tolist()}, params={"outliers": "abstain"})
+    assert r.json()["results"] == results
+
+
+def test_an_unknown_outlier_policy_is_a_422_naming_it(client, sample):
+    r = client.post("/v1/recognize", json={"samples": [sample]}, params={"outliers": "guess"})
+    assert r.status_code == 422
+    assert r.headers["content-type"].startswith("application/problem+json")
+    assert "outliers" in r.json()["detail"] and "abstain, answer" in r.json()["detail"]
+
+
+def test_the_setting_answers_outliers_for_every_request(tmp_path, base_model):
+    model, dataset = base_model
+    broken = broken_of(dataset.samples[0])
+    settings = quick_settings(tmp_path / "o", outliers="answer")
+    with TestClient(create_app(settings, trainer=lambda: base_model)) as c:
+        results = c.post("/v1/recognize", json={"samples": broken.tolist()}).json()["results"]
+        assert all(a["class_name"] and a["input_outlier"] for a in results)
+        r = c.post(
+            "/v1/recognize", json={"samples": broken.tolist()}, params={"outliers": "abstain"}
+        )
+        assert all(abstained(a) for a in r.json()["results"])
+
+
+def test_the_schema_documents_the_abstention(client):
+    doc = client.get("/openapi.json").json()
+    out = doc["components"]["schemas"]["RecognitionOut"]["properties"]
+    assert "input_outlier" in out["kind"]["enum"]
+    assert {"type": "null"} in out["class_name"]["anyOf"]
+    assert {"type": "null"} in out["is_novel"]["anyOf"]
+    params = doc["paths"]["/v1/recognize"]["post"]["parameters"]
+    (outliers,) = [p for p in params if p["name"] == "outliers"]
+    assert outliers["schema"]["enum"] == ["abstain", "answer"]
+    assert "TACTILE_OUTLIERS" in outliers["description"]

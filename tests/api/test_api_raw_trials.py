@@ -361,3 +361,40 @@ def test_a_robot_enrols_an_object_from_its_trials(raw_service, raw_worker, pilot
     assert client.get(f"/v1/classes/{job['class_id']}").json()["n_samples"] == 3
     stored = client.get(f"/v1/classes/{job['class_id']}/samples/{added['sample_id']}").json()
     assert RawTrial(**stored["sample"]).same_as(trials[2])
+
+
+def test_a_trial_with_a_dead_finger_abstains_online_and_offline(raw_service, pilot, tmp_path):
+    """A finger whose electrodes read zeros makes its trial's answer an input outlier: no
+    object named over HTTP (JSON and one ``same_object`` answer) or from the model file,
+    the model's guess with ``outliers=answer``."""
+    from app.client import TactileClient
+    from app.testing.harness import free_port
+
+    client, _ = raw_service
+    sound = pilot[2].trials[0]
+    finger = dataclasses.replace(
+        sound.fingers[1], electrodes=np.zeros_like(sound.fingers[1].electrodes)
+    )
+    broken = dataclasses.replace(sound, fingers=(sound.fingers[0], finger))
+    body = {"trials": [trial_json(sound), trial_json(broken)]}
+    results = client.post("/v1/recognize", json=body).json()["results"]
+    assert [r["input_outlier"] for r in results] == [False, True]
+    assert results[0]["class_name"] and results[0]["kind"] == "known"
+    assert (results[1]["kind"], results[1]["class_name"], results[1]["top_k"]) == (
+        "input_outlier",
+        None,
+        [],
+    )
+    (fused,) = client.post("/v1/recognize", json=body, params={"same_object": True}).json()[
+        "results"
+    ]
+    assert fused["kind"] == "input_outlier" and fused["class_name"] is None
+    guessed = client.post("/v1/recognize", json=body, params={"outliers": "answer"}).json()
+    assert guessed["results"][1]["class_name"] and guessed["results"][1]["input_outlier"]
+
+    model_file = tmp_path / "robot" / "model.bundle"
+    TactileClient(http=client, model_file=model_file, retries=0).sync_model()
+    away = TactileClient(f"http://127.0.0.1:{free_port()}", model_file=model_file, retries=0)
+    offline = away.recognize_trials([sound, broken])["results"]
+    assert [r["kind"] for r in offline] == [results[0]["kind"], "input_outlier"]
+    assert offline[1]["class_name"] is None

@@ -269,3 +269,29 @@ def test_touches_the_service_refuses_are_errors_and_nothing_is_stored(best_servi
         robot.register_class("cup", samples=dataset.samples[:1], trials=[{}])
     with pytest.raises(ValueError, match="exactly one of sample or trial"):
         robot.add_sample(1)
+
+
+def test_a_broken_sensor_abstains_online_and_offline(robot, dataset, tmp_path):
+    """Zeros, a saturated sensor and a dead channel: no class named, online or from the
+    model file; ``outliers="answer"`` gives the model's guess, flagged, in both."""
+    robot.sync_model()
+    sound = dataset.samples[0]
+    dead = sound.copy()
+    dead[4] = 0.0
+    x = np.stack([sound, np.zeros_like(sound), np.full_like(sound, 1e6), dead])
+    away = unreachable(tmp_path, retries=0)
+    for answer in (robot.recognize(x), away.recognize(x)):
+        kinds = [r["kind"] for r in answer["results"]]
+        assert kinds[0] in ("known", "novel") and kinds[1:] == ["input_outlier"] * 3
+        assert [r["class_name"] for r in answer["results"][1:]] == [None] * 3
+        assert [r["is_novel"] for r in answer["results"][1:]] == [None] * 3
+    online = robot.recognize(x, outliers="answer")
+    offline = away.recognize(x, outliers="answer")
+    for answer in (online, offline):
+        assert all(r["class_name"] and r["kind"] != "input_outlier" for r in answer["results"])
+        assert [r["input_outlier"] for r in answer["results"]] == [False, True, True, True]
+    assert [r["class_name"] for r in online["results"]] == [
+        r["class_name"] for r in offline["results"]
+    ]
+    with pytest.raises(ValueError, match="outliers must be one of"):
+        robot.recognize(x, outliers="guess")

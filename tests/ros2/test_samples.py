@@ -39,7 +39,8 @@ def http_answer(url: str, samples: np.ndarray) -> dict:
 
 def inputs(shape: tuple[int, ...], n_procedures: int) -> list[np.ndarray]:
     """What a robot sends: single samples, one lacking procedures (NaN blocks), a batch,
-    and bad ones: another shape, infinity, NaN in part of a procedure."""
+    a broken sensor (zeros, one dead channel: answers that abstain), and bad ones: another
+    shape, infinity, NaN in part of a procedure."""
     x = quick_dataset().samples.astype(np.float32)
     rng = np.random.default_rng(7)
     touched = x[[0, 13, 27]] + rng.normal(0, 0.05, (3, *shape)).astype(np.float32)
@@ -50,12 +51,16 @@ def inputs(shape: tuple[int, ...], n_procedures: int) -> list[np.ndarray]:
     infinite[0, 0] = np.inf
     torn = touched[2].copy()
     torn[rows, :3] = np.nan  # part of a procedure missing: not a procedure not done
+    dead = touched[2].copy()
+    dead[4] = 0.0  # one dead channel
     return [
         touched[0],
         touched[1],
         partial,
         x[40:43],
         touched[2],
+        np.zeros(shape, np.float32),
+        dead,
         np.zeros(3, np.float32),
         infinite,
         torn,
@@ -74,10 +79,14 @@ def test_each_sample_gets_the_answer_http_gives_in_order(samples_service, bridge
     answers = [a.body for a in bridge.next_answers(len(sent) + 1)]
 
     assert answers == [http_answer(samples_service, x) for x in [*sent, sent[0]]]
-    assert [len(a.get("results", [])) for a in answers] == [1, 1, 1, 3, 1, 0, 0, 0, 1]
+    assert [len(a.get("results", [])) for a in answers] == [1, 1, 1, 3, 1, 1, 1, 0, 0, 0, 1]
     assert answers[2]["results"][0]["procedures_used"] == [procedures[0]]
     assert answers[2]["results"][0]["next_procedure"] in procedures[1:]
-    for problem in answers[5:8]:
+    for broken in answers[5:7]:  # a broken sensor is not answered as an object
+        (result,) = broken["results"]
+        assert result["kind"] == "input_outlier" and result["class_name"] is None
+    assert answers[4]["results"][0]["kind"] != "input_outlier"
+    for problem in answers[7:10]:
         assert problem["status"] == 422 and problem["errors"][0]["field"] == "samples"
 
     # a layout that its values do not fill has no HTTP twin; it is a 422 all the same

@@ -17,7 +17,12 @@ from app.api.problems import Problem, blame
 from app.api.sample_input import is_one_sample, sample_array
 from app.api.schemas import RecognizeRequest, RecognizeResponse
 from app.data.biotac import RawTrial
-from app.framework.recognizer import RAW_TRIALS, TARGET_CONFIDENCE, TactileRecognizer
+from app.framework.recognizer import (
+    OUTLIER_POLICIES,
+    RAW_TRIALS,
+    TARGET_CONFIDENCE,
+    TactileRecognizer,
+)
 from app.service.holder import LoadedModel, ModelWaitTimeout
 
 router = APIRouter(prefix="/v1", tags=["recognize"], responses=problems.responses(401, 403, 429))
@@ -75,6 +80,13 @@ MIN_MODEL_VERSION = (
     "rolled back); a 503 when this process cannot load it, or has not loaded it within "
     "`TACTILE_MODEL_WAIT_SECONDS` (30 s by default; its `Retry-After` says when to ask again)."
 )
+OUTLIERS = (
+    "What the answer to an input outlier is (`input_outlier` true: a sensor reading zeros, "
+    "saturated, wrongly scaled or with a dead channel). `abstain` names no object: `kind` "
+    "`input_outlier`, `class_id` and `class_name` null, `is_novel` null, `top_k` empty. "
+    "`answer` gives the model's guess as for any input (`kind` `known` or `novel`), still "
+    "flagged `input_outlier`. Default: the service's `TACTILE_OUTLIERS` (`abstain` unless set)."
+)
 KNOWN_KEPT = (
     "The novelty operating point of this answer: a sample is novel above the threshold that "
     "kept this share of held-out known touches known when the model was fitted (read off the "
@@ -115,6 +127,13 @@ RECOGNIZE_EXTRA = {
             "required": False,
             "schema": {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1},
             "description": KNOWN_KEPT,
+        },
+        {
+            "name": "outliers",
+            "in": "query",
+            "required": False,
+            "schema": {"type": "string", "enum": list(OUTLIER_POLICIES)},
+            "description": OUTLIERS,
         },
         {
             "name": "min_model_version",
@@ -170,6 +189,7 @@ async def answer(request: Request) -> bytes:
     same_object = _same_object(request)
     target = _target_confidence(request)
     kept = _known_kept(request)
+    outliers = _outliers(request)
     rec = model.recognizer
     body = await read_body(
         request, rec.input_shape, service.batch_limit, rec.procedures, rec.input_kind
@@ -184,7 +204,7 @@ async def answer(request: Request) -> bytes:
                 results = await service.recognize_object(model, body.samples, target, kept)
             else:
                 results = await service.recognize(model, body.samples, body.n, target, kept)
-    return service.to_json(model, results)
+    return service.to_json(model, results, outliers)
 
 
 def _query(request: Request, name: str) -> str | None:
@@ -263,6 +283,20 @@ def _known_kept(request: Request) -> float | None:
     if not 0.0 < value < 1.0:
         raise Problem(422, f"known_kept: a share in (0, 1) is needed (got {raw!r})", "known_kept")
     return value
+
+
+def _outliers(request: Request) -> str | None:
+    """The request's ``outliers``, None when it gives none (the service's)."""
+    raw = _query(request, "outliers")
+    if raw is None:
+        return None
+    if raw not in OUTLIER_POLICIES:
+        raise Problem(
+            422,
+            f"outliers: one of {', '.join(OUTLIER_POLICIES)} is needed (got {raw!r})",
+            "outliers",
+        )
+    return raw
 
 
 def _valid(adapter: TypeAdapter[Any], raw: str, otherwise: Any) -> Any:
