@@ -6,13 +6,18 @@ while there are at most ``exact_below`` of them, else by an HNSW graph over the 
 most first), which hands ``RERANK`` x k candidates on. Either way each candidate's squared
 distance is then computed exactly in every coordinate and the k nearest are kept, so the
 approximate search can only miss a candidate, never mis-score one. Prototypes added later
-(promotions, one-shot classes) are kept beside the index and searched exactly: an enrolment
-never rebuilds or copies the index.
+(promotions without a refit) are kept beside the index and searched exactly, which costs
+every sample a distance to each of them: once more than ``fold_above`` wait there, they are
+folded into a copy of the index (the index the served model searches is never written), so
+a backlog of promotions costs one copy and insertion per ``fold_above`` of them instead of a
+brute-force search that grows with each (``bench/grown_backlog.py``).
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from app.framework.growing import appended
 
 #: the approximate search hands this many times ``k`` candidates to the exact re-ranking:
 #: its leading coordinates alone rank the true k nearest lower than k now and then
@@ -35,6 +40,9 @@ class PrototypeSearch:
         links per node of the graph (faiss's ``M``).
     ef_search : int
         candidates the graph search keeps (faiss's ``efSearch``).
+    fold_above : int
+        prototypes added later (``with_points``) are searched exactly beside the index while
+        there are at most this many; past it they are folded into a copy of the index.
     """
 
     def __init__(
@@ -45,9 +53,13 @@ class PrototypeSearch:
         hnsw_links: int = 32,
         ef_search: int = 128,
         index: np.ndarray | None = None,
+        fold_above: int = 256,
     ) -> None:
         import faiss
 
+        if int(fold_above) < 0:
+            raise ValueError(f"fold_above must be a non-negative integer, got {fold_above!r}")
+        self.fold_above = int(fold_above)
         self.points = np.ascontiguousarray(points, np.float32)
         if index is not None:  # a stored index (``index_bytes``): read, not built again
             self.index = faiss.deserialize_index(np.asarray(index, np.uint8))
@@ -88,10 +100,25 @@ class PrototypeSearch:
         return len(self.points) + len(self.extra)
 
     def with_points(self, points: np.ndarray) -> PrototypeSearch:
-        """A search that also finds ``points`` (ids after the existing ones)."""
+        """A search that also finds ``points`` (ids after the existing ones); past
+        ``fold_above`` of them beside the index, the new search indexes them all."""
         new = self.__deepcopy__({})
         new.extra = np.concatenate([self.extra, np.asarray(points, np.float32)])
+        if len(new.extra) > new.fold_above:
+            new._fold()
         return new
+
+    def _fold(self) -> None:
+        """The prototypes beside the index into a copy of it (ids unchanged: they follow
+        the indexed ones). The prototypes' array grows by ``appended``: after the first
+        fold, into room behind it, not by a copy of every row."""
+        import faiss
+
+        index = faiss.clone_index(self.index)
+        index.add(np.ascontiguousarray(self.extra[:, : self.dims]))
+        self.index = index
+        self.points = appended(self.points, self.extra)
+        self.extra = np.zeros((0, self.points.shape[1]), np.float32)
 
     def nearest(self, e: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         """(ids, squared distances), each (N, min(k, len(self))), nearest first; the

@@ -42,11 +42,11 @@ from tqdm import tqdm
 from app.data.dataset import DatasetError, TactileDataset
 from app.data.procedures import block, seconds_of
 from app.framework.errors import FrameworkError
-from app.framework.params import either, integer, number, one_of
+from app.framework.params import Constraint, either, integer, number, one_of
 from app.framework.progress import bar_disabled
 from app.framework.recognizer import TactileRecognizer
 from app.framework.runtime import ensure_threads_configured
-from app.framework.scaling import RobustInputScaler, flatten
+from app.framework.scaling import BlockPCA, RobustInputScaler, flatten
 from app.methods.attributes import (
     LinearAttributeModel,
     softmax,
@@ -84,6 +84,21 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         A class is split in two where the halves keep at most this share of its squared
         spread (``SubclassEmbedding``; one Gaussian cluster of 8 simulated samples keeps
         about 0.84, three modes about 0.49). In (0, 1).
+    reduce_above : int, default 1024
+        Inputs of more features than this are reduced to principal components
+        (``app.framework.scaling.BlockPCA``, within each procedure's block of features)
+        before the within-class covariance is estimated and whitened: that covariance's
+        eigendecompositions, a dozen of them at every fit, cost the cube of the features
+        (at 2,000 features a fit took 49 s, at 10,000 it ran out of time and memory;
+        docs/BENCHMARKS.md, "Sensors of many values a touch"). The attribute parts then learn
+        from the same components. PHAC-2's 188 features and the simulator's 960 stay whole.
+        0 always reduces. A non-negative integer.
+    reduce_dims : tuple of int, default (32, 64, 128, 256, 512)
+        Where inputs are reduced: the numbers of components tried, the one whose probe (the
+        held-out trials below) gives the held-out samples' own classes the highest mean
+        log-probability kept (``metrics["reduced_dims"]``). The probe's components are
+        learnt without its held-out trials. Each is capped at the features and at one fewer
+        than the training samples. Positive integers.
     known_kept : float, default 0.9
         The novelty threshold's operating point: the share of known touches (held-out
         trials of the training objects) it keeps known. In (0, 1).
@@ -122,10 +137,22 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
     learns_known_incrementally = True  # a promoted class is a new prototype
     learns_classes_from_samples = True
     _featurizer_defaults = {"n_offsets": 1}
+    #: the principal components the inputs are reduced to (``reduce_above``), or None
+    reduction_: BlockPCA | None = None
 
     _parameter_constraints = {
         "max_modes": integer(1),
         "split_ratio": number(0, 1),
+        "reduce_above": integer(0, "be a non-negative integer (0 = always reduce)"),
+        "reduce_dims": Constraint(
+            lambda v: (
+                not isinstance(v, str | bytes)
+                and len(v) > 0
+                and all(isinstance(d, int | np.integer) and not isinstance(d, bool) for d in v)
+                and min(v) >= 1
+            ),
+            "be a non-empty sequence of positive integers",
+        ),
         "known_kept": number(0, 1),
         "distance_weight": either(
             one_of((None,)),
@@ -148,6 +175,8 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         seed: int = 0,
         max_modes: int = 3,
         split_ratio: float = 0.7,
+        reduce_above: int = 1024,
+        reduce_dims: tuple[int, ...] = (32, 64, 128, 256, 512),
         known_kept: float = 0.9,
         distance_weight: float | None = None,
         search_k: int = 32,
@@ -166,6 +195,8 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         self.seed = seed
         self.max_modes = max_modes
         self.split_ratio = split_ratio
+        self.reduce_above = reduce_above
+        self.reduce_dims = reduce_dims
         self.known_kept = known_kept
         self.distance_weight = distance_weight
         self.search_k = search_k
@@ -213,11 +244,15 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
             probe["known_scores"], probe["novel_scores"], float(self.known_kept)
         )
         self.novelty_threshold = float(self.novelty_tuning.threshold)
+        self.reduction_ = None
+        if probe["reduced_dims"] is not None:
+            self.reduction_ = self._reduction(probe["reduced_dims"]).fit(z)
+            z = self.reduction_.transform(z)
         timings["probe_s"] = time.perf_counter() - t0
         bar.update()
 
         t = time.perf_counter()
-        embedding = self._embedding().fit(z, y, k)
+        embedding = self._embedding(probe["modes"]).fit(z, y, k)
         # the probe saw one trial a class fewer: its shrinkage, scaled as Ledoit-Wolf's own
         # estimate moves from the probe's samples to all of them (on the simulator at 300
         # objects the probe's 0.9 was 0.7 with all trials, 0.918 against 0.950 accuracy);
@@ -256,6 +291,9 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
             "tau": float(self.tau_),
             "distance_weight": float(self.distance_weight_),
             "probe_known_acc": probe["accuracy"],
+            "reduced_dims": probe["reduced_dims"],
+            "reduction_ll": probe["reduction_ll"],
+            "modes": probe["modes"],
             "nd_known_kept": self.novelty_tuning.known_kept_at_threshold,
             "nd_val_novel": self.novelty_tuning.val_novel_at_threshold,
             "nd_val_auroc": self.novelty_tuning.auroc,
@@ -264,8 +302,9 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
             "params": self.get_params(),
         }
 
-    def _embedding(self) -> SubclassEmbedding:
-        return SubclassEmbedding(int(self.max_modes), float(self.split_ratio), seed=int(self.seed))
+    def _embedding(self, modes: int | None = None) -> SubclassEmbedding:
+        modes = int(self.max_modes) if modes is None else modes
+        return SubclassEmbedding(modes, float(self.split_ratio), seed=int(self.seed))
 
     def _probe(
         self, z: np.ndarray, y: np.ndarray, trials: np.ndarray, k: int
@@ -284,27 +323,22 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
             rng = np.random.default_rng(int(self.seed) + 1)
             rows = np.sort(rng.choice(rows, int(self.calibration_samples), replace=False))
         yh = y[rows]
-        base = self._embedding().fit(z[fit], y[fit], k)
-        owner = base.subclass_class_
-        count_all = np.bincount(base.subclass_, minlength=len(owner)).astype(np.float64)
-        class_total = _class_totals(owner, count_all, k)
-        k_search = int(self.search_k) + int(self.max_modes)
-        dims = z.shape[1]
-        best: dict[str, Any] = {"ll": -np.inf}
-        for shrink in (base.ledoit_wolf_, *_SHRINKAGES):
-            emb = base.shrunk(shrink)
-            search = PrototypeSearch(
-                emb.transform(base.subclass_means_), int(self.exact_below), int(self.search_dims)
-            )
-            ids, dist = search.nearest(emb.transform(z[rows]), k_search)
-            cls, count = owner[ids], count_all[ids]
-            mine = cls == yh[:, None]
-            for tau in _TAUS:
-                logp = class_log_posterior(dist, count, class_total[cls], cls, tau, dims)
-                ll = float(np.maximum(np.where(mine, logp, -np.inf).max(axis=1), -50.0).mean())
-                if ll > best["ll"] + 1e-9:
-                    best = {"ll": ll, "shrinkage": float(shrink), "tau": float(tau), "ids": ids}
-                    best["dist"], best["accuracy"] = dist, float((cls[:, 0] == yh).mean())
+        space: dict[str, Any] = {}
+        tried: dict[str, float] = {}
+        for n_dims, zr in self._probe_inputs(z, fit):
+            # reduced, classes are also tried whole: with 3 trials a class in the probe, a
+            # class split into modes of one trial each leaves no within-class spread to
+            # whiten by (72 % of held-out trials right against 92 % on 60 objects of 5
+            # trials, 10,000 values a touch)
+            every = (int(self.max_modes),) if n_dims is None else sorted({1, int(self.max_modes)})
+            for modes in every:
+                got = self._probe_space(zr[fit], y[fit], zr[rows], yh, k, modes)
+                if n_dims is not None:
+                    tried[f"{n_dims}/{modes}"] = got["best"]["ll"]
+                if not space or got["best"]["ll"] > space["best"]["ll"] + 1e-9:
+                    space = {**got, "reduced_dims": n_dims, "modes": modes}
+        best, base, dims = space["best"], space["base"], space["dims"]
+        owner, count_all, class_total = space["owner"], space["count_all"], space["class_total"]
         dist, ids, tau = best["dist"], best["ids"], best["tau"]
         cls, count = owner[ids], count_all[ids]
         class_n = class_total[cls]
@@ -324,6 +358,9 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
             if auroc > chosen["auroc"] + 1e-9:
                 chosen = {"auroc": auroc, "weight": float(w), "known": known, "novel": novel}
         return {
+            "reduced_dims": space["reduced_dims"],
+            "modes": space["modes"],
+            "reduction_ll": tried,
             "shrinkage": best["shrinkage"],
             "ledoit_wolf": base.ledoit_wolf_,
             "tau": tau,
@@ -332,6 +369,70 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
             "known_scores": chosen["known"],
             "novel_scores": chosen["novel"],
         }
+
+    def _probe_space(
+        self, zf: np.ndarray, yf: np.ndarray, zh: np.ndarray, yh: np.ndarray, k: int, modes: int
+    ) -> dict[str, Any]:
+        """The probe's space, fitted on ``zf`` (classes ``yf``) with at most ``modes``
+        subclasses a class, and its shrinkage and ``tau`` that give the held-out ``zh`` their
+        classes ``yh`` the highest mean log-probability (``best["ll"]``, a class posterior:
+        comparable between spaces)."""
+        base = self._embedding(modes).fit(zf, yf, k)
+        owner = base.subclass_class_
+        count_all = np.bincount(base.subclass_, minlength=len(owner)).astype(np.float64)
+        class_total = _class_totals(owner, count_all, k)
+        k_search = int(self.search_k) + int(self.max_modes)
+        dims = zf.shape[1]
+        best: dict[str, Any] = {"ll": -np.inf}
+        for shrink in (base.ledoit_wolf_, *_SHRINKAGES):
+            emb = base.shrunk(shrink)
+            search = PrototypeSearch(
+                emb.transform(base.subclass_means_), int(self.exact_below), int(self.search_dims)
+            )
+            ids, dist = search.nearest(emb.transform(zh), k_search)
+            cls, count = owner[ids], count_all[ids]
+            mine = cls == yh[:, None]
+            for tau in _TAUS:
+                logp = class_log_posterior(dist, count, class_total[cls], cls, tau, dims)
+                ll = float(np.maximum(np.where(mine, logp, -np.inf).max(axis=1), -50.0).mean())
+                if ll > best["ll"] + 1e-9:
+                    best = {"ll": ll, "shrinkage": float(shrink), "tau": float(tau), "ids": ids}
+                    best["dist"], best["accuracy"] = dist, float((cls[:, 0] == yh).mean())
+        return {
+            "best": best,
+            "base": base,
+            "dims": dims,
+            "owner": owner,
+            "count_all": count_all,
+            "class_total": class_total,
+        }
+
+    def _reduces(self, n_features: int) -> bool:
+        return n_features > int(self.reduce_above)
+
+    def _reduction(self, n_components: int) -> BlockPCA:
+        blocks = max(len(self.procedures), 1)
+        return BlockPCA(int(n_components), blocks, int(self.seed), _SCALER_SAMPLES)
+
+    def _probe_inputs(self, z: np.ndarray, fit: np.ndarray):
+        """(components kept or None, inputs) for each space the probe tries: the scaled
+        inputs themselves, or, where they are reduced, their leading components for each of
+        ``reduce_dims`` (distinct after the caps), learnt from the probe's rows ``fit``."""
+        if not self._reduces(z.shape[1]):
+            yield None, z
+            return
+        whole = self._reduction(max(int(d) for d in self.reduce_dims)).fit(z[fit])
+        seen: set[int] = set()
+        for d in sorted(int(d) for d in self.reduce_dims):
+            part = whole.truncated(d)
+            if part.n_features_out not in seen:
+                seen.add(part.n_features_out)
+                yield part.n_features_out, part.transform(z)
+
+    def _scaled(self, x: np.ndarray) -> np.ndarray:
+        """Flat inputs scaled, and reduced where the fit reduced them."""
+        z = self.scaler_.transform(x)
+        return z if self.reduction_ is None else self.reduction_.transform(z)
 
     def _procedure_order(self, z: np.ndarray, y: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """Procedures by known accuracy alone per robot second (on the calibration samples,
@@ -351,7 +452,7 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         return np.argsort(-per_second, kind="stable")
 
     def _refit_attributes(self, dataset: TactileDataset) -> None:
-        self._fit_attributes(self.scaler_.transform(flatten(dataset.samples)), dataset.labels)
+        self._fit_attributes(self._scaled(flatten(dataset.samples)), dataset.labels)
         self.metrics = {**self.metrics, "n_attributes": len(self.registry.attribute_names)}
 
     # --------------------------------------------------------------- scoring
@@ -371,7 +472,7 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         return known, novelty_scores(logp, dist, count, self.tau_, dims, weight)
 
     def _embedded(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        z = self.scaler_.transform(flatten(samples))
+        z = self._scaled(flatten(samples))
         return z, self.embedding_.transform(z)
 
     def _known_proba(self, samples: np.ndarray) -> np.ndarray:
@@ -421,7 +522,7 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         return softmax(logd)
 
     def _attribute_proba(self, samples: np.ndarray) -> np.ndarray:
-        return self.attributes_.predict_proba(self.scaler_.transform(flatten(samples)))
+        return self.attributes_.predict_proba(self._scaled(flatten(samples)))
 
     def __getstate__(self) -> dict[str, Any]:
         # the marginal models are a cache of this model: a copy (each enrolment's) builds its
@@ -442,7 +543,7 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         """Each class's new samples become one prototype of their own, beside the index; the
         space, ``tau`` and the threshold stay as fitted, and the attribute parts never see a
         promoted class's samples until the next full fit."""
-        e = self.embedding_.transform(self.scaler_.transform(flatten(samples)))
+        e = self.embedding_.transform(self._scaled(flatten(samples)))
         classes = np.unique(labels)
         points = np.stack([e[labels == c].mean(axis=0) for c in classes])
         counts = np.array([(labels == c).sum() for c in classes], np.float64)
@@ -494,6 +595,9 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         return self.procedures[int(self.procedure_order_[0])]
 
     def _features(self, keep: tuple[int, ...]) -> np.ndarray:
+        if self.reduction_ is not None:  # each procedure's components, block after block
+            width = self.reduction_.components_.shape[1]
+            return np.concatenate([np.arange(j * width, (j + 1) * width) for j in keep])
         cols = np.zeros(self.input_shape, bool)
         for j in keep:
             cols[block(self.procedures, self.input_shape, j)] = True
@@ -539,7 +643,7 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
     def _imputed(self, x: np.ndarray, keep: tuple[int, ...]) -> np.ndarray:
         """Scaled inputs with the missing features at their conditional mean given the rest."""
         feats, rest, *_, impute_m = self._marginal(keep)
-        z = self.scaler_.transform(np.nan_to_num(flatten(x)))
+        z = self._scaled(np.nan_to_num(flatten(x)))
         mean = self.embedding_.center_
         z[:, rest] = mean[rest] + (z[:, feats] - mean[feats]) @ impute_m
         return z
@@ -585,6 +689,9 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
             arrays[f"scaler/{key}"] = value
         for key, value in self.embedding_.get_state().items():
             arrays[f"embedding/{key}"] = value
+        if self.reduction_ is not None:
+            for key, value in self.reduction_.get_state().items():
+                arrays[f"reduction/{key}"] = value
         for key, value in self.attributes_.get_state().items():
             arrays[f"attributes/{key}"] = value
         meta = {
@@ -609,11 +716,21 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         self.scaler_ = RobustInputScaler()
         self.scaler_.set_state(part("scaler/"))
         self.embedding_ = SubclassEmbedding.from_state(part("embedding/"))
+        reduction = part("reduction/")
+        self.reduction_ = BlockPCA.from_state(reduction) if reduction else None
         n_features = int(np.prod(self.input_shape))
-        if self.embedding_.projection_.shape[0] != n_features:
+        inner = n_features
+        if self.reduction_ is not None:
+            if self.reduction_.n_features_in != n_features:
+                raise ValueError(
+                    f"the reduction expects {self.reduction_.n_features_in} features, "
+                    f"inputs have {n_features}"
+                )
+            inner = self.reduction_.n_features_out
+        if self.embedding_.projection_.shape[0] != inner:
             raise ValueError(
                 f"the embedding expects {self.embedding_.projection_.shape[0]} features, "
-                f"inputs have {n_features}"
+                f"inputs have {inner}"
             )
         points = np.asarray(arrays["points"], np.float32)
         fitted = int(arrays["n_fitted_points"])
