@@ -25,7 +25,10 @@ reach 1e10.
   which known objects it feels like. A novel class with real samples gets the
   mean signature of its samples as prototype, and samples are matched by cosine
   similarity (softmax over ``shot_temperature``). Classes without samples keep
-  their zero-shot probability; the classes with samples share the rest.
+  their zero-shot probability; the classes with samples share the rest, bounded by
+  ``shot_margin``: they keep it only where the touch's signature is closer to theirs, by
+  ``shot_margin / n`` for a class of n samples, than to the nearest known class's (the
+  rest goes back to the classes without samples).
 
 The forest is stored as plain arrays (``forest``), like every other part, so
 model bundles need no pickle, and enrolment never retrains it: ``add_novel_classes`` only scores the
@@ -48,6 +51,7 @@ from tqdm import tqdm
 
 from app.data.dataset import DatasetError, TactileDataset
 from app.framework.errors import FrameworkError
+from app.framework.one_shot import bounded_shots, shot_penalty
 from app.framework.params import either, integer, number, one_of
 from app.framework.progress import bar_disabled
 from app.framework.recognizer import TactileRecognizer
@@ -61,6 +65,9 @@ from app.methods.by_procedure import ProcedureModels
 from app.methods.described import DescribedClasses, check_known_classes
 from app.methods.known import CUES, KnownModel, relabelled
 from app.methods.small_batch import ScoringConstants, SmallBatchScorer
+
+#: ``shot_margin``'s default (docs/RESULTS.md, "One-shot classes and other objects' touches")
+SHOT_MARGIN = 0.1
 
 
 def signatures(known_proba: np.ndarray) -> np.ndarray:
@@ -101,6 +108,17 @@ class BestRecognizer(DescribedClasses, TactileRecognizer):
         Temperature of the softmax over the cosine similarities between a sample's
         signature and the prototypes of the novel classes that have real samples
         (one-shot learning); smaller is sharper. Positive.
+    shot_margin : float or None, default 0.1
+        How much closer (in cosine, before ``shot_temperature``) a touch's signature must
+        lie to the prototype of a novel class learnt from n samples than to the nearest
+        known class's signature (the unit vector of that class), less ``shot_margin / n``,
+        for the class to keep the probability it shares with the other classes with
+        samples; what it gives up goes to the novel classes without samples (described
+        ones), in proportion to their zero-shot probability. Without it a class enrolled
+        from one sample and no description, whose zero-shot score is neutral, took most
+        touches of described objects (``bench/one_shot_swallow.py``). None: no bound, as
+        before 2026-11-28. Chosen on development splits (docs/RESULTS.md, "One-shot
+        classes and other objects' touches"). Non-negative, or None.
     knn_weight : float, default 0.1
         Weight, in the novelty score ND(x), of the log distance to the nearest
         training sample (relative to the training set's own trial spacing), added to
@@ -213,6 +231,11 @@ class BestRecognizer(DescribedClasses, TactileRecognizer):
         "attribute_samples": integer(0, "be a non-negative integer (0 = every sample)"),
         "dap_clip": number(0, 0.5),
         "shot_temperature": number(0),
+        "shot_margin": either(
+            one_of((None,)),
+            number(0, include_low=True, allow_bool=False, finite=True),
+            must="be None or a non-negative number",
+        ),
         "novelty_val_fraction": number(0, 1),
         "novelty_holdout_trials": integer(1),
         "knn_weight": number(0, include_low=True, allow_bool=False),
@@ -243,6 +266,7 @@ class BestRecognizer(DescribedClasses, TactileRecognizer):
         attribute_samples: int = 50000,
         dap_clip: float = 0.02,
         shot_temperature: float = 0.05,
+        shot_margin: float | None = SHOT_MARGIN,
         knn_weight: float = 0.1,
         top_weight: float = 0.1,
         novelty_val_fraction: float = 0.1,
@@ -268,6 +292,7 @@ class BestRecognizer(DescribedClasses, TactileRecognizer):
         self.attribute_samples = attribute_samples
         self.dap_clip = dap_clip
         self.shot_temperature = shot_temperature
+        self.shot_margin = shot_margin
         self.knn_weight = knn_weight
         self.top_weight = top_weight
         self.novelty_val_fraction = novelty_val_fraction
@@ -428,6 +453,7 @@ class BestRecognizer(DescribedClasses, TactileRecognizer):
         n_known = len(self.registry.known_names)
         self.shot_prototypes_ = np.zeros((0, n_known), np.float64)
         self.shot_has_ = np.zeros(0, bool)
+        self.shot_counts_ = np.zeros(0, np.float64)
         self._small_batch = None  # its constants describe the novel part: built again on use
         if getattr(self, "procedures_", None) is not None:
             self.procedures_ = self.procedures_.synced(self, lambda m, j: m._reset_novel())
@@ -459,7 +485,22 @@ class BestRecognizer(DescribedClasses, TactileRecognizer):
         p_shot = softmax(sim / float(self.shot_temperature))
         out = p_zsl.copy()
         out[:, has] = (1.0 - p_zsl[:, ~has].sum(axis=1, keepdims=True)) * p_shot
-        return out
+        return self._bounded(out, known_p)
+
+    def _bounded(self, novel: np.ndarray, known_p: np.ndarray) -> np.ndarray:
+        """``novel`` (the novel classes' probabilities, classes with samples sharing their
+        zero-shot mass) bounded by ``shot_margin`` (``one_shot.bounded_shots``): a class with
+        samples keeps its share where the touch's signature is closer to its prototype, less
+        ``shot_margin / n``, than to the nearest known class's unit signature. The same
+        numbers from either path (``_novel_from`` and the small-batch scorer's)."""
+        has = self.shot_has_
+        if self.shot_margin is None or not self.has_attributes or not has.any() or has.all():
+            return novel
+        sig = signatures(known_p)
+        penalty = shot_penalty(self.shot_margin, self.shot_counts_[has])
+        temperature = float(self.shot_temperature)
+        shot = (sig @ self.shot_prototypes_[has].T - penalty) / temperature
+        return bounded_shots(novel, has, shot, sig.max(axis=1) / temperature)
 
     def _attribute_proba(self, samples: np.ndarray) -> np.ndarray:
         # DAP's per-attribute classifiers: the same probabilities its zero-shot scores use
@@ -478,7 +519,8 @@ class BestRecognizer(DescribedClasses, TactileRecognizer):
         if len(samples) <= self.small_batch_max:
             if getattr(self, "_small_batch", None) is None:
                 self._small_batch = SmallBatchScorer(ScoringConstants.of(self))
-            return self._small_batch.scores(flatten(samples))
+            novelty, known, novel = self._small_batch.scores(flatten(samples))
+            return novelty, known, None if novel is None else self._bounded(novel, known)
         z, known, novelty = self.known_.scores(flatten(samples))
         novel = self._novel_from(z, known) if self.registry.novel_names else None
         return novelty, known, novel
@@ -492,13 +534,14 @@ class BestRecognizer(DescribedClasses, TactileRecognizer):
         reg = self.registry
         protos = np.zeros((len(reg.novel_names), len(reg.known_names)), np.float64)
         has = np.zeros(len(reg.novel_names), bool)
+        counts = np.zeros(len(reg.novel_names), np.float64)
         for i, name in enumerate(reg.novel_names):
             samples = reg.novel_samples.get(name)
             if samples is not None and len(samples):
                 mean = signatures(self._known_proba(samples)).mean(axis=0)
                 protos[i] = mean / max(float(np.linalg.norm(mean)), 1e-12)
-                has[i] = True
-        self.shot_prototypes_, self.shot_has_ = protos, has
+                has[i], counts[i] = True, len(samples)
+        self.shot_prototypes_, self.shot_has_, self.shot_counts_ = protos, has, counts
         self._small_batch = None
         if self.procedures_ is not None:
             self.procedures_ = self.procedures_.synced(self, lambda m, j: m._refit_novel())

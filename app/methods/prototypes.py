@@ -23,7 +23,10 @@ split into subclasses where its trials gather in several clusters (contact modes
   (``app.methods.attributes``).
 - One-shot and samples-only classes: a novel class's samples give it a prototype, their
   mean in the same space, scored by the same Gaussian; classes without samples keep their
-  zero-shot probability and those with samples share the rest.
+  zero-shot probability and those with samples share the rest, bounded by ``shot_margin``:
+  they keep it only where the touch lies clearly closer to their prototype (by
+  ``shot_margin / n`` for a class of n samples) than to its nearest known prototype (the
+  rest goes back to the classes without samples).
 - Promotion (``with_known_samples``): the class's samples become a prototype of their own
   beside the index, at no refit. The space, ``tau`` and the threshold stay as fitted.
 - Missing procedures: the same Gaussian model's marginal over the features a sample holds
@@ -42,6 +45,7 @@ from tqdm import tqdm
 from app.data.dataset import DatasetError, TactileDataset
 from app.data.procedures import block, seconds_of
 from app.framework.errors import FrameworkError
+from app.framework.one_shot import bounded_shots, shot_penalty
 from app.framework.params import Constraint, either, integer, number, one_of
 from app.framework.progress import bar_disabled
 from app.framework.recognizer import TactileRecognizer
@@ -65,6 +69,10 @@ _BLOCK = 1024
 _ORDER_SAMPLES = 4096
 #: training samples the input scaler's medians and quartiles are read from
 _SCALER_SAMPLES = 50_000
+#: a squared distance below this counts as this (a touch on a prototype: no log of 0)
+_TINY = 1e-12
+#: ``shot_margin``'s default (docs/RESULTS.md, "One-shot classes and other objects' touches")
+SHOT_MARGIN = 5.0
 #: shrinkages of the within-class correlations tried at fit, beside Ledoit-Wolf's own
 _SHRINKAGES = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
 
@@ -114,6 +122,15 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
     calibration_samples : int, default 20000
         Training samples the leave-one-out calibration of ``tau`` and the threshold reads
         (every one where there are fewer). A positive integer.
+    shot_margin : float or None, default 5.0
+        How much closer a touch must lie to the prototype of a novel class learnt from n
+        samples than to its nearest known prototype for the class to keep the probability it
+        shares with the other classes with samples: each is scored by the profile
+        log-likelihood of an isotropic Gaussian around it (-dims/2 log of the squared
+        distance, free of the data's scale), the class's less ``shot_margin / n`` (nats).
+        What it gives up goes to the novel classes without samples (described ones), in
+        proportion to their zero-shot probability. As ``best``'s ``shot_margin``, on this
+        method's own scale; None: no bound, as before 2026-11-28. Non-negative, or None.
     attribute_C : float, default 0.1
         As ``best``'s: the L2 penalty's inverse of DAP's attribute classifiers.
     attribute_samples : int, default 50000
@@ -163,6 +180,11 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         "exact_below": integer(0),
         "search_dims": integer(1),
         "calibration_samples": integer(1),
+        "shot_margin": either(
+            one_of((None,)),
+            number(0, include_low=True, allow_bool=False, finite=True),
+            must="be None or a non-negative number",
+        ),
         "attribute_C": number(0),
         "attribute_samples": integer(0, "be a non-negative integer (0 = every sample)"),
         "dap_clip": number(0, 0.5),
@@ -183,6 +205,7 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         exact_below: int = 4096,
         search_dims: int = 64,
         calibration_samples: int = 20000,
+        shot_margin: float | None = SHOT_MARGIN,
         attribute_C: float = 0.1,
         attribute_samples: int = 50000,
         dap_clip: float = 0.02,
@@ -203,6 +226,7 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         self.exact_below = exact_below
         self.search_dims = search_dims
         self.calibration_samples = calibration_samples
+        self.shot_margin = shot_margin
         self.attribute_C = attribute_C
         self.attribute_samples = attribute_samples
         self.dap_clip = dap_clip
@@ -492,11 +516,16 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         return novelty, known, novel
 
     def _novel_from(
-        self, z: np.ndarray, e: np.ndarray, shot_points: np.ndarray | None = None
+        self,
+        z: np.ndarray,
+        e: np.ndarray,
+        shot_points: np.ndarray | None = None,
+        search: PrototypeSearch | None = None,
     ) -> np.ndarray:
         """The novel classes' probabilities from scaled inputs ``z`` and their coordinates
-        ``e``, in which the one-shot prototypes are ``shot_points`` (the fitted space's,
-        ``shot_points_``, unless given: a marginal's)."""
+        ``e``, in which the one-shot prototypes are ``shot_points`` and the known ones are
+        searched by ``search`` (the fitted space's, ``shot_points_`` and ``search_``, unless
+        given: a marginal's)."""
         reg = self.registry
         has = self.shot_has_
         if self.has_attributes:
@@ -506,20 +535,45 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         if not has.any():
             return p_zsl
         points = self.shot_points_ if shot_points is None else shot_points
-        p_shot = self._shot_posterior(e, points[has], self.shot_counts_[has])
+        logd = self._shot_log_density(e, points[has], self.shot_counts_[has])
+        p_shot = softmax(logd)
         out = p_zsl.copy()
         rest = 1.0 - p_zsl[:, ~has].sum(axis=1, keepdims=True) if self.has_attributes else 1.0
         out[:, has] = rest * p_shot
-        return out
+        if self.shot_margin is None or not self.has_attributes or has.all():
+            return out
+        # the bound (one_shot.bounded_shots), the known prototypes the rivals: each scores
+        # the touch by the profile log-likelihood of an isotropic Gaussian around it whose
+        # spread, fitted to the touch, is that prototype's share (1 + 1/n) of a common one:
+        # -dims/2 log(squared distance / (1 + 1/n)), free of the data's scale. A mean of n
+        # samples lies farther from its object's touches the fewer they are (a single
+        # sample, twice as far squared), and tau's Gaussian, with its normaliser, vetoed or
+        # favoured the class by the dataset's scale (on the simulator, all its own touches)
+        half = 0.5 * e.shape[1]
+        ids, dist = (self.search_ if search is None else search).nearest(e, int(self.search_k))
+        spread = dist.astype(np.float64) / (1.0 + 1.0 / self.proto_count_[ids])
+        rival = -half * np.log(np.maximum(spread.min(axis=1), _TINY))
+        counts = self.shot_counts_[has]
+        shot_spread = self._shot_distances(e, points[has]) / (1.0 + 1.0 / counts)
+        shot = -half * np.log(np.maximum(shot_spread, _TINY))
+        shot -= shot_penalty(self.shot_margin, counts)
+        return bounded_shots(out, has, shot, rival)
 
-    def _shot_posterior(self, e: np.ndarray, points: np.ndarray, counts: np.ndarray) -> np.ndarray:
-        """Softmax over the novel classes with samples, by the known part's Gaussian."""
+    def _shot_log_density(
+        self, e: np.ndarray, points: np.ndarray, counts: np.ndarray
+    ) -> np.ndarray:
+        """(N, S) log density of each touch under each class with samples' Gaussian (the
+        known part's, variance ``tau (1 + 1/n)``); its softmax shares their probability."""
+        dist = self._shot_distances(e, points)
+        v = 1.0 + 1.0 / counts
+        return -dist / (2.0 * self.tau_ * v) - 0.5 * e.shape[1] * np.log(v)
+
+    @staticmethod
+    def _shot_distances(e: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """(N, S) squared distances from the touches ``e`` to the one-shot prototypes."""
         e64, p64 = e.astype(np.float64), points.astype(np.float64)
         dist = (e64**2).sum(axis=1)[:, None] - 2.0 * e64 @ p64.T + (p64**2).sum(axis=1)
-        dist = np.maximum(dist, 0.0)
-        v = 1.0 + 1.0 / counts
-        logd = -dist / (2.0 * self.tau_ * v) - 0.5 * e.shape[1] * np.log(v)
-        return softmax(logd)
+        return np.maximum(dist, 0.0)
 
     def _attribute_proba(self, samples: np.ndarray) -> np.ndarray:
         return self.attributes_.predict_proba(self._scaled(flatten(samples)))
@@ -656,7 +710,8 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         known, novelty, e = self._marginal_scores(z, keep)
         novel = None
         if self.registry.novel_names:
-            novel = self._novel_from(z, e, self.shot_points_ @ self._marginal(keep)[5])
+            marginal = self._marginal(keep)
+            novel = self._novel_from(z, e, self.shot_points_ @ marginal[5], marginal[4])
         return novelty, known, novel
 
     def _subset_attribute_proba(self, x: np.ndarray, keep: np.ndarray) -> np.ndarray:
