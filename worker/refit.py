@@ -1,24 +1,37 @@
-"""A full refit in a child process of its own, under a memory limit the kernel enforces.
+"""A full refit in a child process of its own, under memory and time limits.
 
 A full refit (a promotion, a withdrawal from the known part) fits a new model on every
-stored sample. With the worker embedded in an API process (the default), a fit in that
-process shares its memory with recognition: at thousands of objects a fit takes gigabytes,
-and running out of memory there stops recognition. So the fit runs in a spawned child (a
-fork of a threaded server process is unsafe) whose data segment the kernel caps at
-``memory_limit_bytes`` (``RLIMIT_DATA``: an allocation past it fails at once, however
-short the spike). ``RLIMIT_DATA``, not ``RLIMIT_AS``: torch, numba and the BLAS reserve
-address space they never touch (after their imports a child's address space is 944 MB
-where its resident memory is 279 MB and its data 252 MB; after a 60-object fit 1,332 MB,
-445 MB and 498 MB), so an address-space cap would stop fits at a third of the memory it
-names. The old model answers meanwhile; a refit stopped for memory raises
-``RefitMemoryError``, which fails the retrain's jobs with that message and takes nothing
-else down (the next enrolment that needs the refit tries again).
+stored sample, and so does an attribute rebuild (``with_attributes``: the vocabulary or a
+known class's values changed) for the parts that learn attributes. With the worker
+embedded in an API process (the default), a fit in that process shares its memory with
+recognition: at thousands of objects a fit takes gigabytes, and running out of memory there
+stops recognition. So the fit runs in a spawned child (a fork of a threaded server process
+is unsafe) whose data segment the kernel caps at ``memory_limit_bytes`` (``RLIMIT_DATA``:
+an allocation past it fails at once, however short the spike). ``RLIMIT_DATA``, not
+``RLIMIT_AS``: torch, numba and the BLAS reserve address space they never touch (after
+their imports a child's address space is 944 MB where its resident memory is 279 MB and its
+data 252 MB; after a 60-object fit 1,332 MB, 445 MB and 498 MB), so an address-space cap
+would stop fits at a third of the memory it names. The old model answers meanwhile; a
+refit stopped for memory raises ``RefitMemoryError``, which fails the retrain's jobs with
+that message and takes nothing else down (the next enrolment that needs the refit tries
+again). A refused allocation is a memory stop however a library reports it: Python's and
+numpy's MemoryError, torch's allocator error, faiss's C++ ``std::bad_alloc`` (a MemoryError
+through its bindings, its own error naming it, or an abort printing it), a library's
+message on stderr, or the child killed by SIGKILL, as the kernel's out-of-memory killer
+does.
+
+The child leads a process group of its own and may run ``seconds`` of wall clock: past
+them the parent kills the group (the child and whatever it started) and raises
+``RefitTimeoutError``, with the same effect on the jobs. A parent that waited without a
+limit kept the worker's round, and every job behind it, waiting on a fit that never ends.
 
 The parent holds no second copy of what it sends or gets back: the dataset is pickled to
 a file, not into the pipe (``pickle.dumps`` of a 400 MB array peaks at 800 MB, a dump to
-a file at 400 MB), and the child writes the model as a split bundle, a head and one file
+a file at 400 MB); the base model of an attribute rebuild is written as a split bundle one
+row block at a time; and the child writes the model as a split bundle, a head and one file
 per part, which the parent decodes one part at a time (``bundle.load`` of one file held
-the file's bytes, its array archive's and the arrays at once).
+the file's bytes, its array archive's and the arrays at once), taking the base model's own
+array where a part is byte for byte one of its own.
 """
 
 from __future__ import annotations
@@ -225,9 +238,10 @@ def _failure(folder: Path, exitcode: int | None) -> tuple[str, str]:
     # a C++ library's std::bad_alloc thrown where nothing catches it (faiss in a parallel
     # region) aborts with "terminate called after throwing an instance of 'std::bad_alloc'";
     # OpenBLAS prints "Memory allocation still failed after 10 retries, giving up."
-    memory = [line for line in said if _MEMORY_WORDS.search(line)]
+    # (faulthandler's stack lines name functions, not what a library said)
+    memory = [line for line in said if _MEMORY_WORDS.search(line) and not line.startswith("File")]
     if memory:
-        return "memory", f"{memory[-1]}; {how}"
+        return "memory", f"{memory[0]}; {how}"
     if exitcode == -signal.SIGKILL:
         # not ours (a timeout is told apart before): the kernel's out-of-memory killer
         return "memory", f"{how}, as the kernel's out-of-memory killer ends a process"

@@ -122,6 +122,14 @@ def _allocates_with_numpy(dataset, base):
     return np.ones((2**30,), np.float32)  # 4 GiB
 
 
+def _aborts_on_bad_alloc(dataset, base):
+    """Ends as a C++ library ends a process when its std::bad_alloc escapes where nothing
+    catches it (an OpenMP region): libstdc++'s last words on stderr, then SIGABRT."""
+    os.write(2, b"terminate called after throwing an instance of 'std::bad_alloc'\n")
+    os.write(2, b"  what():  std::bad_alloc\n")
+    os.abort()
+
+
 def _is_killed(dataset, base):
     """Ends as the kernel's out-of-memory killer ends a process."""
     os.kill(os.getpid(), signal.SIGKILL)
@@ -161,12 +169,14 @@ def test_faiss_std_bad_alloc_is_a_memory_stop(dataset):
     assert "Raise TACTILE_REFIT_MEMORY_LIMIT_MB" in str(stopped.value)
 
 
-def test_numpys_memory_error_and_a_kill_for_memory_are_memory_stops(dataset):
+def test_numpys_memory_error_a_kill_and_an_abort_for_memory_are_memory_stops(dataset):
     limit = 1000 * 2**20
     with pytest.raises(RefitMemoryError, match="Unable to allocate 4.00 GiB"):
         run_in_child(_allocates_with_numpy, (), dataset, limit)
     with pytest.raises(RefitMemoryError, match="SIGKILL, as the kernel's out-of-memory killer"):
         run_in_child(_is_killed, (), dataset, limit)
+    with pytest.raises(RefitMemoryError, match=r"instance of 'std::bad_alloc'; ended by SIGABRT"):
+        run_in_child(_aborts_on_bad_alloc, (), dataset, limit)
 
 
 def test_an_attribute_refit_in_a_child_is_the_one_in_process_sharing_the_rest(dataset):
