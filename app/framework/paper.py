@@ -370,6 +370,11 @@ class PaperRecognizer(TactileRecognizer):
             dataset, self.novelty_val_fraction, holdout_trials=1, seed=self.seed
         )
         z = self._novelty_input(x, feats)
+        if len(fit_idx) < 2:
+            # too few known samples left to fit a detector without the held-out trials
+            # (2 classes of 2 trials: one is the validation object, one trial of the other
+            # is held out): the held-out ones join the fit, and their scores are in-sample
+            fit_idx = np.union1d(fit_idx, known_idx)
         tuning_detector = self._new_detector().fit(z[fit_idx])
         self.novelty_tuning = tune_threshold(
             tuning_detector.novelty_score(z[known_idx]), tuning_detector.novelty_score(z[val_idx])

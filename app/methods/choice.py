@@ -5,23 +5,36 @@ shrinkage LDA's accuracy on thousands of simulated objects where ``best``'s fore
 apart, and ``best`` detects novel PHAC-2 objects better. So a fit first measures each
 candidate on its own training data and then fits the winner on all of it:
 
-1. up to ``probe_classes`` classes are drawn at random;
+1. up to ``probe_classes`` classes with at least ``PROBE_MIN_TRIALS`` whole trials are
+   drawn at random (a class of fewer cannot give a trial to the probe and keep two for its
+   candidates' own calibration);
 2. each of ``probe_folds`` folds sets apart ``probe_novel`` of them as pseudo-novel objects,
    whole (the next ones in the draw, so that folds share none while they last), holds out
    one whole trial of each remaining class, and fits every candidate on the rest;
 3. a candidate scores its held-out trials' known accuracy plus the AUROC of its novelty
    score between those trials and the pseudo-novel objects' samples, averaged over folds;
+   a candidate that cannot fit a fold scores nothing and its reason is kept;
 4. the best score wins (ties go to the earlier candidate), and is fitted on everything.
 
-The probe's fits leave out what it does not measure (``best``'s per-procedure models).
+Where the data hold no probe (fewer than 3 such classes, as in a service's first model of
+2 classes with 2 enrolled samples each) or no candidate could be probed, ``unprobed`` wins
+by rule: ``best``, which named held-out touches right 0.89-1.00 of the time where
+``prototypes`` did 0.69-0.91, with 2 samples a class of 2 to 5 classes (PHAC-2 and the
+simulator, 8 development seeds: ``python -m bench.research.small_catalogue``). A rule that
+fails on the data falls back to the next candidate that fits.
 
+The probe's fits leave out what it does not measure (``best``'s per-procedure models).
 The choice rests on measurement, never on the catalogue's size: a probe is as large as the
 catalogue up to ``probe_classes``. Raw trials are featurized once for the probe (by the
 first candidate's featurizer) and the winner is fitted on the raw trials.
 
 ``fit`` returns the winner's fitted recognizer (a ``BestRecognizer`` or a
 ``PrototypeRecognizer``), not this object: its bundles load as that method, and its
-``metrics["chosen_by"]`` holds the probe's figures (so ``GET /v1/models/active`` shows them).
+``metrics["chosen_by"]`` records the choice (``choice_record``; ``GET /v1/models/active``
+shows it): the method, why (``probe`` or ``rule``), the catalogue's size when it was made,
+the probe's figures labelled with the probe's size, and the fitted model's own held-out
+known accuracy at full size where the method measures one (``prototypes``' calibration
+holds out a trial of every class), else ``null`` with the reason.
 """
 
 from __future__ import annotations
@@ -34,7 +47,7 @@ import numpy as np
 from sklearn.metrics import roc_auc_score
 
 from app.data.biotac_dataset import BioTacDataset
-from app.data.dataset import TactileDataset
+from app.data.dataset import DatasetError, TactileDataset
 from app.framework.errors import FrameworkError
 from app.framework.params import Constraint, Hyperparameters, between, check, integer
 from app.framework.recognizer import TactileRecognizer
@@ -44,6 +57,10 @@ log = logging.getLogger(__name__)
 CANDIDATES = ("prototypes", "best")
 # parts a probe does not measure, left out of its fits: answers from some procedures
 PROBE_ONLY_PARAMS = {"best": {"by_procedure": False}}
+#: whole trials a class needs to enter the probe: one held out, two left to fit on
+PROBE_MIN_TRIALS = 3
+#: the candidate chosen where the data hold no probe (module docstring)
+UNPROBED = "best"
 
 
 class MethodChoice(Hyperparameters):
@@ -67,6 +84,9 @@ class MethodChoice(Hyperparameters):
         Passed to each candidate.
     params : dict or None, default None
         Each candidate's own hyper-parameters, by method name.
+    unprobed : str or None, default None
+        The candidate chosen by rule where the data hold no probe (module docstring);
+        None: ``best`` where it is a candidate, else the first candidate.
     """
 
     method: ClassVar[str] = "auto"
@@ -93,6 +113,7 @@ class MethodChoice(Hyperparameters):
         probe_folds: int = 3,
         n_jobs: int | None = 1,
         params: dict[str, dict[str, Any]] | None = None,
+        unprobed: str | None = None,
     ) -> None:
         self.seed = seed
         self.candidates = candidates
@@ -101,6 +122,7 @@ class MethodChoice(Hyperparameters):
         self.probe_folds = probe_folds
         self.n_jobs = n_jobs
         self.params = params
+        self.unprobed = unprobed
 
     def _validate_params(self) -> None:
         from app.framework.registry import METHODS
@@ -114,6 +136,11 @@ class MethodChoice(Hyperparameters):
         )
         extra = sorted(set(self.params or {}) - set(self.candidates))
         check(not extra, f"params name methods that are not candidates: {extra}")
+        check(
+            self.unprobed is None or self.unprobed in self.candidates,
+            f"unprobed must be one of the candidates {list(self.candidates)}, "
+            f"got {self.unprobed!r}",
+        )
 
     def _make(self, name: str, probe: bool = False) -> TactileRecognizer:
         from app.framework.registry import method_class
@@ -136,33 +163,58 @@ class MethodChoice(Hyperparameters):
             )
         t0 = time.perf_counter()
         scores = self.probe(dataset) if len(self.candidates) > 1 else {}
-        winner = max(self.candidates, key=lambda c: scores.get(c, {}).get("score", 0.0))
+        scored = [c for c in self.candidates if "score" in scores.get(c, {})]
+        if scored:
+            order = sorted(scored, key=lambda c: -scores[c]["score"])  # stable: ties keep order
+            reason = "probe"
+        else:
+            first = self.unprobed or (UNPROBED if UNPROBED in self.candidates else None)
+            first = first or self.candidates[0]
+            order = [first, *(c for c in self.candidates if c != first)]
+            reason = "rule" if len(self.candidates) > 1 else "only candidate"
         probe_s = time.perf_counter() - t0
-        log.info("auto: %s chosen by the probe (%s) in %.1f s", winner, scores, probe_s)
-        model = self._make(winner).fit(dataset, progress=progress)
-        choice = {"method": winner, "probe": scores, "probe_seconds": round(probe_s, 1)}
-        model.metrics = {**model.metrics, "chosen_by": choice}  # kept in its bundle
+        failed: dict[str, str] = {}
+        for winner in order:
+            try:
+                model = self._make(winner).fit(dataset, progress=progress)
+                break
+            except (DatasetError, FrameworkError) as error:
+                # a rule's choice that cannot fit these data gives way to the next candidate
+                failed[winner] = str(error)
+                if reason == "probe" or winner == order[-1]:
+                    raise
+        log.info("auto: %s chosen by %s (%s) in %.1f s", winner, reason, scores, probe_s)
+        model.metrics = {  # kept in its bundle
+            **model.metrics,
+            "chosen_by": choice_record(
+                winner, reason, dataset, scores, probe_s, self._probed_classes(dataset), model
+            )
+            | ({"candidates_failed": failed} if failed else {}),
+        }
         return model
 
-    def probe(self, dataset: TactileDataset | BioTacDataset) -> dict[str, dict[str, float]]:
+    def _probed_classes(self, dataset: TactileDataset | BioTacDataset) -> int:
+        """How many classes a probe of ``dataset`` draws."""
+        return min(len(_eligible(dataset)), int(self.probe_classes))
+
+    def probe(self, dataset: TactileDataset | BioTacDataset) -> dict[str, dict[str, Any]]:
         """Each candidate's probe figures: ``known_acc``, ``nd_auroc`` and their sum
-        ``score``, means over the folds; empty when the data hold no probe (fewer than
-        three classes with two trials or more)."""
+        ``score``, means over the folds, or ``error`` where the candidate could not fit a
+        fold; empty when the data hold no probe (fewer than three classes with
+        ``PROBE_MIN_TRIALS`` trials or more)."""
+        eligible = _eligible(dataset)
+        if len(eligible) < 3:
+            return {}
         if isinstance(dataset, BioTacDataset):
             from app.framework.tactile_image import featurize_dataset
 
             featurizer = self._make(self.candidates[0])._new_featurizer().fit(dataset.trials)
             dataset = featurize_dataset(dataset, featurizer, augment=False)
         rng = np.random.default_rng(self.seed)
-        n_trials = np.array(
-            [len(np.unique(dataset.trials[dataset.labels == c])) for c in range(dataset.n_classes)]
-        )
-        eligible = np.flatnonzero(n_trials >= 2)
-        if len(eligible) < 3:
-            return {}
         drawn = rng.permutation(eligible)[: self.probe_classes]
-        n_novel = max(1, int(round(self.probe_novel * len(drawn))))
+        n_novel = min(len(drawn) - 2, max(1, int(round(self.probe_novel * len(drawn)))))
         figures: dict[str, list[tuple[float, float]]] = {c: [] for c in self.candidates}
+        errors: dict[str, str] = {}
         for fold in range(self.probe_folds):
             # each fold sets apart the next classes as novel, so that folds share none
             novel = np.roll(drawn, -fold * n_novel)[:n_novel]
@@ -177,16 +229,81 @@ class MethodChoice(Hyperparameters):
             x_novel = probe.samples[is_novel]
             truth = np.r_[np.zeros(len(x_known)), np.ones(len(x_novel))]
             for name in self.candidates:
-                model = self._make(name, probe=True).fit(train)
+                if name in errors:
+                    continue
+                try:
+                    model = self._make(name, probe=True).fit(train)
+                except (DatasetError, FrameworkError) as error:
+                    errors[name] = str(error)
+                    continue
                 acc = float(np.mean(model.known_proba(x_known).argmax(axis=1) == y_known))
                 score = np.r_[model.novelty_score(x_known), model.novelty_score(x_novel)]
                 figures[name].append((acc, float(roc_auc_score(truth, score))))
-        out = {}
+        out: dict[str, dict[str, Any]] = {}
         for name, folds in figures.items():
+            if name in errors:
+                out[name] = {"error": errors[name]}
+                continue
             acc, auroc = np.mean(folds, axis=0)
             out[name] = {"known_acc": float(acc), "nd_auroc": float(auroc)}
             out[name]["score"] = float(acc + auroc)
         return out
+
+
+#: the probe's figures estimate the catalogue's own while it is at most this many times
+#: the probe's size; past it known accuracy falls with the number of classes
+#: (docs/BENCHMARKS.md: 0.95 on a 100-class probe, 0.609 at 30,000 objects)
+PROBE_REPRESENTS = 2
+
+
+def choice_record(
+    method: str,
+    reason: str,
+    dataset: TactileDataset | BioTacDataset,
+    scores: dict[str, dict[str, Any]],
+    probe_seconds: float,
+    probe_classes: int,
+    model: TactileRecognizer,
+) -> dict[str, Any]:
+    """What ``metrics["chosen_by"]`` keeps of a choice (module docstring)."""
+    n_classes = int(dataset.n_classes)
+    record: dict[str, Any] = {
+        "method": method,
+        "reason": reason,
+        "n_classes": n_classes,
+        "n_samples": int(len(dataset)),
+        "probe_classes": probe_classes if scores else 0,
+        "probe": scores,
+        "probe_seconds": round(probe_seconds, 1),
+    }
+    held_out = model.metrics.get("probe_known_acc")  # prototypes: a trial of each class
+    if held_out is not None:
+        record["full_size_known_acc"] = float(held_out)
+    else:
+        record["full_size_known_acc"] = None
+        record["full_size_note"] = (
+            f"{method} measures no held-out known accuracy at full size"
+            if scores and n_classes > PROBE_REPRESENTS * probe_classes
+            else "the probe's figures are at the catalogue's size"
+            if scores
+            else "no probe: the data hold too few classes with enough trials"
+        )
+    if scores and n_classes > PROBE_REPRESENTS * probe_classes:
+        record["probe_note"] = (
+            f"measured on a probe of {probe_classes} of {n_classes} classes; accuracy falls "
+            "as classes are added, so the probe's figures overstate the catalogue's"
+        )
+    return record
+
+
+def _eligible(dataset: TactileDataset | BioTacDataset) -> np.ndarray:
+    """The classes with at least ``PROBE_MIN_TRIALS`` whole trials."""
+    labels = np.asarray(dataset.labels)
+    trials = np.asarray(dataset.trial_ids if isinstance(dataset, BioTacDataset) else dataset.trials)
+    n_trials = np.array(
+        [len(np.unique(trials[labels == c])) for c in range(dataset.n_classes)], dtype=int
+    )
+    return np.flatnonzero(n_trials >= PROBE_MIN_TRIALS)
 
 
 def _one_trial_each(

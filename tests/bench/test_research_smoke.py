@@ -204,6 +204,17 @@ def rerun_check(phac2: Path, tmp: Path) -> None:
         assert share(row["reruns"]["9"]) and share(row["base_mean"])
 
 
+def small_catalogue(phac2: Path, tmp: Path) -> None:
+    report = json.loads(run("small_catalogue.py", phac2).stdout)
+    assert report["seeds"] == [101] and set(report["accuracy"]) == {
+        "phac2 K=2",
+        "simulator K=2",
+    }
+    for figures in report["accuracy"].values():
+        assert set(figures) == {"best", "prototypes"}
+        assert all(share(f["mean"]) for f in figures.values()), figures
+
+
 SCRIPTS: dict[str, Callable[[Path, Path], None]] = {
     f"{check.__name__}.py": check
     for check in (
@@ -219,6 +230,7 @@ SCRIPTS: dict[str, Callable[[Path, Path], None]] = {
         explore_novelty,
         attribute_growth,
         rerun_check,
+        small_catalogue,
     )
 }
 

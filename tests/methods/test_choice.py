@@ -87,15 +87,33 @@ def test_a_single_candidate_needs_no_probe():
     assert model.metrics["chosen_by"]["probe"] == {}
 
 
-def test_too_few_classes_for_a_probe_fall_back_to_the_first_candidate():
+def test_too_few_classes_for_a_probe_fall_back_to_the_rule():
     ds = simulate_dataset(2, 4, seed=0)
-    model = MethodChoice(candidates=("best", "prototypes")).fit(ds)
+    model = MethodChoice(candidates=("prototypes", "best")).fit(ds)
     assert isinstance(model, BestRecognizer)
-    assert model.metrics["chosen_by"] == {
-        "method": "best",
-        "probe": {},
-        "probe_seconds": model.metrics["chosen_by"]["probe_seconds"],
-    }
+    chosen = model.metrics["chosen_by"]
+    assert (chosen["method"], chosen["reason"], chosen["probe"]) == ("best", "rule", {})
+    alone = MethodChoice(candidates=("prototypes",)).fit(ds).metrics["chosen_by"]
+    assert (alone["method"], alone["reason"]) == ("prototypes", "only candidate")
+
+
+def test_unprobed_must_be_a_candidate():
+    with pytest.raises(FrameworkError, match="unprobed"):
+        MethodChoice(candidates=("prototypes",), unprobed="best").fit(simulate_dataset(2, 2))
+
+
+def test_where_the_catalogue_outgrows_the_probe_its_figures_say_so(simulated_many):
+    """40 classes, a probe of at most 10: the record names both sizes and gives the fitted
+    model's own held-out accuracy at full size."""
+    ds = simulated_many[1]
+    model = MethodChoice(seed=0, probe_folds=1, probe_classes=10).fit(ds)
+    chosen = model.metrics["chosen_by"]
+    assert (chosen["n_classes"], chosen["probe_classes"]) == (40, 10)
+    assert "probe of 10 of 40 classes" in chosen["probe_note"]
+    if chosen["method"] == "prototypes":
+        assert chosen["full_size_known_acc"] == model.metrics["probe_known_acc"]
+    else:
+        assert chosen["full_size_known_acc"] is None and chosen["full_size_note"]
 
 
 @pytest.mark.phac2
