@@ -116,6 +116,8 @@ def simulate_dataset(
     noise: float = DEFAULT_NOISE,
     separation: str | None = None,
     modes: int = 1,
+    channels: int = len(CHANNEL_NAMES),
+    steps: int = N_STEPS,
 ) -> TactileDataset:
     """A deterministic PHAC-2-like dataset: samples (N, 32, 30), one sample per trial.
 
@@ -136,6 +138,14 @@ def simulate_dataset(
     Trial i of an object is touched in mode i % modes; each mode moves the object's trials by a
     smooth signature of its own, the object's modes centred on it (drawn from a generator of
     its own, so every other value is the same as with 1).
+
+    ``channels`` and ``steps``: a sensor of many taxels (a GelSight image, an event array)
+    instead of the 32 readings: samples (N, ``channels``, ``steps``). Each procedure's 8
+    readings, resampled to ``steps`` steps, are seen by ``channels / 4`` taxels, each a
+    weighted sum of them whose weights fall off smoothly along the array (every reading has a
+    receptive field of its own), so neighbouring taxels are strongly correlated, plus white
+    noise of std ``noise`` per taxel (``_taxels``; drawn from a generator of its own).
+    ``channels`` must be a positive multiple of 4; the defaults (32, 30) add nothing.
     """
     if separation is not None and separation not in SEPARATIONS:
         raise ValueError(f"separation must be None or one of {SEPARATIONS}, got {separation!r}")
@@ -149,6 +159,13 @@ def simulate_dataset(
         raise ValueError("n_objects and trials_per_object must be >= 1 and noise >= 0")
     if not isinstance(modes, int | np.integer) or modes < 1:
         raise ValueError(f"modes must be an integer >= 1, got {modes!r}")
+    n_procedures = len(PROCEDURES)
+    if not isinstance(channels, int | np.integer) or channels < 1 or channels % n_procedures:
+        raise ValueError(
+            f"channels must be a positive multiple of {n_procedures}, got {channels!r}"
+        )
+    if not isinstance(steps, int | np.integer) or steps < 2:
+        raise ValueError(f"steps must be an integer >= 2, got {steps!r}")
     rng = np.random.default_rng(seed)
     full = sample_attributes(rng, n_objects, names)  # (K, 19) in PAPER_ATTRIBUTES order
     labels = np.repeat(np.arange(n_objects), trials_per_object)
@@ -159,6 +176,8 @@ def simulate_dataset(
         samples.reshape(n_objects, trials_per_object, *samples.shape[1:])[:] += signature[:, None]
     if modes > 1:
         samples = _in_modes(samples, trials_per_object, modes, seed)
+    if channels != len(CHANNEL_NAMES) or steps != N_STEPS:
+        samples = _taxels(samples, int(channels), int(steps), noise, seed)
     width = max(2, len(str(n_objects - 1)))
     cols = [PAPER_ATTRIBUTES.index(a) for a in names]
     return TactileDataset(
@@ -325,6 +344,32 @@ def _in_modes(samples: np.ndarray, trials: int, modes: int, seed: int) -> np.nda
         offsets -= offsets.mean(axis=1, keepdims=True)
         out[lo : lo + objects] += offsets[:, mode]
     return samples
+
+
+def _taxels(samples: np.ndarray, channels: int, steps: int, noise: float, seed: int) -> np.ndarray:
+    """(N, channels, steps) float32: each procedure's readings resampled to ``steps`` and seen
+    by ``channels / 4`` taxels (``simulate_dataset``'s ``channels``)."""
+    rng = np.random.default_rng([seed, 0x7A7E1])
+    at = np.linspace(0.0, N_STEPS - 1, steps)
+    lo = np.minimum(at.astype(np.int64), N_STEPS - 2)
+    frac = (at - lo).astype(np.float32)
+    per, readings = channels // len(PROCEDURES), len(READINGS)
+    taxel = np.arange(per)[:, None]
+    out = np.empty((len(samples), channels, steps), np.float32)
+    for p in range(len(PROCEDURES)):
+        own = samples[:, p * readings : (p + 1) * readings]
+        x = own[..., lo] * (1.0 - frac) + own[..., lo + 1] * frac  # (N, 8, steps)
+        centres = rng.uniform(0.0, per, readings)
+        widths = rng.uniform(0.1, 0.3, readings) * per + 0.5
+        weights = np.exp(-0.5 * ((taxel - centres) / widths) ** 2)  # (per, 8): smooth fields
+        weights *= rng.uniform(0.5, 1.5, (per, readings))
+        weights += rng.normal(0.0, 0.05, (per, readings))
+        for lo_row in range(0, len(x), 1024):  # bounded memory at many samples
+            rows = x[lo_row : lo_row + 1024]
+            block = np.einsum("kr,nrt->nkt", weights.astype(np.float32), rows)
+            block += rng.normal(0.0, noise, block.shape).astype(np.float32)
+            out[lo_row : lo_row + len(rows), p * per : (p + 1) * per] = block
+    return out
 
 
 def _signals(rng: np.random.Generator, attrs: np.ndarray, labels: np.ndarray, noise: float):
