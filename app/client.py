@@ -114,7 +114,9 @@ class TactileClient:
         ``model_version`` of an enrolment job waited for, so that the answer includes it
         whichever API process gives it (offline, the model file answers as it is).
         ``known_kept``: the novelty operating point, the share of known touches the
-        threshold kept at fit (None: the service's, else the model's own). ``outliers``:
+        threshold kept at fit (None: the service's; offline ``DEFAULT_KNOWN_KEPT``, 0.90,
+        as the service's default, else the model's own threshold where it holds no
+        calibration curve); each result names the threshold it used. ``outliers``:
         what an input outlier's answer is, ``"abstain"`` (no class named, ``kind``
         ``"input_outlier"``) or ``"answer"`` (the model's guess, flagged); None: the
         service's, offline ``"abstain"``."""
@@ -141,7 +143,8 @@ class TactileClient:
             x = model.validate_samples(x, partial=True)
             groups = np.zeros(len(x), np.int64) if same_object else None
             target = TARGET_CONFIDENCE if target_confidence is None else target_confidence
-            batch = model.recognize_batch(x, self.offline_top_k, groups, target, known_kept)
+            kept = model.operating_point(known_kept)
+            batch = model.recognize_batch(x, self.offline_top_k, groups, target, kept)
             return self._offline_answer(batch, meta, outliers)
         return {**r.json(), "source": "service"}
 
@@ -193,11 +196,10 @@ class TactileClient:
             images, groups = model.trial_samples(body)
             if same_object:
                 groups = np.zeros_like(groups)
-            return self._offline_answer(
-                model.recognize_batch(images, top_k=self.offline_top_k, groups=groups),
-                meta,
-                outliers,
+            batch = model.recognize_batch(
+                images, self.offline_top_k, groups, known_kept=model.operating_point()
             )
+            return self._offline_answer(batch, meta, outliers)
         return {**r.json(), "source": "service"}
 
     @staticmethod

@@ -10,7 +10,7 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
-from app.framework.defaults import DEFAULT_METHOD
+from app.framework.defaults import DEFAULT_KNOWN_KEPT, DEFAULT_METHOD
 
 # each API process holds its own interpreter, torch and model (~0.5 GB resident)
 MAX_DEFAULT_PROCESSES = 4
@@ -74,14 +74,14 @@ class Settings(BaseSettings):
     top_k: int = Field(3, ge=1, description="Scores returned per recognised sample.")
     batch_limit: int = Field(1024, ge=1, description="Most samples in one recognize request.")
     known_kept: float | None = Field(
-        None,
+        DEFAULT_KNOWN_KEPT,
         gt=0,
         lt=1,
-        description="The novelty operating point of every answer: the threshold that kept "
-        "this share of held-out known touches known when the model was fitted (read off its "
-        "calibration curve); a request's own `known_kept` overrides it. Unset, each model "
-        "answers at its own threshold: 0.90 of known touches kept for `prototypes`, the "
-        "paper's balanced point (Sect. VI-B) for `best`.",
+        description="The novelty operating point of every answer, whatever the method: the "
+        "threshold that kept this share of held-out known touches known when the model was "
+        "fitted (read off its calibration curve); a request's own `known_kept` overrides it. "
+        "A model without a calibration curve answers at its own threshold (`operating_point` "
+        "`model_default` in each answer). Every answer states the threshold it used.",
     )
     outliers: Literal["abstain", "answer"] = Field(
         "abstain",

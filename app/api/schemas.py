@@ -447,8 +447,27 @@ class RecognitionOut(BaseModel):
         "(`kind` `input_outlier`): it claims neither a known nor a novel object."
     )
     novelty_score: float = Field(
-        description="How unlike the known classes the sample is; above the model's tuned "
-        "threshold it is novel. Comparable within one model version only."
+        description="How unlike the known classes the sample is; above `novelty_threshold` "
+        "it is novel. Comparable within one model version only."
+    )
+    novelty_threshold: float | None = Field(
+        description="The novelty threshold this answer was routed by: novel above it. Read "
+        "off the model's calibration curve at `known_kept`, or the model's own threshold "
+        "(`operating_point` `model_default`).",
+        examples=[1.5],
+    )
+    known_kept: float | None = Field(
+        description="The operating point: the share of held-out known touches that "
+        "`novelty_threshold` kept known when the model was fitted, as asked for (the "
+        "request's `known_kept`, else the service's `TACTILE_KNOWN_KEPT`, 0.90 unless set), "
+        "the same for every method. Null where the model holds no calibration curve.",
+        examples=[0.9],
+    )
+    operating_point: Literal["known_kept", "model_default"] | None = Field(
+        description="`known_kept`: routed by the threshold keeping `known_kept` of known "
+        "touches; `model_default`: by the model's own threshold (a model without a "
+        "calibration curve).",
+        examples=["known_kept"],
     )
     top_k: list[ScoreOut] = Field(
         description="The most probable classes of the group answered from, best first."

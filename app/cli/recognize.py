@@ -75,10 +75,12 @@ def _from_json(text: str, where: str):
 
 
 def answers(model, request, top_k: int):
-    """A model's answers to samples, or to raw trials (one per trial)."""
+    """A model's answers to samples, or to raw trials (one per trial), at the service's
+    default operating point (``TactileRecognizer.operating_point``)."""
+    kept = model.operating_point()
     if isinstance(request, Trials):
-        return model.recognize_trials(list(request), top_k=top_k)
-    return model.recognize_batch(request, top_k=top_k)
+        return model.recognize_trials(list(request), top_k=top_k, known_kept=kept)
+    return model.recognize_batch(request, top_k=top_k, known_kept=kept)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -9,3 +9,9 @@ from __future__ import annotations
 # thousands of simulated objects (docs/RESULTS.md, docs/BENCHMARKS.md); each method, and
 # the paper pipeline ("paper"), stays selectable by name.
 DEFAULT_METHOD = "auto"
+
+# the operating point every served answer is routed by unless one is asked for: the novelty
+# threshold that kept this share of held-out known touches known at fit, for every method
+# that holds a calibration curve (the service's TACTILE_KNOWN_KEPT, the client's model file,
+# the ROS 2 bridge); prototypes fits its own threshold at the same share
+DEFAULT_KNOWN_KEPT = 0.90

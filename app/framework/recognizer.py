@@ -84,13 +84,22 @@ from app.framework.some_procedures import (
     asks_next,
     by_procedures,
 )
-from app.framework.state import ClassRegistry, NoveltyTuning
+from app.framework.state import (
+    DEFAULT_KNOWN_KEPT,
+    KNOWN_KEPT,
+    MODEL_DEFAULT,
+    ClassRegistry,
+    NoveltyTuning,
+)
 
 __all__ = [
     "ABSTAIN",
+    "DEFAULT_KNOWN_KEPT",
     "FUSION_RULE",
     "INPUT_OUTLIER",
+    "KNOWN_KEPT",
     "MIN_PROCEDURES",
+    "MODEL_DEFAULT",
     "OUTLIER_POLICIES",
     "RAW_TRIALS",
     "SAMPLES",
@@ -503,7 +512,8 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
 
         ``known_kept`` routes by another operating point than the model's own threshold:
         the threshold that kept that share of held-out known samples known when the model
-        was fitted (``threshold_keeping``).
+        was fitted (``threshold_keeping``). Every answer records the threshold it was routed
+        by and the operating point (``novelty_threshold``, ``known_kept``).
         """
         if not 0.0 < float(target_confidence) <= 1.0:
             raise FrameworkError(f"target_confidence must lie in (0, 1], got {target_confidence}")
@@ -522,6 +532,7 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
             if used is not None:
                 used = group_mean(used.astype(np.float64), g, int(g.max()) + 1) > 0
         batch = self._batch(scores, known_p, novel_p, top_k, threshold)
+        batch.__dict__.update(known_kept=known_kept)
         self._add_input_health(batch, x, g)
         if used is None:
             return self._complete(batch)
@@ -546,6 +557,17 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
                 "it answers at its own threshold only (known_kept cannot move it)"
             )
         return self.novelty_tuning.threshold_keeping(float(known_kept))
+
+    def operating_point(
+        self, known_kept: float | None = None, default: float | None = DEFAULT_KNOWN_KEPT
+    ) -> float | None:
+        """The share of known touches an answer is routed by (``recognize_batch``'s
+        ``known_kept``): ``known_kept`` where one is asked for; else ``default`` (the
+        served default, ``DEFAULT_KNOWN_KEPT``) where the model holds a calibration curve;
+        else None, the model's own threshold (a model without a curve)."""
+        if known_kept is not None:
+            return known_kept
+        return default if self.novelty_tuning is not None else None
 
     def input_outlier_score(self, samples: Any) -> np.ndarray:
         """(N,) how far each sample lies outside the training data's channel ranges, in

@@ -25,6 +25,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from app.framework.state import KNOWN_KEPT, MODEL_DEFAULT
+
 #: what an answer to an input outlier is: ``"abstain"`` (the default: no object named) or
 #: ``"answer"`` (the model's guess, flagged ``input_outlier``)
 ABSTAIN, ANSWER = "abstain", "answer"
@@ -62,6 +64,12 @@ class Recognition(NamedTuple):
     #: input_health``); None where the model holds no input profile (fitted before them)
     input_outlier: bool | None = None
     input_outlier_score: float | None = None
+    #: the threshold the answer was routed by, the share of known touches it kept at fit
+    #: (None: the model's own threshold) and which of the two (``"known_kept"``,
+    #: ``"model_default"``)
+    novelty_threshold: float | None = None
+    known_kept: float | None = None
+    operating_point: str | None = None
 
 
 @dataclass(frozen=True)
@@ -95,6 +103,11 @@ class RecognitionBatch:
     #: rows than answers where groups fused samples (a slice keeps them only where each
     #: answer is one sample); None where the model holds no input profile
     input_statistics: np.ndarray | None = None
+    #: (N,) float64 the novelty threshold each answer was routed by (novel above it), and
+    #: the share of held-out known touches that threshold kept known at fit, the operating
+    #: point asked for (None: the model's own threshold); None where not recorded
+    novelty_threshold: np.ndarray | None = None
+    known_kept: float | None = None
 
     def __len__(self) -> int:
         return len(self.novelty_score)
@@ -115,6 +128,8 @@ class RecognitionBatch:
             self.input_statistics[rows]
             if self.input_statistics is not None and len(self.input_statistics) == len(self)
             else None,
+            None if self.novelty_threshold is None else self.novelty_threshold[rows],
+            self.known_kept,
         )
 
     def health_fields(self) -> list[tuple[bool | None, float | None]]:
@@ -125,6 +140,15 @@ class RecognitionBatch:
         return list(
             zip(self.input_outlier.tolist(), self.input_outlier_score.tolist(), strict=True)
         )
+
+    def operating_fields(self) -> list[tuple[float | None, float | None, str | None]]:
+        """(``novelty_threshold``, ``known_kept``, ``operating_point``) of each answer:
+        the threshold it was routed by, and the share of known touches asked for
+        (``"known_kept"``) or none, the model's own threshold (``"model_default"``)."""
+        if self.novelty_threshold is None:
+            return [(None, None, None)] * len(self)
+        point = MODEL_DEFAULT if self.known_kept is None else KNOWN_KEPT
+        return [(t, self.known_kept, point) for t in self.novelty_threshold.tolist()]
 
     def procedure_fields(self) -> list[tuple[list[str], str | None]]:
         """(``procedures_used``, ``next_procedure``) of each answer, by name."""
@@ -182,14 +206,22 @@ class RecognitionBatch:
                 "next_procedure": nxt,
                 "input_outlier": outlier,
                 "input_outlier_score": outlier_score,
+                "novelty_threshold": threshold,
+                "known_kept": kept,
+                "operating_point": point,
             }
-            for idx, top_p, novel, score, (used, nxt), (outlier, outlier_score) in zip(
+            for idx, top_p, novel, score, (used, nxt), (outlier, outlier_score), (
+                threshold,
+                kept,
+                point,
+            ) in zip(
                 self.top_index.tolist(),
                 self.top_probability.tolist(),
                 self.is_novel.tolist(),
                 self.novelty_score.tolist(),
                 self.procedure_fields(),
                 self.health_fields(),
+                self.operating_fields(),
                 strict=True,
             )
         ]
@@ -224,14 +256,16 @@ class RecognitionBatch:
                 nxt,
                 outlier,
                 outlier_score,
+                *operating,
             )
-            for idx, tp, nov, score, (used, nxt), (outlier, outlier_score) in zip(
+            for idx, tp, nov, score, (used, nxt), (outlier, outlier_score), operating in zip(
                 self.top_index.tolist(),
                 self.top_probability.tolist(),
                 self.is_novel.tolist(),
                 self.novelty_score.tolist(),
                 self.procedure_fields(),
                 self.health_fields(),
+                self.operating_fields(),
                 strict=True,
             )
         ]
@@ -250,9 +284,9 @@ def rows_batch(
     novel_names: Sequence[str],
 ) -> RecognitionBatch:
     """The answers of any number of rows: a row whose novelty score is above ``threshold``
-    is answered from ``novel_p`` (where there are novel classes), the others from
-    ``known_p``; each ranks its top ``top_k`` (at least 1). ``one_row_batch`` must match it
-    bit for bit."""
+    (a number, or one per row; the batch records it) is answered from ``novel_p`` (where
+    there are novel classes), the others from ``known_p``; each ranks its top ``top_k`` (at
+    least 1). ``one_row_batch`` must match it bit for bit."""
     novel = scores > threshold
     n, k, n_known = len(scores), max(1, top_k), len(known_names)
     # Route, then rank top-k for each classifier's rows at once.
@@ -275,6 +309,7 @@ def rows_batch(
         top_p,
         novel,
         scores.astype(np.float64),
+        novelty_threshold=np.full(n, threshold, np.float64),
     )
 
 
@@ -319,6 +354,8 @@ def one_row_batch(
         input_outlier_score=None,
         input_outlier=None,
         input_statistics=None,
+        novelty_threshold=np.full(1, threshold, np.float64),
+        known_kept=None,
     )
     return batch
 

@@ -10,7 +10,13 @@ from typing import Any
 
 import numpy as np
 
+from app.framework.defaults import DEFAULT_KNOWN_KEPT
 from app.framework.errors import UnknownClassError
+
+__all__ = ["DEFAULT_KNOWN_KEPT", "KNOWN_KEPT", "MODEL_DEFAULT", "ClassRegistry", "NoveltyTuning"]
+#: ``operating_point`` of an answer: routed by a stated share of known touches kept, or by
+#: the model's own threshold (a model without a calibration curve, or asked for none)
+KNOWN_KEPT, MODEL_DEFAULT = "known_kept", "model_default"
 
 
 @dataclass

@@ -21,6 +21,7 @@ import numpy as np
 
 from app.api.problems import Problem, blame, framework_problem, problem_body
 from app.framework import bundle
+from app.framework.defaults import DEFAULT_KNOWN_KEPT
 from app.framework.errors import FrameworkError
 from app.framework.results import ABSTAIN, check_outliers
 
@@ -163,14 +164,25 @@ class ModelFileBackend:
     very file. A changed file that cannot be read leaves the model read before answering,
     with a warning in the diagnostics. ``outliers``: what an input outlier's answer is, as
     the service's ``TACTILE_OUTLIERS``: ``"abstain"`` (no class: ``kind``
-    ``"input_outlier"``) or ``"answer"`` (the model's guess, flagged)."""
+    ``"input_outlier"``) or ``"answer"`` (the model's guess, flagged). ``known_kept``: the
+    novelty operating point, as the service's ``TACTILE_KNOWN_KEPT`` (the same default; a
+    model without a calibration curve answers at its own threshold)."""
 
-    def __init__(self, path: str | Path, top_k: int = 3, outliers: str = ABSTAIN) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        top_k: int = 3,
+        outliers: str = ABSTAIN,
+        known_kept: float | None = DEFAULT_KNOWN_KEPT,
+    ) -> None:
         if top_k < 1:
             raise ValueError(f"top_k must be at least 1, got {top_k}")
         self.path = Path(path)
         self.top_k = top_k
         self.outliers = check_outliers(outliers)
+        if known_kept is not None and not 0.0 < known_kept < 1.0:
+            raise ValueError(f"known_kept must lie in (0, 1), got {known_kept}")
+        self.known_kept = known_kept
         self._file = bundle.BundleFile(self.path)
         self._file.load()  # a model that cannot be read is the caller's error, at once
         self._meta: dict[str, Any] = self._read_meta()
@@ -192,7 +204,9 @@ class ModelFileBackend:
         def run(rec: Any) -> Any:
             takes_kind(rec, Body(samples, None, 1))
             with blame("samples"):
-                return rec.recognize_batch(samples, self.top_k)
+                return rec.recognize_batch(
+                    samples, self.top_k, known_kept=rec.operating_point(None, self.known_kept)
+                )
 
         return self._answered(run)
 
@@ -202,7 +216,9 @@ class ModelFileBackend:
         def run(rec: Any) -> Any:
             parsed = trials.one(trial, "trials", 0)
             with blame("trials"):
-                return rec.recognize_trials([parsed], self.top_k)
+                return rec.recognize_trials(
+                    [parsed], self.top_k, rec.operating_point(None, self.known_kept)
+                )
 
         return self._answered(run)
 

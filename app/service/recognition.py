@@ -20,6 +20,7 @@ from app.framework.recognizer import (
     ABSTAIN,
     TARGET_CONFIDENCE,
     RecognitionBatch,
+    TactileRecognizer,
     check_outliers,
 )
 from app.service.batcher import RecognitionBatcher
@@ -42,7 +43,9 @@ class RecognitionService:
         outliers: str = ABSTAIN,
     ) -> None:
         self.metrics = metrics
-        self.known_kept = known_kept  # the service's operating point; None: each model's own
+        # the service's operating point, for every model with a calibration curve; None:
+        # each model's own threshold
+        self.known_kept = known_kept
         # what an input outlier's answer is by default: "abstain" (no object) or "answer"
         self.outliers = check_outliers(outliers)
         self.inputs = InputMonitor(metrics, input_window)
@@ -71,7 +74,7 @@ class RecognitionService:
         above the threshold keeping ``known_kept`` of known touches (None: the service's
         ``known_kept``, else the model's own threshold)."""
         rec = model.recognizer
-        kept = self._kept(known_kept)
+        kept = self._kept(rec, known_kept)
         if target_confidence is not None:
             return self._counted(
                 model,
@@ -99,7 +102,7 @@ class RecognitionService:
         groups = np.zeros(len(samples), np.int64)
         rec = model.recognizer
         target = TARGET_CONFIDENCE if target_confidence is None else target_confidence
-        kept = self._kept(known_kept)
+        kept = self._kept(rec, known_kept)
         return self._counted(
             model,
             await run_in_threadpool(rec.recognize_batch, samples, self.top_k, groups, target, kept),
@@ -115,7 +118,7 @@ class RecognitionService:
         """One answer per raw trial from all its fingers (with ``same_object``, one for all
         the trials): featurized by the model's own featurizer."""
         rec = model.recognizer
-        kept = self._kept(known_kept)
+        kept = self._kept(rec, known_kept)
 
         def run() -> RecognitionBatch:
             images, groups = rec.trial_samples(trials)
@@ -125,10 +128,11 @@ class RecognitionService:
 
         return self._counted(model, await run_in_threadpool(run))
 
-    def _kept(self, known_kept: float | None) -> float | None:
+    def _kept(self, rec: TactileRecognizer, known_kept: float | None) -> float | None:
         """The share of known touches an answer is routed by: the request's, else the
-        service's; None answers at the model's own threshold."""
-        return self.known_kept if known_kept is None else known_kept
+        service's where the model holds a calibration curve; None answers at the model's
+        own threshold (``TactileRecognizer.operating_point``)."""
+        return rec.operating_point(known_kept, self.known_kept)
 
     def _counted(self, model: LoadedModel, results: RecognitionBatch) -> RecognitionBatch:
         best = results.top_index[:, 0]

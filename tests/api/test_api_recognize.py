@@ -189,6 +189,7 @@ def test_touches_of_one_object_get_one_fused_answer(client, dataset):
         "same_object",
         "target_confidence",
         "known_kept",
+        "outliers",
         "min_model_version",
     ]
 
@@ -310,7 +311,8 @@ def test_waiting_for_a_version_shares_one_load_and_holds_no_request_thread(
 def test_known_kept_moves_the_operating_point_of_one_answer(client, app, dataset):
     """A request's ``known_kept`` routes its answers by the threshold that kept that share
     of held-out known touches: a lower share calls more samples novel; the answer without
-    it is the model's own; a share outside (0, 1) is a 422 naming the parameter."""
+    it keeps 0.90, the service's default; a share outside (0, 1) is a 422 naming the
+    parameter."""
     x = dataset.samples[:64]
     rec = app.state.service.holder.current.recognizer
     low_t, high_t = rec.threshold_keeping(0.05), rec.threshold_keeping(0.99)
@@ -324,7 +326,7 @@ def test_known_kept_moves_the_operating_point_of_one_answer(client, app, dataset
     scores = rec.novelty_score(x)
     assert novel(known_kept=0.05) == int((scores > low_t).sum())
     assert novel(known_kept=0.99) == int((scores > high_t).sum())
-    assert novel() == int((scores > rec.novelty_threshold).sum())
+    assert novel() == int((scores > rec.threshold_keeping(0.90)).sum())
     assert novel(known_kept=0.05) > novel(known_kept=0.99)
     one = client.post("/v1/recognize", content=npy(x[0]), headers=NPY, params={"known_kept": 0.05})
     assert one.json()["results"][0]["is_novel"] == bool(scores[0] > low_t)  # through the batcher

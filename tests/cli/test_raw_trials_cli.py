@@ -56,7 +56,9 @@ def test_recognize_answers_raw_trials_once_per_trial(trained, tmp_path, capsys):
     out = json.loads(capsys.readouterr().out)
     assert code == 0 and len(out["results"]) == 3
     assert [r["class_name"] for r in out["results"]] == ["obj0", "obj1", "obj2"]
-    expected = bundle.load(path).recognize_trials([raw.trials[i] for i in (0, 7, 13)]).records()
+    model = bundle.load(path)
+    trials = [raw.trials[i] for i in (0, 7, 13)]
+    expected = model.recognize_trials(trials, known_kept=model.operating_point()).records()
     assert out["results"] == expected
 
 

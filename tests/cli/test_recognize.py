@@ -33,7 +33,7 @@ def test_npy_samples_get_the_models_own_answers(saved, tmp_path, capsys):
     np.save(tmp_path / "x.npy", x)
     code, printed, _ = run(capsys, "--model", str(path), "--top-k", "2", str(tmp_path / "x.npy"))
     assert code == 0 and printed["method"] == model.method
-    expected = model.recognize_batch(x, top_k=2).records()
+    expected = model.recognize_batch(x, top_k=2, known_kept=model.operating_point()).records()
     assert [r["class_name"] for r in printed["results"]] == [r["class_name"] for r in expected]
     assert all(len(r["top_k"]) == 2 and "class_id" not in r for r in printed["results"])
     np.testing.assert_allclose(
@@ -130,14 +130,16 @@ def test_lines_are_answered_one_by_one_and_a_new_model_file_is_picked_up(saved, 
     assert answer_lines(robot_file, lines(), out, top_k=3) == 0
     answers = [json.loads(line) for line in out.getvalue().splitlines()]
     assert len(answers) == 5
-    assert answers[0]["results"] == model.recognize_batch(x).records()
+    at_default = {"known_kept": model.operating_point()}  # the service's default
+    assert answers[0]["results"] == model.recognize_batch(x, **at_default).records()
     assert (
         "is not JSON" in answers[1]["error"] and "expected samples of shape" in answers[2]["error"]
     )
-    assert answers[3]["results"] == model.recognize_batch(x).records()
+    assert answers[3]["results"] == model.recognize_batch(x, **at_default).records()
     assert "cannot be read" in answers[3]["warning"]
     assert (
-        answers[4]["results"] == newer.recognize_batch(x).records() and "warning" not in answers[4]
+        answers[4]["results"] == newer.recognize_batch(x, **at_default).records()
+        and "warning" not in answers[4]
     )
 
 

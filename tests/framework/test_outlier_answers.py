@@ -1,10 +1,14 @@
-"""A broken sensor is not answered as an object: an answer whose input is an outlier
-(zeros, a saturated sensor, one dead channel) abstains by default in ``recognize``,
-``RecognitionBatch.answers`` and ``records`` (no class, ``kind`` ``input_outlier``), for
-single samples and fused groups alike, and gives the model's guess with
-``outliers="answer"``; sound samples are answered as before either way."""
+"""A broken sensor is not answered as an object, and every answer names its operating
+point. An answer whose input is an outlier (zeros, a saturated sensor, one dead channel)
+abstains by default in ``recognize``, ``RecognitionBatch.answers`` and ``records`` (no
+class, ``kind`` ``input_outlier``), for single samples and fused groups alike, and gives
+the model's guess with ``outliers="answer"``; sound samples are answered as before either
+way. Each answer records the threshold it was routed by and the share of known touches
+asked for (``operating_point`` ``known_kept``), or none (``model_default``)."""
 
 from __future__ import annotations
+
+import copy
 
 import numpy as np
 import pytest
@@ -81,3 +85,25 @@ def test_an_unknown_policy_is_refused_by_name(model_and_data):
         model.recognize(data.samples[:1], outliers="guess")
     with pytest.raises(ValueError, match="'guess'"):
         model.recognize_batch(data.samples[:1]).records(outliers="guess")
+
+
+def test_each_answer_names_the_threshold_and_operating_point_it_used(model_and_data):
+    model, data = model_and_data
+    x = data.samples[:6]
+    own = model.recognize_batch(x)
+    assert own.novelty_threshold.tolist() == [model.novelty_threshold] * 6
+    assert {(a.known_kept, a.operating_point) for a in own.answers()} == {(None, "model_default")}
+    kept = model.operating_point()  # the served default, the model holding a curve
+    assert kept == 0.90
+    at = model.recognize_batch(x, known_kept=kept)
+    threshold = model.threshold_keeping(kept)
+    records = at.records()
+    assert {(r["novelty_threshold"], r["known_kept"], r["operating_point"]) for r in records} == {
+        (threshold, 0.90, "known_kept")
+    }
+    assert at.is_novel.tolist() == (at.novelty_score > threshold).tolist()
+    assert at[2:4].novelty_threshold.tolist() == [threshold] * 2 and at[2:4].known_kept == 0.90
+    assert model.operating_point(0.97) == 0.97
+    bare = copy.copy(model)
+    bare.novelty_tuning = None
+    assert bare.operating_point() is None and bare.operating_point(None, 0.8) is None

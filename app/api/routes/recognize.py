@@ -91,8 +91,10 @@ KNOWN_KEPT = (
     "The novelty operating point of this answer: a sample is novel above the threshold that "
     "kept this share of held-out known touches known when the model was fitted (read off the "
     "model's calibration curve, up to 200 points). Higher keeps more known touches known and "
-    "detects fewer novel ones. Default: the service's `TACTILE_KNOWN_KEPT`, else the model's "
-    "own threshold (`metrics.nd_known_kept` in `GET /v1/models/active` says what it kept)."
+    "detects fewer novel ones. Default: the service's `TACTILE_KNOWN_KEPT` (0.90 unless set), "
+    "for every method; a model without a calibration curve answers at its own threshold. "
+    "Each answer states the threshold it used (`novelty_threshold`, `known_kept`, "
+    "`operating_point`)."
 )
 # recognize reads its query by hand too: FastAPI's parameter machinery cost ~25 µs a request
 # (bench/side_by_side.py measures the route against the framework's floor)
