@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from app.framework.defaults import DEFAULT_KNOWN_KEPT, DEFAULT_METHOD
@@ -112,6 +112,14 @@ class Settings(BaseSettings):
         "within this share of that refit's samples; beyond it, or at 0, the whole model is "
         "fitted again.",
     )
+    rechoose_growth: float = Field(
+        2.0,
+        ge=1.0,
+        description="With method auto, a full refit keeps the method chosen before until the "
+        "known classes number this many times those it was chosen at; then it chooses again. "
+        "An operator asks for a new choice at any time (POST /v1/models/choice, or "
+        "'tactile-zsl model choose').",
+    )
     refit_memory_limit_mb: int = Field(
         0,
         ge=0,
@@ -148,8 +156,12 @@ class Settings(BaseSettings):
         "attributes and input shape must be the dataset's.",
     )
     method: str = Field(DEFAULT_METHOD, description="Recognition method used for training.")
-    method_params: dict[str, Any] = Field(
-        default_factory=dict, description="JSON keyword arguments for the method (epochs, seed)."
+    method_params: dict[str, dict[str, Any]] = Field(
+        default_factory=dict,
+        description="JSON keyword arguments by method name, e.g. "
+        '{"best": {"n_estimators": 200}, "auto": {"probe_classes": 50}}: each method gets '
+        "its own wherever it is fitted (with method auto, its candidates get theirs). "
+        "Unknown methods or parameters stop the service at start.",
     )
     torch_threads: int = Field(
         1, ge=1, description="Torch intra-op threads; the networks are tiny, more mostly contend."
@@ -207,8 +219,24 @@ class Settings(BaseSettings):
     @classmethod
     def _parse_params(cls, value: Any) -> Any:
         if isinstance(value, str):
-            return json.loads(value) if value.strip() else {}
-        return value
+            value = json.loads(value) if value.strip() else {}
+        from app.framework.params_by_method import check_params_by_method
+
+        return check_params_by_method(value)
+
+    @model_validator(mode="after")
+    def _params_for_methods_fitted(self) -> Settings:
+        from app.framework.params_by_method import check_placed
+
+        check_placed(self.method, self.method_params)
+        return self
+
+    def params_for(self, method: str | None = None) -> dict[str, Any]:
+        """The keyword arguments that make ``method`` (default: ``method``) from
+        ``method_params``: its own, and for ``auto`` its candidates' as ``params``."""
+        from app.framework.params_by_method import params_for
+
+        return params_for(method or self.method, self.method_params)
 
     @property
     def api_processes(self) -> int:

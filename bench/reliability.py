@@ -91,7 +91,7 @@ def pg_outage(args: argparse.Namespace) -> int:
                 n_workers=args.workers or 2,
                 extra_env={
                     "TACTILE_METHOD": "best",
-                    "TACTILE_METHOD_PARAMS": json.dumps(BEST_PARAMS),
+                    "TACTILE_METHOD_PARAMS": json.dumps({"best": BEST_PARAMS}),
                     "TACTILE_DB_TIMEOUT_SECONDS": str(args.db_timeout),
                     "TACTILE_PROMOTION_THRESHOLD": "1000",
                 },

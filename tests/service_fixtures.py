@@ -208,7 +208,7 @@ def best_service(tmp_path, best_base):
     from worker import Worker
 
     app = create_app(
-        quick_settings(tmp_path, method="best", method_params=BEST_PARAMS),
+        quick_settings(tmp_path, method="best", method_params={"best": BEST_PARAMS}),
         trainer=lambda: best_base,
     )
     with TestClient(app) as client:
@@ -230,7 +230,7 @@ def best_stores_service(settings, best_base):
     from worker import Worker
 
     app = create_app(
-        settings.model_copy(update={"method": "best", "method_params": BEST_PARAMS}),
+        settings.model_copy(update={"method": "best", "method_params": {"best": BEST_PARAMS}}),
         trainer=lambda: best_base,
     )
     with TestClient(app) as client:

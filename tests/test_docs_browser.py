@@ -42,7 +42,7 @@ def service(tmp_path_factory) -> Iterator[str]:
         "TACTILE_DATA_DIR": str(data_dir),
         "TACTILE_DATASET": QUICK_DATASET,
         "TACTILE_METHOD": QUICK_METHOD,
-        "TACTILE_METHOD_PARAMS": json.dumps(QUICK_PARAMS),
+        "TACTILE_METHOD_PARAMS": json.dumps({QUICK_METHOD: QUICK_PARAMS}),
     }
     log = data_dir / "serve.log"
     with open(log, "wb") as out:

@@ -34,6 +34,7 @@ from app.service.bootstrap import (
 )
 from app.store import bundles, leases, repo, retention
 from app.store.enums import JobStatus
+from worker.kept_method import record_choice, refit_method
 from worker.retrain import Plan, Rebuild, build, known_dataset, make_first_plan, make_plan
 
 log = logging.getLogger(__name__)
@@ -194,6 +195,14 @@ class Worker:
                 )
             refit = plan.rebuild in (Rebuild.FULL, Rebuild.ATTRIBUTES)
             known = known_dataset(s, plan, model.procedures if model else ()) if refit else None
+            if plan.rebuild is Rebuild.FULL:
+                plan.method, plan.kept_choice = refit_method(
+                    self.settings,
+                    model,
+                    base.version if base else None,
+                    known.n_classes,
+                    plan.choose_method,
+                )
         # the session is closed: no transaction stays open while training runs
         if plan.changes_model:
             log.info(
@@ -205,6 +214,8 @@ class Worker:
                 len(plan.new_samples),
             )
             new = build(plan, model, self.settings, known)
+            if plan.rebuild is Rebuild.FULL:
+                new = record_choice(new, plan.kept_choice, model)
             split = self._encoder.split(new)  # serialised before the transaction opens
         ok = [j for j in job_ids if j not in plan.rejected]
         with self._handover():

@@ -76,6 +76,12 @@ class Plan:
     novel: list[ClassState] = field(default_factory=list)  # every novel class of the new model
     samples: dict[int, list[Sample]] = field(default_factory=dict)  # its enrolled samples by class
     rejected: dict[int, str] = field(default_factory=dict)  # job id -> why it cannot succeed
+    # an operator asked method auto to choose again (a ``choose_method`` job): a full refit
+    choose_method: bool = False
+    # what a full refit fits (``worker.kept_method``): "" for the settings' method, and the
+    # kept choice's record (None: auto chooses anew)
+    method: str = ""
+    kept_choice: dict | None = None
 
     @property
     def changes_model(self) -> bool:
@@ -112,6 +118,9 @@ def make_plan(
     live_samples = set()
     redescribed = False  # an operator changed a class's attributes (PATCH)
     for job in claimed:
+        if job.kind == JobKind.CHOOSE_METHOD:
+            plan.choose_method = True
+            continue
         if job.kind in (JobKind.ADD_ATTRIBUTE, JobKind.RETIRE_ATTRIBUTE):
             continue  # the vocabulary is compared with the base's below
         if (
@@ -206,6 +215,7 @@ def make_plan(
         full |= not grows
     if (
         full
+        or plan.choose_method
         or known_part
         or (novel_part and not model.novel_part_separable)
         or (attributes and not model.attributes_separable)
@@ -221,7 +231,9 @@ def make_plan(
         plan.rebuild = Rebuild.INCREMENTAL
     # Changed attributes make the base hold a class as it no longer is, as a withdrawal
     # does; asked for by PATCH, that is an update.
-    if plan.promote or ((full or grows) and not stale):
+    if plan.choose_method and not (plan.promote or full or grows or stale):
+        plan.reason = VersionReason.METHOD_CHOICE
+    elif plan.promote or ((full or grows) and not stale):
         plan.reason = VersionReason.PROMOTION
     elif stale and not redescribed and not attributes:
         plan.reason = VersionReason.WITHDRAWAL
@@ -255,6 +267,7 @@ def make_first_plan(s: Session, claimed: list[Job]) -> Plan:
         elif n or describes(plan.vocabulary, cls.attribute_key):
             plan.novel.append(cls)
     placed = {c.id for c in plan.promote + plan.novel}
+    plan.choose_method = any(j.kind == JobKind.CHOOSE_METHOD for j in claimed)
     for job in claimed:
         if job.class_id is not None and job.class_id not in placed:
             plan.rejected[job.id] = f"class {job.class_id} has no live sample and no description"
@@ -339,8 +352,9 @@ def build(
             # off the serving path: a child process under memory and time limits
             # (worker/refit.py)
             limit = settings.refit_memory_limit_mb * 2**20 or default_memory_limit()
+            method = plan.method or settings.method
             model = fit_in_child(
-                settings.method, settings.method_params, known, limit, settings.refit_seconds
+                method, settings.params_for(method), known, limit, settings.refit_seconds
             )
         elif plan.rebuild is Rebuild.ATTRIBUTES:  # refits parts on every sample: as a full one
             limit = settings.refit_memory_limit_mb * 2**20 or default_memory_limit()

@@ -18,6 +18,7 @@ SUBCOMMANDS = [
     "worker",
     "apikey",
     "store",
+    "model",
     "dataset",
     "ros2",
 ]

@@ -61,7 +61,7 @@ def train_base(settings: Settings, progress: bool = True) -> tuple[TactileRecogn
         f"training the base model ({settings.method}) on '{settings.dataset}': "
         f"{len(dataset)} {what} of {dataset.n_classes} objects; this runs once"
     )
-    model = make_method(settings.method, **settings.method_params).fit(dataset, progress=progress)
+    model = make_method(settings.method, **settings.params_for()).fit(dataset, progress=progress)
     return model, dataset
 
 

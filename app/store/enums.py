@@ -20,6 +20,7 @@ class JobKind(StrEnum):
     WITHDRAW_SAMPLE = "withdraw_sample"
     ADD_ATTRIBUTE = "add_attribute"  # an attribute added to the vocabulary, with values
     RETIRE_ATTRIBUTE = "retire_attribute"  # an attribute taken out of later models
+    CHOOSE_METHOD = "choose_method"  # method auto chooses again at a full refit
 
 
 class JobStatus(StrEnum):
@@ -54,6 +55,7 @@ class VersionReason(StrEnum):
     UPDATE = "update"  # classes or samples added, or a class described anew
     PROMOTION = "promotion"  # fitted again on the stored samples: a class became known
     WITHDRAWAL = "withdrawal"  # something withdrawn left the model
+    METHOD_CHOICE = "method choice"  # method auto chose again, as an operator asked
 
 
 class SampleForm(StrEnum):

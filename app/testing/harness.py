@@ -86,7 +86,7 @@ class Cluster:
             "TACTILE_DATABASE_URL": self.database_url,
             "TACTILE_DATASET": QUICK_DATASET,
             "TACTILE_METHOD": QUICK_METHOD,
-            "TACTILE_METHOD_PARAMS": json.dumps(QUICK_PARAMS),
+            "TACTILE_METHOD_PARAMS": json.dumps({QUICK_METHOD: QUICK_PARAMS}),
             "TACTILE_MODEL_POLL_SECONDS": "0.2",
             "TACTILE_WORKER_POLL_SECONDS": "0.1",
             "TACTILE_LEASE_SECONDS": "10",

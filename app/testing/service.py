@@ -89,7 +89,7 @@ def quick_settings(data_dir, **overrides) -> Settings:
         "embedded_worker": False,
         "dataset": QUICK_DATASET,
         "method": QUICK_METHOD,
-        "method_params": QUICK_PARAMS,
+        "method_params": {QUICK_METHOD: QUICK_PARAMS},
         "model_poll_seconds": 0.05,
         "worker_poll_seconds": 0.05,
         "lease_seconds": 10.0,

@@ -21,7 +21,7 @@ def empty(settings):
 
     app = create_app(
         settings.model_copy(
-            update={"dataset": "none", "method": "best", "method_params": BEST_PARAMS}
+            update={"dataset": "none", "method": "best", "method_params": {"best": BEST_PARAMS}}
         )
     )
     with TestClient(app) as client:

@@ -51,7 +51,7 @@ def raw_service(tmp_path, pilot):
     from app.api.main import create_app
 
     model, train = pilot[:2]
-    settings = quick_settings(tmp_path, method="best", method_params=PARAMS)
+    settings = quick_settings(tmp_path, method="best", method_params={"best": PARAMS})
     app = create_app(settings, trainer=lambda: (model, train))
     with TestClient(app) as client:
         yield client, app

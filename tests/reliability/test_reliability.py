@@ -133,7 +133,7 @@ def test_postgres_outage(tmp_path):
             extra_env={
                 # best predicts attributes, so POST /v1/describe answers too
                 "TACTILE_METHOD": "best",
-                "TACTILE_METHOD_PARAMS": json.dumps(BEST_PARAMS),
+                "TACTILE_METHOD_PARAMS": json.dumps({"best": BEST_PARAMS}),
                 "TACTILE_DB_TIMEOUT_SECONDS": str(DB_TIMEOUT),
                 "TACTILE_PROMOTION_THRESHOLD": "1000",
             },

@@ -45,7 +45,7 @@ def samples_service(tmp_path_factory):
         {
             "TACTILE_DATASET": QUICK_DATASET,
             "TACTILE_METHOD": "best",
-            "TACTILE_METHOD_PARAMS": json.dumps(BEST_PARAMS),
+            "TACTILE_METHOD_PARAMS": json.dumps({"best": BEST_PARAMS}),
         },
     )
 

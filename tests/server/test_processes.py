@@ -59,7 +59,7 @@ def start(data_dir: Path, port: int) -> subprocess.Popen:
         "TACTILE_DATA_DIR": str(data_dir),
         "TACTILE_DATASET": QUICK_DATASET,
         "TACTILE_METHOD": QUICK_METHOD,
-        "TACTILE_METHOD_PARAMS": json.dumps(QUICK_PARAMS),
+        "TACTILE_METHOD_PARAMS": json.dumps({QUICK_METHOD: QUICK_PARAMS}),
         "TACTILE_RATE_LIMIT": "0",
         "TACTILE_WARM_WORDS": "false",  # two processes need not load it for these checks
     }

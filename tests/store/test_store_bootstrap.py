@@ -86,7 +86,7 @@ def test_a_dataset_of_graded_and_unknown_values_is_stored_as_given(tmp_path, bes
     values[0, 0], values[1, :3], values[2, 1] = 0.5, np.nan, 0.25
     graded = dataset.with_attributes(dataset.attribute_names, values)
     fitted = type(model)(**BEST_PARAMS).fit(graded)
-    settings = quick_settings(tmp_path, method="best", method_params=BEST_PARAMS)
+    settings = quick_settings(tmp_path, method="best", method_params={"best": BEST_PARAMS})
     engine = make_engine(settings.sqlalchemy_url)
     sessions = make_sessionmaker(engine)
     ensure_ready(settings, engine, sessions, trainer=lambda: (fitted, graded), progress=False)

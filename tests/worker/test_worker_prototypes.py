@@ -28,7 +28,7 @@ def prototypes_service(tmp_path, prototypes_base):
     from worker import Worker
 
     app = create_app(
-        quick_settings(tmp_path, method="prototypes", method_params=PARAMS),
+        quick_settings(tmp_path, method="prototypes", method_params={"prototypes": PARAMS}),
         trainer=lambda: prototypes_base,
     )
     with TestClient(app) as client:

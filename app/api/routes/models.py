@@ -4,10 +4,21 @@ from fastapi import APIRouter, Header, Response
 from sqlalchemy.orm import Session
 
 from app.api import problems
-from app.api.deps import AdminAccess, ExportsDep, HolderDep, PageDep, ReadAccess, RowId, SessionDep
+from app.api.deps import (
+    AdminAccess,
+    Enroller,
+    ExportsDep,
+    HolderDep,
+    PageDep,
+    ReadAccess,
+    RowId,
+    SessionDep,
+    SettingsDep,
+)
 from app.api.problems import Problem, not_found
-from app.api.schemas import ModelList, ModelOut, ModelSummary
+from app.api.schemas import JobOut, ModelList, ModelOut, ModelSummary
 from app.framework.errors import BundleError
+from app.service.method_choice import NothingToChoose, ask_for_choice
 from app.store import bundles, repo
 from app.store.bundles import ExportCache
 from app.store.models import ModelVersion
@@ -154,3 +165,28 @@ def activate_model(version: RowId, session: SessionDep, holder: HolderDep) -> Mo
     session.refresh(row)
     holder.refresh()  # this process answers with it at once; others poll
     return ModelOut.model_validate(row)
+
+
+@router.post(
+    "/choice",
+    status_code=202,
+    response_model=JobOut,
+    dependencies=[AdminAccess],
+    responses=problems.responses(409),
+)
+def choose_method(
+    session: SessionDep, settings: SettingsDep, response: Response, principal: Enroller
+) -> JobOut:
+    """Ask method `auto` to choose again: the worker's next round fits it anew on every
+    stored sample (a probe of them, then the winner), where refits otherwise keep the method
+    chosen before until the known classes have grown `TACTILE_RECHOOSE_GROWTH` times. The
+    job's `model_version` is the version it made; that version's `method_choice` says what
+    was chosen and why. A 409 where the service's method is fixed (not `auto`)."""
+    try:
+        job = ask_for_choice(session, settings.method, principal.id)
+    except NothingToChoose as exc:
+        raise Problem(409, str(exc), "method") from None
+    session.commit()
+    session.refresh(job)
+    response.headers["Location"] = f"/v1/jobs/{job.id}"
+    return JobOut.model_validate(job)
