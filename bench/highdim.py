@@ -18,7 +18,9 @@ other, and measured there:
 - ``peak_rss_gb``: the process's high-water mark of resident memory (Linux ``VmHWM``) after
   the fit: Python, the libraries, the data set and the fit together; ``rss_before_gb``:
   its resident memory just before ``fit``;
-- ``known_acc``: known-object accuracy on the held-out trials.
+- ``known_acc``: known-object accuracy on the held-out trials;
+- ``chosen``, ``probe_s``: the method ``auto`` chose and its probe's seconds (of ``fit_s``);
+  ``reduced_dims``, ``modes``: the components ``prototypes`` kept and its modes a class.
 
 A first, unrecorded fit of each method on a small set compiles the numba kernels (kept in
 ``__pycache__``), so no recorded fit pays for compiling. It writes ``highdim.json`` (the
@@ -85,6 +87,7 @@ def fit_once(method: str, objects: int, trials: int, channels: int, steps: int, 
         "peak_rss_gb": round(peak, 3),
         "known_acc": acc,
         "chosen": chosen,
+        "probe_s": metrics.get("chosen_by", {}).get("probe_seconds"),
         "reduced_dims": metrics.get("reduced_dims"),
         "modes": metrics.get("modes"),
     }
