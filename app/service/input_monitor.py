@@ -26,7 +26,7 @@ import threading
 
 import numpy as np
 
-from app.framework.input_health import OUTLIER_THRESHOLD, InputProfile
+from app.framework.input_health import InputProfile
 from app.framework.results import RecognitionBatch
 from app.service.polling import Poller
 
@@ -65,7 +65,7 @@ class InputMonitor:
         flags = (
             batch.input_outlier
             if len(batch.input_outlier) == len(statistics)
-            else profile.score_features(statistics) > OUTLIER_THRESHOLD
+            else profile.is_outlier(profile.score_features(statistics))
         )
         with self._lock:
             if profile is not self._profile:
