@@ -469,6 +469,15 @@ class RecognitionOut(BaseModel):
         "calibration curve).",
         examples=["known_kept"],
     )
+    calibrated_touches: int | None = Field(
+        description="The kind of answer the threshold's calibration curve was measured on: "
+        "held-out answers fusing this many touches of one known object (trials, for a model "
+        "of raw trials). A fused answer (`same_object`, or a trial's fingers) reads the curve "
+        "of as many touches where fitting measured one, else the largest measured below "
+        "(1: single touches; 0: single images of a raw-trial model, which a model fitted "
+        "before 2026-11-28 also reads for trials). Null at the model's own threshold.",
+        examples=[1],
+    )
     top_k: list[ScoreOut] = Field(
         description="The most probable classes of the group answered from, best first."
     )
