@@ -194,10 +194,15 @@ class TactileClient:
         except ServiceUnreachable as exc:
             model, meta = self._offline_model(exc)
             images, groups = model.trial_samples(body)
+            touches = None  # one trial a group
             if same_object:
-                groups = np.zeros_like(groups)
+                groups, touches = np.zeros_like(groups), np.array([len(body)])
             batch = model.recognize_batch(
-                images, self.offline_top_k, groups, known_kept=model.operating_point()
+                images,
+                self.offline_top_k,
+                groups,
+                known_kept=model.operating_point(),
+                touches=touches,
             )
             return self._offline_answer(batch, meta, outliers)
         return {**r.json(), "source": "service"}

@@ -7,6 +7,9 @@ negated log-likelihood and the threshold is -sigma_nov.
 
 from __future__ import annotations
 
+import itertools
+import math
+
 import numpy as np
 from scipy.special import logsumexp
 from sklearn.decomposition import PCA
@@ -114,10 +117,15 @@ def _precisions(chol: np.ndarray, covariance_type: str) -> np.ndarray:
 
 
 def tune_threshold(
-    known_scores: np.ndarray, novel_scores: np.ndarray, n_thresholds: int = 200
+    known_scores: np.ndarray,
+    novel_scores: np.ndarray,
+    n_thresholds: int = 200,
+    known_trials: np.ndarray | None = None,
 ) -> NoveltyTuning:
     """Pick the threshold that maximises the mean of the accuracy of calling known
-    samples known and novel samples novel (Sect. VI-B, Fig. 7)."""
+    samples known and novel samples novel (Sect. VI-B, Fig. 7). With ``known_trials``
+    ((N, 2): object and trial of each known score), the tuning also holds the curves of
+    fused touches (``touch_curves``)."""
     known_scores = np.asarray(known_scores, np.float64)
     novel_scores = np.asarray(novel_scores, np.float64)
     if len(known_scores) == 0 or len(novel_scores) == 0:
@@ -137,17 +145,84 @@ def tune_threshold(
         known_kept_at_threshold=float(known_kept[best]),
         val_novel_at_threshold=float(val_novel[best]),
         auroc=float(roc_auc_score(labels, both)),
+        touches={}
+        if known_trials is None
+        else touch_curves(known_scores, known_trials, n_thresholds=n_thresholds),
     )
 
 
+#: the most touches (trials) fused in a calibration curve; answers fusing more read this
+#: one's (``NoveltyTuning.curve_for``)
+MAX_TOUCHES = 5
+#: fewer fused groups than this measure no curve: the answers read fewer touches' curve
+MIN_GROUPS = 20
+#: groups drawn per object and number of touches at most (all of them where fewer)
+GROUPS_PER_OBJECT = 20
+
+
+def touch_curves(
+    known_scores: np.ndarray,
+    known_trials: np.ndarray,
+    max_touches: int = MAX_TOUCHES,
+    n_thresholds: int = 200,
+    seed: int = 0,
+) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """``{k: (thresholds, known_kept)}``: the calibration curves of answers fusing k touches
+    of one known object, measured on held-out known scores. ``known_trials`` (N, 2): the
+    object and trial of each score. A touch is a trial: the mean score of its samples (the
+    images of a raw trial, the rounds that held the same trial out); a group of k touches is
+    k distinct held-out trials of one object, its fused score their mean, as
+    ``fuse_groups`` fuses an answer's. Every k-subset of an object's trials is a group where
+    there are at most ``GROUPS_PER_OBJECT``, else that many drawn at random.
+
+    k = 1 is the curve of whole trials: a raw-trial model's answer to one trial reads it (a
+    model of samples reads its single samples' curve for one touch). A k with fewer than
+    ``MIN_GROUPS`` groups ends the curves (answers fusing k touches or more then read the
+    largest k measured)."""
+    scores = np.asarray(known_scores, np.float64)
+    ids = np.asarray(known_trials).reshape(len(scores), 2)
+    trials, unit = np.unique(ids, axis=0, return_inverse=True)
+    unit = unit.ravel()
+    unit_score = np.bincount(unit, scores) / np.bincount(unit)
+    objects = trials[:, 0]
+    by_object = [unit_score[objects == o] for o in np.unique(objects)]
+    rng = np.random.default_rng(seed)
+    out: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    for k in range(1, max_touches + 1):
+        fused = [_fused(own, k, rng) for own in by_object if len(own) >= k]
+        fused = np.concatenate(fused) if fused else np.zeros(0)
+        if len(fused) < MIN_GROUPS:
+            break
+        grid = np.unique(np.quantile(fused, np.linspace(0, 1, n_thresholds)))
+        out[k] = (grid, (fused[None, :] <= grid[:, None]).mean(axis=1))
+    return out
+
+
+def _fused(own: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
+    """Mean scores of k-subsets of one object's touches ``own``: all of them where there
+    are at most ``GROUPS_PER_OBJECT``, else that many drawn."""
+    if math.comb(len(own), k) <= GROUPS_PER_OBJECT:
+        subsets = np.array(list(itertools.combinations(range(len(own)), k)), np.int64)
+    else:
+        subsets = np.array(
+            [rng.choice(len(own), k, replace=False) for _ in range(GROUPS_PER_OBJECT)]
+        )
+    return own[subsets].mean(axis=1)
+
+
 def threshold_at_kept(
-    known_scores: np.ndarray, novel_scores: np.ndarray, kept: float, n_thresholds: int = 200
+    known_scores: np.ndarray,
+    novel_scores: np.ndarray,
+    kept: float,
+    n_thresholds: int = 200,
+    known_trials: np.ndarray | None = None,
 ) -> NoveltyTuning:
     """The threshold that keeps the share ``kept`` of held-out known samples known (their
     scores' ``kept`` quantile): an operating point stated in advance rather than Sect. VI-B's
     balanced choice, whose known share moves with the validation objects. ``novel_scores``
-    (validation-novel samples) only report what it detects there, and the AUROC."""
-    tuning = tune_threshold(known_scores, novel_scores, n_thresholds)
+    (validation-novel samples) only report what it detects there, and the AUROC;
+    ``known_trials`` as ``tune_threshold``'s."""
+    tuning = tune_threshold(known_scores, novel_scores, n_thresholds, known_trials)
     threshold = float(np.quantile(np.asarray(known_scores, np.float64), kept))
     return NoveltyTuning(
         thresholds=tuning.thresholds,
@@ -157,6 +232,7 @@ def threshold_at_kept(
         known_kept_at_threshold=float((np.asarray(known_scores) <= threshold).mean()),
         val_novel_at_threshold=float((np.asarray(novel_scores) > threshold).mean()),
         auroc=tuning.auroc,
+        touches=tuning.touches,
     )
 
 

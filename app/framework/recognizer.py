@@ -55,7 +55,7 @@ from app.framework.errors import (
     UnsupportedOperationError,
 )
 from app.framework.fusion import FUSION_RULE, check_groups, fuse_groups, group_mean
-from app.framework.input_health import OUTLIER_THRESHOLD, InputProfile
+from app.framework.input_health import InputProfile
 from app.framework.params import Hyperparameters
 from app.framework.raw_input import (
     RAW_TRIALS,
@@ -494,6 +494,7 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
         groups: np.ndarray | None = None,
         target_confidence: float = TARGET_CONFIDENCE,
         known_kept: float | None = None,
+        touches: np.ndarray | None = None,
     ) -> RecognitionBatch:
         """``recognize`` as arrays (the service's hot path): one row per sample.
 
@@ -512,12 +513,17 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
 
         ``known_kept`` routes by another operating point than the model's own threshold:
         the threshold that kept that share of held-out known samples known when the model
-        was fitted (``threshold_keeping``). Every answer records the threshold it was routed
-        by and the operating point (``novelty_threshold``, ``known_kept``).
+        was fitted (``threshold_keeping``). An answer that fuses touches reads the curve
+        measured on held-out answers fusing as many (``NoveltyTuning.touches``), where
+        fitting measured it: ``touches`` ((G,) ints) says how many each group fuses, by
+        default its samples (one for each group of a raw-trial model: a trial). Every answer
+        records the threshold it was routed by, the operating point and the curve's touches
+        (``novelty_threshold``, ``known_kept``, ``calibrated_touches``).
         """
         if not 0.0 < float(target_confidence) <= 1.0:
             raise FrameworkError(f"target_confidence must lie in (0, 1], got {target_confidence}")
-        threshold = (
+        # a bad share, or a model without a curve, refused before any work
+        single = (
             self.novelty_threshold if known_kept is None else self.threshold_keeping(known_kept)
         )
         x, used = self._checked(samples)
@@ -531,8 +537,9 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
             scores, known_p, novel_p = fuse_groups(g, scores, known_p, novel_p)
             if used is not None:
                 used = group_mean(used.astype(np.float64), g, int(g.max()) + 1) > 0
+        threshold, calibrated = self._thresholds(known_kept, single, g, len(scores), touches)
         batch = self._batch(scores, known_p, novel_p, top_k, threshold)
-        batch.__dict__.update(known_kept=known_kept)
+        batch.__dict__.update(known_kept=known_kept, calibrated_touches=calibrated)
         self._add_input_health(batch, x, g)
         if used is None:
             return self._complete(batch)
@@ -543,6 +550,49 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
             next_procedure=self._next_procedures(known_p, used, ask),
         )
         return batch
+
+    def _thresholds(
+        self,
+        known_kept: float | None,
+        single: float,
+        groups: np.ndarray | None,
+        n: int,
+        touches: np.ndarray | None,
+    ) -> tuple[float | np.ndarray, np.ndarray | None]:
+        """(threshold of each of the ``n`` answers, or one for all; the touches of the curve
+        each was read off, None at the model's own threshold). ``single``: the threshold of
+        single samples (the model's own where ``known_kept`` is None)."""
+        if known_kept is None:
+            return single, None
+        tuning = self.novelty_tuning
+        if groups is None or not tuning.touches:  # single samples, or one curve: one threshold
+            return single, np.full(n, self._single_touches, np.int64)
+        if touches is not None:
+            count = np.asarray(touches, np.int64).reshape(-1)
+            if count.shape != (n,) or (count < 1).any():
+                raise FrameworkError(
+                    f"touches must give each of the {n} groups a positive count, got "
+                    f"{count.tolist()[:10]}"
+                )
+        elif self.featurizer_ is not None:
+            count = np.ones(n, np.int64)  # a raw-trial model's group: one trial
+        else:
+            count = np.bincount(groups, minlength=n)
+        if self.featurizer_ is None:
+            count = np.where(count == 1, 0, count)  # one sample: the single samples' curve
+        kinds = np.unique(count)
+        threshold, calibrated = np.empty(n), np.empty(n, np.int64)
+        for c in kinds.tolist():
+            rows = count == c
+            threshold[rows], k = tuning.threshold_keeping_touches(known_kept, c)
+            calibrated[rows] = k if k else self._single_touches
+        return threshold, calibrated
+
+    @property
+    def _single_touches(self) -> int:
+        """``calibrated_touches`` of the single samples' curve: 1 where a sample is a touch,
+        0 for a raw-trial model (its samples are images, not trials)."""
+        return 0 if self.featurizer_ is not None else 1
 
     def threshold_keeping(self, known_kept: float) -> float:
         """The novelty threshold that kept the share ``known_kept`` (in (0, 1)) of held-out
@@ -571,8 +621,8 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
 
     def input_outlier_score(self, samples: Any) -> np.ndarray:
         """(N,) how far each sample lies outside the training data's channel ranges, in
-        training IQRs (``app.framework.input_health``; above ``OUTLIER_THRESHOLD`` it is an
-        outlier); NaN for every sample of a model without an input profile."""
+        training IQRs (``app.framework.input_health``; above the profile's ``threshold`` it
+        is an outlier); NaN for every sample of a model without an input profile."""
         x, _ = self._checked(samples)
         if self.input_profile_ is None:
             return np.full(len(x), np.nan)
@@ -594,7 +644,7 @@ class TactileRecognizer(Hyperparameters, Enrolment, ABC):
             score = fused
         batch.__dict__.update(
             input_outlier_score=score,
-            input_outlier=score > OUTLIER_THRESHOLD,
+            input_outlier=self.input_profile_.is_outlier(score),
             input_statistics=statistics,
         )
 

@@ -70,6 +70,7 @@ class Recognition(NamedTuple):
     novelty_threshold: float | None = None
     known_kept: float | None = None
     operating_point: str | None = None
+    calibrated_touches: int | None = None
 
 
 @dataclass(frozen=True)
@@ -108,6 +109,10 @@ class RecognitionBatch:
     #: point asked for (None: the model's own threshold); None where not recorded
     novelty_threshold: np.ndarray | None = None
     known_kept: float | None = None
+    #: (N,) int64 the touches fused in the held-out groups of the calibration curve each
+    #: threshold was read off (1: single touches; 0: a raw-trial model's single images);
+    #: None at the model's own threshold
+    calibrated_touches: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.novelty_score)
@@ -130,6 +135,7 @@ class RecognitionBatch:
             else None,
             None if self.novelty_threshold is None else self.novelty_threshold[rows],
             self.known_kept,
+            None if self.calibrated_touches is None else self.calibrated_touches[rows],
         )
 
     def health_fields(self) -> list[tuple[bool | None, float | None]]:
@@ -141,14 +147,25 @@ class RecognitionBatch:
             zip(self.input_outlier.tolist(), self.input_outlier_score.tolist(), strict=True)
         )
 
-    def operating_fields(self) -> list[tuple[float | None, float | None, str | None]]:
-        """(``novelty_threshold``, ``known_kept``, ``operating_point``) of each answer:
-        the threshold it was routed by, and the share of known touches asked for
-        (``"known_kept"``) or none, the model's own threshold (``"model_default"``)."""
+    def operating_fields(
+        self,
+    ) -> list[tuple[float | None, float | None, str | None, int | None]]:
+        """(``novelty_threshold``, ``known_kept``, ``operating_point``,
+        ``calibrated_touches``) of each answer: the threshold it was routed by, the share of
+        known touches asked for (``"known_kept"``) or none, the model's own threshold
+        (``"model_default"``), and the touches of the curve the threshold was read off."""
         if self.novelty_threshold is None:
-            return [(None, None, None)] * len(self)
+            return [(None, None, None, None)] * len(self)
         point = MODEL_DEFAULT if self.known_kept is None else KNOWN_KEPT
-        return [(t, self.known_kept, point) for t in self.novelty_threshold.tolist()]
+        kept = self.known_kept
+        if self.calibrated_touches is None:
+            return [(t, kept, point, None) for t in self.novelty_threshold.tolist()]
+        return [
+            (t, kept, point, k)
+            for t, k in zip(
+                self.novelty_threshold.tolist(), self.calibrated_touches.tolist(), strict=True
+            )
+        ]
 
     def procedure_fields(self) -> list[tuple[list[str], str | None]]:
         """(``procedures_used``, ``next_procedure``) of each answer, by name."""
@@ -209,11 +226,13 @@ class RecognitionBatch:
                 "novelty_threshold": threshold,
                 "known_kept": kept,
                 "operating_point": point,
+                "calibrated_touches": calibrated,
             }
             for idx, top_p, novel, score, (used, nxt), (outlier, outlier_score), (
                 threshold,
                 kept,
                 point,
+                calibrated,
             ) in zip(
                 self.top_index.tolist(),
                 self.top_probability.tolist(),
@@ -356,6 +375,7 @@ def one_row_batch(
         input_statistics=None,
         novelty_threshold=np.full(1, threshold, np.float64),
         known_kept=None,
+        calibrated_touches=None,
     )
     return batch
 

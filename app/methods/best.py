@@ -351,7 +351,7 @@ class BestRecognizer(DescribedClasses, TactileRecognizer):
             desc=f"best on {dataset.name}: probes, model",
             disable=bar_disabled(progress),
         )
-        known_scores, val_scores, val_objects = [], [], 0
+        known_scores, val_scores, val_objects, known_trials = [], [], 0, []
         for r in range(int(self.tuning_rounds)):
             if 0 < self.tuning_objects <= val_objects:
                 break
@@ -365,6 +365,8 @@ class BestRecognizer(DescribedClasses, TactileRecognizer):
                 continue
             probe = self._known_model(relabelled(dataset, fit_idx))
             known_scores.append(probe.novelty(flatten(dataset.samples[known_idx])))
+            # object and trial of each: the curves of fused touches (``touch_curves``)
+            known_trials.append(np.c_[y[known_idx], np.asarray(dataset.trials)[known_idx]])
             val_scores.append(probe.novelty(flatten(dataset.samples[val_idx])))
             val_objects += len(np.unique(dataset.labels[val_idx]))
             del probe  # gigabytes at thousands of objects: gone before the deployed fit
@@ -377,7 +379,9 @@ class BestRecognizer(DescribedClasses, TactileRecognizer):
         bar.total = bar.n + 1  # the rounds left out once enough validation objects were pooled
         bar.refresh()
         self.novelty_tuning = tune_threshold(
-            np.concatenate(known_scores), np.concatenate(val_scores)
+            np.concatenate(known_scores),
+            np.concatenate(val_scores),
+            known_trials=np.concatenate(known_trials),
         )
         self.novelty_threshold = float(self.novelty_tuning.threshold)
         timings["novelty_tuning_s"] = time.perf_counter() - t0

@@ -122,9 +122,10 @@ class RecognitionService:
 
         def run() -> RecognitionBatch:
             images, groups = rec.trial_samples(trials)
-            if same_object:
-                groups = np.zeros_like(groups)
-            return rec.recognize_batch(images, self.top_k, groups, known_kept=kept)
+            touches = None  # one trial a group
+            if same_object:  # every trial one touch of the object: the curve of that many
+                groups, touches = np.zeros_like(groups), np.array([len(trials)])
+            return rec.recognize_batch(images, self.top_k, groups, known_kept=kept, touches=touches)
 
         return self._counted(model, await run_in_threadpool(run))
 

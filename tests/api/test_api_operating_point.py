@@ -81,3 +81,19 @@ def test_the_schema_documents_the_operating_point(client, name):
     schema = client.get("/openapi.json").json()["components"]["schemas"]["RecognitionOut"]
     assert name in schema["properties"] and name in schema["required"]
     assert len(schema["properties"][name]["description"]) > 40
+
+
+def test_touches_of_one_object_read_the_curve_of_as_many_touches(best_service, best_base):
+    c, a = best_service[:2]
+    tuning = a.state.service.holder.current.recognizer.novelty_tuning
+    x = best_base[1].samples[:3]
+    (fused,) = c.post(
+        "/v1/recognize", json={"samples": x.tolist()}, params={"same_object": True}
+    ).json()["results"]
+    threshold, k = tuning.threshold_keeping_touches(0.9, 3)
+    assert (fused["novelty_threshold"], fused["calibrated_touches"]) == (threshold, k or 1)
+    assert fused["is_novel"] == (fused["novelty_score"] > threshold)
+    each = c.post("/v1/recognize", json={"samples": x.tolist()}).json()["results"]
+    assert {(r["novelty_threshold"], r["calibrated_touches"]) for r in each} == {
+        (tuning.threshold_keeping(0.9), 1)
+    }

@@ -380,6 +380,10 @@ def test_a_trial_with_a_dead_finger_abstains_online_and_offline(raw_service, pil
     results = client.post("/v1/recognize", json=body).json()["results"]
     assert [r["input_outlier"] for r in results] == [False, True]
     assert results[0]["class_name"] and results[0]["kind"] == "known"
+    # a trial's answer reads the curve of whole trials where fitting measured one
+    tuning = pilot[0].novelty_tuning
+    assert results[0]["calibrated_touches"] == tuning.curve_for(1)
+    assert results[0]["novelty_threshold"] == tuning.threshold_keeping_touches(0.9, 1)[0]
     assert (results[1]["kind"], results[1]["class_name"], results[1]["top_k"]) == (
         "input_outlier",
         None,
