@@ -4,6 +4,13 @@ Every sample is a flat vector scaled by ``RobustInputScaler`` (as ``best``), the
 ``SubclassEmbedding``'s space: whitened by the shrunk within-class covariance, each class
 split into subclasses where its trials gather in several clusters (contact modes).
 
+- Wide inputs (more than ``reduce_above`` features: a sensor of thousands of taxels) are
+  first reduced to principal components within each procedure's block of features
+  (``BlockPCA``); the probe chooses how many (``reduce_dims``), and whether classes are
+  split into modes, by the held-out trials' mean log-probability of their own classes.
+  Everything below (the space, the attribute parts, the marginals of missing procedures)
+  then reads the components.
+
 - Known classes (FC_Y): each subclass's mean is a prototype. A sample's class probabilities
   are the posterior of a mixture of isotropic Gaussians, one per prototype, with a variance
   ``tau (1 + 1/n)`` that counts the prototype's own uncertainty from its ``n`` samples, over
