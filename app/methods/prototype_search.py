@@ -131,6 +131,29 @@ class PrototypeSearch:
             return parts[0]
         return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
+    def squared_to_all(self, e: np.ndarray) -> np.ndarray | None:
+        """(N, len(self)) float32 squared distances from each row of ``e`` to every
+        prototype, by ``squared``'s function (the exact distances ``nearest`` re-ranks its
+        candidates by: the same bits); None for an HNSW index, which a few rows search as
+        ``nearest`` does. The small-batch path ranks these itself: faiss's search (an
+        OpenMP region and a heap) cost more than the distances for one row."""
+        if not self.exact:
+            return None
+        n_fit, n_extra = len(self.points), len(self.extra)
+        ids = getattr(self, "_all_ids", None)
+        if ids is None or ids[0].shape != (len(e), n_fit) or ids[1].shape != (len(e), n_extra):
+            ids = tuple(
+                np.ascontiguousarray(np.broadcast_to(np.arange(m, dtype=np.int64), (len(e), m)))
+                for m in (n_fit, n_extra)
+            )
+            if len(e) == 1:  # one row's ids, kept: a robot sends one touch a request
+                self._all_ids = ids
+        e = np.ascontiguousarray(e, np.float32)
+        out = _squared_by_id(e, self.points, ids[0])
+        if n_extra:
+            out = np.concatenate([out, _squared_by_id(e, self.extra, ids[1])], axis=1)
+        return out
+
     def _nearest(self, e: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         fitted = min(k if self.exact else k * RERANK, len(self.points))
         _, ids = self.index.search(np.ascontiguousarray(e[:, : self.dims]), fitted)

@@ -65,6 +65,7 @@ from app.methods.attributes import (
 from app.methods.described import DescribedClasses, check_known_classes
 from app.methods.embedding import SubclassEmbedding
 from app.methods.prototype_search import PrototypeSearch
+from app.methods.prototype_small_batch import PrototypeSmallBatch
 
 #: the weights of the distance cue the probe chooses among (``distance_weight=None``)
 DISTANCE_WEIGHTS = (0.0, 0.03, 0.1, 0.3, 1.0, 3.0, 100.0)
@@ -166,6 +167,10 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
     _featurizer_defaults = {"n_offsets": 1}
     #: the principal components the inputs are reduced to (``reduce_above``), or None
     reduction_: BlockPCA | None = None
+    #: batches of at most this many complete samples, of a model without a reduction, take
+    #: ``PrototypeSmallBatch`` (the general path's answers to rounding, at a fraction of its
+    #: per-call cost, which dominates for a few samples); 0 forces the general path
+    small_batch_max = 32
 
     _parameter_constraints = {
         "max_modes": integer(1),
@@ -520,6 +525,13 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         return self._novel_from(z, e)
 
     def _all_scores(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        if len(samples) <= self.small_batch_max and self.reduction_ is None:
+            few = getattr(self, "_few", None)
+            if few is None or not few.fits(self):
+                few = self._few = PrototypeSmallBatch(self)
+            novelty, known, e, z, near = few.scores(flatten(samples))
+            novel = self._novel_from(z, e, near=near) if self.registry.novel_names else None
+            return novelty, known, novel
         z, e = self._embedded(samples)
         known, novelty = self._scores_e(e)
         novel = self._novel_from(z, e) if self.registry.novel_names else None
@@ -531,11 +543,13 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         e: np.ndarray,
         shot_points: np.ndarray | None = None,
         search: PrototypeSearch | None = None,
+        near: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> np.ndarray:
         """The novel classes' probabilities from scaled inputs ``z`` and their coordinates
         ``e``, in which the one-shot prototypes are ``shot_points`` and the known ones are
         searched by ``search`` (the fitted space's, ``shot_points_`` and ``search_``, unless
-        given: a marginal's)."""
+        given: a marginal's). ``near``: the ``search_k`` nearest known prototypes' (ids,
+        squared distances) where the caller found them already (the fitted space's)."""
         reg = self.registry
         has = self.shot_has_
         if self.has_attributes:
@@ -545,7 +559,8 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         if not has.any():
             return p_zsl
         points = self.shot_points_ if shot_points is None else shot_points
-        logd = self._shot_log_density(e, points[has], self.shot_counts_[has])
+        shot_dist = self._shot_distances(e, points[has])  # the density's and the bound's
+        logd = self._shot_log_density(e, points[has], self.shot_counts_[has], shot_dist)
         p_shot = softmax(logd)
         out = p_zsl.copy()
         rest = 1.0 - p_zsl[:, ~has].sum(axis=1, keepdims=True) if self.has_attributes else 1.0
@@ -560,21 +575,29 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         # sample, twice as far squared), and tau's Gaussian, with its normaliser, vetoed or
         # favoured the class by the dataset's scale (on the simulator, all its own touches)
         half = 0.5 * e.shape[1]
-        ids, dist = (self.search_ if search is None else search).nearest(e, int(self.search_k))
+        if near is None:
+            near = (self.search_ if search is None else search).nearest(e, int(self.search_k))
+        ids, dist = near
         spread = dist.astype(np.float64) / (1.0 + 1.0 / self.proto_count_[ids])
         rival = -half * np.log(np.maximum(spread.min(axis=1), _TINY))
         counts = self.shot_counts_[has]
-        shot_spread = self._shot_distances(e, points[has]) / (1.0 + 1.0 / counts)
+        shot_spread = shot_dist / (1.0 + 1.0 / counts)
         shot = -half * np.log(np.maximum(shot_spread, _TINY))
         shot -= shot_penalty(self.shot_margin, counts)
         return bounded_shots(out, has, shot, rival)
 
     def _shot_log_density(
-        self, e: np.ndarray, points: np.ndarray, counts: np.ndarray
+        self,
+        e: np.ndarray,
+        points: np.ndarray,
+        counts: np.ndarray,
+        dist: np.ndarray | None = None,
     ) -> np.ndarray:
         """(N, S) log density of each touch under each class with samples' Gaussian (the
-        known part's, variance ``tau (1 + 1/n)``); its softmax shares their probability."""
-        dist = self._shot_distances(e, points)
+        known part's, variance ``tau (1 + 1/n)``); its softmax shares their probability.
+        ``dist``: the touches' ``_shot_distances`` to ``points`` where computed already."""
+        if dist is None:
+            dist = self._shot_distances(e, points)
         v = 1.0 + 1.0 / counts
         return -dist / (2.0 * self.tau_ * v) - 0.5 * e.shape[1] * np.log(v)
 
@@ -591,7 +614,7 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
     def __getstate__(self) -> dict[str, Any]:
         # the marginal models are a cache of this model: a copy (each enrolment's) builds its
         # own on first use rather than copying prototypes for every set of procedures
-        return {**self.__dict__, "_marginals": {}}
+        return {**self.__dict__, "_marginals": {}, "_few": None}
 
     # --------------------------------------------------------------- enrolment
     def _set_prototypes(self, owner: np.ndarray, counts: np.ndarray) -> None:
