@@ -608,6 +608,32 @@ class ModelSummary(BaseModel):
         "only.",
     )
     metrics: dict[str, Any]
+
+    @computed_field(
+        description="How method `auto` chose this version's method (`metrics.chosen_by`): "
+        "`method`; `reason` (`probe`, or `rule` where the data held no probe); `n_classes` "
+        "the known classes it was chosen at and `probe_classes` how many of them the probe "
+        "measured; `kept` and `kept_since` where a refit kept the choice of an earlier "
+        "version. Null for a fixed method.",
+        examples=[
+            {
+                "method": "prototypes",
+                "reason": "probe",
+                "n_classes": 3000,
+                "probe_classes": 100,
+                "kept": True,
+                "kept_since": 1,
+            }
+        ],
+    )
+    @property
+    def method_choice(self) -> dict[str, Any] | None:
+        chosen = (self.metrics or {}).get("chosen_by")
+        if not isinstance(chosen, dict):
+            return None
+        keys = ("method", "reason", "n_classes", "probe_classes", "kept", "kept_since")
+        return {k: chosen[k] for k in keys if k in chosen}
+
     class_count: int = Field(description="Classes the version recognises, known and novel.")
     attribute_names: list[str] | None = Field(
         None,
