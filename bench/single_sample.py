@@ -1,13 +1,20 @@
-"""One sample in process: what ``best``'s ``recognize_batch`` costs for 1 sample against
-its batch-amortised cost per sample, and where the 1-sample call spends its time.
+"""One sample in process: what each method's ``recognize_batch`` costs for 1 sample against
+its batch-amortised cost per sample, where the 1-sample call spends its time, and the
+methods the default (``auto``) chooses between side by side.
 
-    .venv/bin/python -m bench.single_sample [--repeats 3000] [--batch 1024] [--novel 6]
-                                            [--clock wall|cpu] [--rounds 3] [--clients 32]
-                                            [--seconds 2]
+    .venv/bin/python -m bench.single_sample [--methods best,prototypes] [--repeats 3000]
+                                            [--batch 1024] [--novel 6] [--clock wall|cpu]
+                                            [--rounds 3] [--clients 32] [--seconds 2]
+                                            [--json docs/results/single_sample/x.json]
 
-``best`` is fitted on the embedded default (``simulate_dataset()``, seed 0), then, for a
-second model, given ``--novel`` zero-shot classes (attribute vectors no known class has)
-of which half get one one-shot sample each. For each model it prints first the ratio
+Each of ``--methods`` (default ``best,prototypes``: ``auto`` chooses one of them, and
+``prototypes`` on the embedded default) is fitted on the embedded default
+(``simulate_dataset()``, seed 0), then, for a second model, given ``--novel`` zero-shot
+classes (attribute vectors no known class has) of which half get one one-shot sample each.
+First, side by side: the median seconds of a 1-sample call of each method, the methods
+alternating call for call in ``--rounds`` rounds, and each method's over the first's (per
+round: median and range), for the base models and those with novel classes. Then, for each
+method and model, the ratio
 (median seconds of a 1-sample call) / (median seconds of a ``--batch`` call / ``--batch``),
 for the small-batch path and for the general path side by side (``small_batch_max = 0``
 forces the general path), then a cProfile of the 1-sample call on each path (the
@@ -21,7 +28,8 @@ it), once more through the service's ``RecognitionBatcher``: N concurrent 1-samp
 in one event loop, as the API process answers them (the batcher coalesces requests that
 arrive during a pass, so passes hold several samples), each path for ``--seconds`` a round,
 alternately; it prints requests a second on each path, their ratio, and the mean samples a
-pass.
+pass. ``--json`` writes the side-by-side figures and each path's 1-sample and batch
+costs, with the machine.
 """
 
 from __future__ import annotations
@@ -29,8 +37,10 @@ from __future__ import annotations
 import argparse
 import cProfile
 import io
+import json
 import pstats
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -93,9 +103,9 @@ def through_batcher(model, one: np.ndarray, clients: int, seconds: float):
 
     passes: list[int] = []
 
-    def recognize_batch(x, top_k):
+    def recognize_batch(x, top_k, **options):
         passes.append(len(x))
-        return model.recognize_batch(x, top_k)
+        return model.recognize_batch(x, top_k, **options)
 
     loaded = SimpleNamespace(recognizer=SimpleNamespace(recognize_batch=recognize_batch))
 
@@ -138,7 +148,10 @@ def measure(label: str, model, dataset, args) -> None:
         for _ in range(20):
             m.recognize_batch(one)
         m.recognize_batch(batch)
-    print(f"\n== {label}: {len(model.registry.novel_names)} novel classes ({args.clock} clock)")
+    print(
+        f"\n== {model.method}, {label}: {len(model.registry.novel_names)} novel classes "
+        f"({args.clock} clock)"
+    )
     # alternate the two paths so that load from elsewhere hits both alike
     single = {name: [] for name in paths}
     per_sample = {name: [] for name in paths}
@@ -152,8 +165,10 @@ def measure(label: str, model, dataset, args) -> None:
                 median_seconds(lambda m=m: m.recognize_batch(batch), args.batch_repeats, clock)
                 / args.batch
             )
+    figures: dict = {}
     for name in paths:
         s, b = min(single[name]), min(per_sample[name])
+        figures[name] = {"one_us": s * 1e6, "per_sample_in_batch_us": b * 1e6, "ratio": s / b}
         print(
             f"{name:17s} ratio {s / b:5.2f}   1 sample {s * 1e6:7.1f} us   "
             f"batch of {args.batch} {b * 1e6:6.1f} us/sample"
@@ -183,10 +198,50 @@ def measure(label: str, model, dataset, args) -> None:
     for name, m in paths.items():
         print(f"\n-- cProfile of the 1-sample call, {name} (own time, 2,000 calls)")
         print(profile(m, one))
+    return figures
+
+
+def side_by_side(label: str, models: dict, dataset, args) -> dict:
+    """Median seconds of one sample's ``recognize_batch`` of each model, the models taking
+    turns call for call within each of ``--rounds`` rounds (so that load from elsewhere
+    hits them alike), and each one's over the first model's."""
+    one = dataset.samples[:1]
+    clock = CLOCKS[args.clock]
+    for m in models.values():
+        for _ in range(50):
+            m.recognize_batch(one)
+    times = {name: np.empty(args.repeats) for name in models}
+    medians: dict[str, list[float]] = {name: [] for name in models}
+    for _ in range(args.rounds):
+        for i in range(args.repeats):
+            for name, m in models.items():
+                t = clock()
+                m.recognize_batch(one)
+                times[name][i] = clock() - t
+        for name in models:
+            medians[name].append(float(np.median(times[name])))
+    first = next(iter(models))
+    print(f"\n== side by side, {label}: 1 sample in process ({args.clock} clock)")
+    out: dict = {"one_us": {}, "ratio_to_" + first: {}}
+    for name in models:
+        us = [v * 1e6 for v in medians[name]]
+        r = np.asarray(medians[name]) / np.asarray(medians[first])
+        out["one_us"][name] = float(np.median(us))
+        out["ratio_to_" + first][name] = {
+            "median": float(np.median(r)),
+            "min": float(r.min()),
+            "max": float(r.max()),
+        }
+        print(
+            f"{name:12s} 1 sample {np.median(us):7.1f} us (rounds {min(us):.1f}-{max(us):.1f})"
+            f"   over {first}: {spread(medians[name], medians[first])}"
+        )
+    return out
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--methods", default="best,prototypes", help="comma-separated, first: base")
     ap.add_argument("--repeats", type=int, default=3000, help="1-sample calls per median")
     ap.add_argument("--batch", type=int, default=1024)
     ap.add_argument("--batch-repeats", type=int, default=15)
@@ -195,13 +250,30 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=3, help="alternating rounds of each path")
     ap.add_argument("--clients", type=int, default=32, help="concurrent requests (0: none)")
     ap.add_argument("--seconds", type=float, default=2.0, help="each batcher phase")
+    ap.add_argument("--json", type=Path, default=None, help="write the figures here")
     args = ap.parse_args()
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     print(f"machine: {cpu_model()}; numpy {np.__version__}")
     dataset = simulate_dataset()
-    model = make_method("best", seed=0).fit(dataset)
-    measure("base model", model, dataset, args)
+    models = {m: make_method(m, seed=0).fit(dataset) for m in methods}
+    groups = {"base model": models}
     if args.novel:
-        measure("with novel classes", with_novel(model, dataset, args.novel), dataset, args)
+        groups["with novel classes"] = {
+            m: with_novel(model, dataset, args.novel) for m, model in models.items()
+        }
+    report: dict = {"machine": cpu_model(), "numpy": np.__version__, "args": vars(args)}
+    report["args"]["json"] = None if args.json is None else str(args.json)
+    report["side_by_side"] = {
+        label: side_by_side(label, group, dataset, args) for label, group in groups.items()
+    }
+    report["paths"] = {
+        label: {m: measure(label, model, dataset, args) for m, model in group.items()}
+        for label, group in groups.items()
+    }
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(report, indent=2) + "\n")
+        print(f"\nwrote {args.json}")
 
 
 if __name__ == "__main__":
