@@ -335,7 +335,8 @@ async def validation_exception_handler(
         if "(got null)" in first["reason"] and partial and model.recognizer.procedures:
             detail += (
                 ": a procedure not done yet is null as whole rows (`procedure_rows` of "
-                "GET /v1/models/active), not cell by cell"
+                "GET /v1/models/active), or rows of null or NaN cells; a row with some "
+                "numbers needs all of them"
             )
     return problem_response(request, 422, detail, errors[:MAX_ERRORS])
 

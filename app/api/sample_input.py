@@ -6,10 +6,15 @@ answers from some of them (``partial``), a row may be ``null``: a procedure not 
 yet, NaN throughout, which the model checks is a whole procedure. The sample may also
 come as one entry per procedure, ``[[...47 numbers], null, null, null]`` for PHAC-2's
 188 features in 4 procedures (each entry the procedure's block, ``app.data.procedures``).
+A row (or entry) with no number in it, ``null`` or NaN in every cell, is a ``null`` row:
+orjson and JavaScript's ``JSON.stringify`` write NaN as ``null``, so a client that marks a
+procedure not done with NaN sends rows of ``null`` cells (``missing_as_null``). A row with
+some numbers and some ``null`` cells stays a 422 that names it.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -28,6 +33,8 @@ def sample_array(
     """``data`` as a float32 array of ``input_shape`` (NaN for a ``null`` row, where
     ``partial``), or a 422 at ``field`` that names the shape expected."""
     expected = f"expected one sample of shape {list(input_shape)}"
+    if partial:  # elsewhere NaN rows stay NaN, for the model to name the procedures missing
+        data = missing_as_null(data)
     if procedures:
         per = list(_per_procedure(input_shape, procedures))
         expected += f" (or {per}, one entry per procedure)"
@@ -47,6 +54,27 @@ def sample_array(
     if procedures and x.shape == _per_procedure(input_shape, procedures):
         return x.reshape(input_shape)
     raise Problem(422, f"{field}: {expected}, {_got(x.shape, input_shape, procedures)}", field)
+
+
+def missing_as_null(sample: Any) -> Any:
+    """``sample`` with each row (or per-procedure entry) that holds no number, ``null`` or
+    NaN in every cell, as ``null``: a procedure not done. Anything else comes back as it
+    came, for the validators to name. A pydantic before-validator of the sample types."""
+    if not isinstance(sample, list) or not any(_no_number(row) for row in sample):
+        return sample
+    return [None if _no_number(row) else row for row in sample]
+
+
+def _no_number(row: Any) -> bool:
+    """Whether ``row`` is a non-empty list whose every cell, at any depth, is null or NaN.
+    A row of numbers stops at its first cell."""
+    if not isinstance(row, list) or not row:
+        return False
+    return all(_no_number(v) if isinstance(v, list) else _no_value(v) for v in row)
+
+
+def _no_value(cell: Any) -> bool:
+    return cell is None or (isinstance(cell, float) and math.isnan(cell))
 
 
 def sample_shapes(input_shape: tuple[int, ...], procedures: tuple[str, ...] = ()) -> set:
@@ -126,6 +154,7 @@ def explain(
 def _nulls(sample: Any, input_shape: tuple[int, ...], procedures: tuple[str, ...]) -> str:
     """Why a sample with null rows is refused where whole samples are needed: the
     procedures they leave out, or the rows. Empty where no row is null."""
+    sample = missing_as_null(sample)
     if not isinstance(sample, list) or not any(row is None for row in sample):
         return ""
     nulls = [i for i, row in enumerate(sample) if row is None]

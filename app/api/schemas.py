@@ -7,6 +7,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import (
     BaseModel,
+    BeforeValidator,
     ConfigDict,
     Field,
     StringConstraints,
@@ -15,6 +16,7 @@ from pydantic import (
     model_validator,
 )
 
+from app.api.sample_input import missing_as_null
 from app.data.procedures import block
 from app.store.enums import ClassKind, JobKind, JobStatus, Origin, VersionReason
 from app.words.interpret import MAX_TEXT
@@ -22,8 +24,12 @@ from app.words.interpret import MAX_TEXT
 # One tactile sample: a [C, T] tactile image or a flat [D] feature vector.
 SampleData = list[list[float]] | list[float]
 # A sample to recognise or describe: a row may be null, a procedure not done yet, and the
-# sample may come as one entry per procedure (app/api/sample_input.py).
-ProbeData = list[list[float] | None] | list[float] | list[list[list[float]] | None]
+# sample may come as one entry per procedure (app/api/sample_input.py). A row of null or
+# NaN cells is a null row (what orjson and JSON.stringify write for NaN).
+ProbeData = Annotated[
+    list[list[float] | None] | list[float] | list[list[list[float]] | None],
+    BeforeValidator(missing_as_null),
+]
 
 # no control characters: PostgreSQL text cannot hold NUL, and no one names an object with a tab
 ClassName = Annotated[
