@@ -197,7 +197,11 @@ def read_text(
     try:
         return interpreter.interpret(text, vocab.active)
     except NothingRecognised as exc:
-        raise InvalidDescription(f"{exc} (GET /v1/attributes lists them all)", field) from None
+        raise InvalidDescription(
+            f"{exc} (GET /v1/attributes lists them all); an attribute the vocabulary lacks "
+            "can be added with POST /v1/attributes",
+            field,
+        ) from None
     except TextError as exc:
         raise InvalidDescription(str(exc), field) from None
     except EmbeddingModelError as exc:
@@ -258,9 +262,11 @@ def description_key(
         _agree(read, dict(zip(active, vector, strict=True)), "attribute_vector")
         key = vocab.key_of_vector(vector)
     if not describes(vocab, key):
+        field = field_of(described)
         raise InvalidDescription(
-            "a description needs at least one attribute with a value above 0",
-            field_of(described),
+            f"{field} gives no attribute a value above 0: a class needs at least one"
+            + (" (name one of GET /v1/attributes)" if field == "attributes" else ""),
+            field,
         )
     return key
 
@@ -293,7 +299,7 @@ def check_names(names: Iterable[str], vocab: Vocabulary, field: str) -> None:
 
     raise InvalidDescription(
         f"unknown attribute(s): {'; '.join(map(named, unknown))}; the attributes are: "
-        f"{', '.join(active)}",
+        f"{', '.join(active)}; a new one can be added with POST /v1/attributes",
         field,
     )
 

@@ -19,7 +19,9 @@ How a text is read:
    "doesn't", "without") makes "has it" 0 and drops what the word implied about
    opposites; "not very" gives ``NOT_VERY``; "very" and the like give 1; "slightly" and
    the like give ``WEAK``; a plain word gives ``PLAIN``. A material ("steel", "foam")
-   gives the values such material usually has, scaled by ``MATERIAL``.
+   gives the values such material usually has, scaled by ``MATERIAL``. A material
+   phrase whose words speak of the feel on their own ("hard steel") gives both readings,
+   each word graded by the words before it: "a very hard steel block" is hard 1.
 5. Per attribute the strongest source wins (a word about the feel over a material, an
    attribute named directly over one implied), then the earlier mention.
 """
@@ -233,6 +235,11 @@ class TextInterpreter:
             out.extend(self._graded(text, clause, i, n, values, strength, vocab))
             if n == 1 and named is not None and named not in values:  # the lexicon reads the
                 out.extend(self._graded(text, clause, i, 1, {named: 1.0}, 1.0, vocab))  # word too
+            if strength < 1.0 and n > 1:  # "hard steel" is a material and says "hard" too
+                for j in range(i, i + n):
+                    feel = self._feel(words[j], stems[j], names)
+                    if feel:
+                        out.extend(self._graded(text, clause, j, 1, feel, 1.0, vocab))
             i += n
         left = [
             k
@@ -242,6 +249,16 @@ class TextInterpreter:
         if left:
             out.extend(self._embedded(text, clause, left, vocab))
         return out
+
+    def _feel(self, word: str, stem: str, names: dict[str, str]) -> dict[str, float]:
+        """What one word says of the feel on its own (a lexicon word of full strength, or a
+        vocabulary attribute's name); empty for a word that is not one."""
+        for form in (word, stem):
+            values, strength = self._lexicon.get(form, ({}, 0.0))
+            if values and strength >= 1.0:
+                return values
+        named = names.get(word, names.get(stem))
+        return {named: 1.0} if named is not None else {}
 
     def _graded(self, text, clause, i, n, values, strength, vocab) -> list[Reading]:
         """The readings of the phrase at words i … i+n-1, graded by up to 3 words before it."""

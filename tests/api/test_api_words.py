@@ -113,3 +113,26 @@ def test_patch_replaces_the_text_and_a_new_word_is_read_from_texts(service):
     assert "rubbery" not in cube["attribute_values"]  # no text: not known
     jobs = client.get("/v1/jobs", params={"limit": 100}).json()["jobs"]
     assert {j["status"] for j in jobs} == {"succeeded"}, jobs
+
+
+def test_an_empty_or_unknown_attribute_is_a_422_that_names_the_field_and_the_way_to_add_one(
+    service,
+):
+    client, _, _ = service
+    before = len(classes(client))
+    r = client.post("/v1/classes", json={"name": "x", "attributes": []})
+    detail = problem(r, 422, "attributes")["detail"]
+    assert detail.startswith("attributes gives no attribute a value above 0"), detail
+    assert "description" not in detail
+    r = client.post("/v1/classes", json={"name": "x", "attributes": ["sticky"]})
+    detail = problem(r, 422, "attributes")["detail"]
+    assert "'sticky' (did you mean 'thick'?)" in detail
+    assert detail.endswith("a new one can be added with POST /v1/attributes"), detail
+    for path, body, field in [
+        ("/v1/classes", {"name": "x", "description": "a blue gift"}, "description"),
+        ("/v1/attributes/interpret", {"text": "a blue gift"}, "text"),
+    ]:
+        detail = problem(client.post(path, json=body), 422, field)["detail"]
+        assert "the closest are" in detail
+        assert "can be added with POST /v1/attributes" in detail, detail
+    assert len(classes(client)) == before  # nothing stored

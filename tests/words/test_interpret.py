@@ -67,6 +67,17 @@ def test_a_name_alone_reads_its_material(reader):
     assert read["metallic"].words == "steel"
 
 
+@pytest.mark.parametrize("strong", ["very", "extremely"])
+def test_a_graded_word_inside_a_material_phrase_keeps_its_grade(reader, strong):
+    # "hard steel" is a material phrase of the lexicon: its "hard" is a word about the feel
+    read = reader.interpret(f"a {strong} hard steel block", VOCAB)
+    assert read["hard"].value == 1.0 and read["hard"].source == "word"
+    assert read["hard"].words == f"{strong} hard"
+    assert read["metallic"].source == "material" and read["soft"].value == 0.0
+    assert values(reader, "a hard steel block")["hard"] == pytest.approx(0.9)
+    assert values(reader, "not very hard steel")["hard"] == pytest.approx(0.3)
+
+
 def test_a_word_added_to_the_vocabulary_is_read_by_its_name(reader):
     got = values(reader, "a rubbery ball", VOCAB + ["rubbery"])
     assert got["rubbery"] == pytest.approx(0.9)
