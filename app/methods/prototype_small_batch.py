@@ -26,14 +26,18 @@ OpenMP region) before the exact distances, and ``class_log_posterior``'s dozen c
   for bit.
 
 The novel classes' part is the general path's own code (``_novel_from``), given the
-coordinates and the candidates found here: the same bits as the general path from the
-same inputs.
+coordinates and the candidates found here, and the zero-shot posterior from constants
+taken once per novel part (``ZeroShotConstants``: ``zero_shot_proba``'s calls on the
+samples, without its per-call work on the class vectors and the prior): the same bits as
+the general path from the same inputs.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+from app.methods.attributes import dap_class_terms, impute, softmax
 
 
 class PrototypeSmallBatch:
@@ -100,6 +104,56 @@ class PrototypeSmallBatch:
         novelty = np.empty(n)
         _posterior(ids, dist, self.proto, self.settings, known, novelty)
         return novelty, known, e, z, (ids, dist)
+
+    def zero_shot(self, model, z: np.ndarray) -> np.ndarray:
+        """``model._zero_shot(z)`` from constants taken once per novel part."""
+        c = getattr(self, "_zero", None)
+        if c is None or not c.fits(model):
+            c = self._zero = ZeroShotConstants(model)
+        return c.proba(z)
+
+
+class ZeroShotConstants:
+    """What ``zero_shot_proba`` derives from the model alone on every call, taken once:
+    DAP's clipped prior, its class-vector terms and prior term, the autoencoder's unit
+    class vectors. ``proba`` then makes the calls ``zero_shot_proba`` makes on the samples,
+    on arrays of the same shapes, dtypes and layout (the constants' transposed views as
+    there): the same bits."""
+
+    def __init__(self, model) -> None:
+        reg = model.registry
+        self.attributes = model.attributes_
+        self.clip = float(model.dap_clip)
+        q = np.clip(model.prior_, self.clip, 1 - self.clip)
+        self.present, self.absent = dap_class_terms(reg.novel_attributes)
+        self.log_prior = np.log(q) @ self.present.T + np.log1p(-q) @ self.absent.T
+        self.sae = model.sae_
+        self.temperature = float(model.sae_temperature)
+        self.unit_vectors = None
+        if self.sae is not None:
+            vectors = np.asarray(impute(reg.novel_attributes, model.prior_), np.float64)
+            self.unit_vectors = _unit(vectors)
+        self._key = (model.attributes_, model.prior_, model.sae_, reg.novel_attributes)
+
+    def fits(self, model) -> bool:
+        key = (model.attributes_, model.prior_, model.sae_, model.registry.novel_attributes)
+        return all(a is b for a, b in zip(self._key, key, strict=True))
+
+    def proba(self, z: np.ndarray) -> np.ndarray:
+        """(N, L) ``zero_shot_proba`` of scaled rows ``z``."""
+        p = np.clip(self.attributes.predict_proba(z), self.clip, 1 - self.clip)
+        scores = np.log(p) @ self.present.T + np.log1p(-p) @ self.absent.T
+        scores = scores - self.log_prior[None, :]
+        if self.sae is not None:
+            projected = np.asarray(z, np.float32) @ np.asarray(self.sae, np.float32).T
+            cosine = _unit(projected.astype(np.float64)) @ self.unit_vectors.T
+            scores = scores + self.temperature * cosine
+        return softmax(scores)
+
+
+def _unit(m: np.ndarray) -> np.ndarray:
+    """Rows over max(their norm, 1e-12), as ``cosine_scores`` computes them."""
+    return m / np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-12)
 
 
 def _key(model) -> tuple:

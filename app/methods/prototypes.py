@@ -530,7 +530,10 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
             if few is None or not few.fits(self):
                 few = self._few = PrototypeSmallBatch(self)
             novelty, known, e, z, near = few.scores(flatten(samples))
-            novel = self._novel_from(z, e, near=near) if self.registry.novel_names else None
+            novel = None
+            if self.registry.novel_names:
+                zsl = few.zero_shot(self, z) if self.has_attributes else None
+                novel = self._novel_from(z, e, near=near, p_zsl=zsl)
             return novelty, known, novel
         z, e = self._embedded(samples)
         known, novelty = self._scores_e(e)
@@ -544,17 +547,19 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         shot_points: np.ndarray | None = None,
         search: PrototypeSearch | None = None,
         near: tuple[np.ndarray, np.ndarray] | None = None,
+        p_zsl: np.ndarray | None = None,
     ) -> np.ndarray:
         """The novel classes' probabilities from scaled inputs ``z`` and their coordinates
         ``e``, in which the one-shot prototypes are ``shot_points`` and the known ones are
         searched by ``search`` (the fitted space's, ``shot_points_`` and ``search_``, unless
         given: a marginal's). ``near``: the ``search_k`` nearest known prototypes' (ids,
-        squared distances) where the caller found them already (the fitted space's)."""
+        squared distances) where the caller found them already (the fitted space's);
+        ``p_zsl``: the zero-shot posterior, where computed already."""
         reg = self.registry
         has = self.shot_has_
-        if self.has_attributes:
+        if p_zsl is None and self.has_attributes:
             p_zsl = self._zero_shot(z)
-        else:
+        elif p_zsl is None:
             p_zsl = np.zeros((len(z), len(reg.novel_names)))
         if not has.any():
             return p_zsl

@@ -126,3 +126,22 @@ def test_the_distances_to_every_prototype_are_the_reranking_distances_bit_for_bi
             assert got.dtype == np.float32 and got.shape == (len(rows), len(s))
             assert np.array_equal(got.astype(np.float64), s.squared(rows, every))
     assert PrototypeSearch(e, exact_below=0).squared_to_all(e) is None
+
+
+def test_samples_lacking_procedures_beside_complete_ones_answer_as_the_general_path(model, data):
+    """A batch mixing complete samples (the small-batch path) with samples lacking some
+    procedures (the marginal model's path, on both) answers as the general path does."""
+    from app.data.procedures import keep_only
+
+    _, known, held = data
+    x = np.concatenate([known[:2], keep_only(known[2:4], model.procedures, [0, 2]), held[:1]])
+    fast, general = model.recognize_batch(x), _general(model).recognize_batch(x)
+    assert fast.procedures_used[:2].all() and not fast.procedures_used[2:4].all()
+    assert np.array_equal(fast.top_index, general.top_index)
+    assert np.array_equal(fast.procedures_used, general.procedures_used)
+    assert np.array_equal(fast.next_procedure, general.next_procedure)
+    np.testing.assert_allclose(fast.top_probability, general.top_probability, rtol=0, atol=TOL)
+    np.testing.assert_allclose(fast.novelty_score, general.novelty_score, rtol=0, atol=TOL)
+    lone = keep_only(held[1:2], model.procedures, [1])  # one partial sample alone
+    a, b = model.recognize_batch(lone), _general(model).recognize_batch(lone)
+    assert np.array_equal(a.top_probability, b.top_probability)
