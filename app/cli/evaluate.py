@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 from pathlib import Path
@@ -321,122 +320,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def summary_table(results: dict) -> str:
-    """Mean figures per method, each with its 95 % confidence interval over splits, as a
-    plain-text table; with several methods, a second table of each method's paired
-    difference from the first one (its 95 % interval, splits won / lost)."""
-    from app.evaluation.raw import PROTOCOL
-    from app.evaluation.report import ORDER, measured_figures
+    """The printed tables: each figure once, timings with their units, and notes on what
+    was left out and why (``app.evaluation.summary``)."""
+    from app.evaluation.summary import summary_table as table
 
-    if results.get("protocol") == PROTOCOL:
-        return raw_summary_table(results)
-    methods = list(results["methods"])
-    # only what was measured: a figure no method has a finite mean of gets no row of "—"
-    present = set(measured_figures(results))
-    rows = [f for f in ORDER if f in present] + sorted(
-        present - set(ORDER), key=lambda f: (f.startswith("ceil_"), f)
-    )
-    width = max(len(m) for m in methods + ["figure"]) + 2
-    if any("ci95" in results["methods"][m] for m in methods):
-        width = max(width, 23)
-    lines = ["figure".ljust(24) + "".join(m.rjust(width) for m in methods)]
-    for f in rows:
-        cells = []
-        for m in methods:
-            e = results["methods"][m]
-            cells.append(_cell(e["mean"].get(f), (e.get("ci95") or {}).get(f)).rjust(width))
-        lines.append(f.ljust(24) + "".join(cells))
-    lines.append(
-        "seconds".ljust(24)
-        + "".join(f"{results['methods'][m]['elapsed_s']:.0f}".rjust(width) for m in methods)
-    )
-    n = results.get("splits")
-    lines.append(f"mean [95% CI]: Student's t over the {n} splits' values, clipped to [0, 1]")
-    lines += rerun_lines(results, rows, width)
-    lines += paired_lines(results, rows)
-    return "\n".join(lines)
-
-
-def rerun_lines(results: dict, rows: list[str], width: int) -> list[str]:
-    """Where a re-run's mean lands, a row per figure that has the range (none in results that
-    predate it, or of one split)."""
-    methods = list(results["methods"])
-    body = []
-    for f in rows:
-        cells = []
-        for m in methods:
-            lo, hi = (results["methods"][m].get("rerun95") or {}).get(f) or (None, None)
-            ok = lo is not None and hi is not None and not (math.isnan(lo) or math.isnan(hi))
-            cells.append(f"[{lo:.3f}, {hi:.3f}]" if ok else "—")
-        if any(c != "—" for c in cells):
-            body.append(f.ljust(24) + "".join(c.rjust(width) for c in cells))
-    if not body:
-        return []
-    return [
-        "",
-        f"where a re-run of {results.get('rerun_splits')} splits on another seed lands (95%)",
-        "figure".ljust(24) + "".join(m.rjust(width) for m in methods),
-        *body,
-    ]
-
-
-def paired_lines(results: dict, rows: list[str]) -> list[str]:
-    """The paired differences from the reference method, a row per figure (none with one
-    method)."""
-    paired = results.get("paired")
-    if not paired or not paired.get("methods"):
-        return []
-    ref = paired["reference"]
-    others = list(paired["methods"])
-    pw = 31
-    lines = [
-        "",
-        f"paired difference from {ref} on the same splits: mean [95% CI] won/lost",
-        "figure".ljust(24) + "".join(f"{m} - {ref}".rjust(pw) for m in others),
-    ]
-    for f in rows:
-        if all(_cell(paired["methods"][m]["mean"].get(f)) == "—" for m in others):
-            continue
-        cells = []
-        for m in others:
-            p = paired["methods"][m]
-            if _cell(p["mean"].get(f)) == "—":
-                cells.append("—".rjust(pw))
-                continue
-            cell = _cell(p["mean"][f], p["ci95"].get(f), signed=True)
-            cells.append(f"{cell} {p['won'][f]}/{p['lost'][f]}".rjust(pw))
-        lines.append(f.ljust(24) + "".join(cells))
-    return lines
-
-
-def _cell(mean, ci=None, signed: bool = False) -> str:
-    """``0.612 [0.590, 0.634]``; ``—`` for a figure not measured."""
-    if mean is None or (isinstance(mean, float) and math.isnan(mean)):
-        return "—"
-    fmt = "{:+.3f}" if signed else "{:.3f}"
-    lo, hi = ci if ci else (None, None)
-    if lo is None or hi is None or math.isnan(lo) or math.isnan(hi):
-        return fmt.format(mean)
-    return f"{fmt.format(mean)} [{fmt.format(lo)}, {fmt.format(hi)}]"
-
-
-def raw_summary_table(results: dict) -> str:
-    """Raw-trial results: mean and 95 % confidence interval of every figure per method, and
-    with several methods the paired differences from the first."""
-    from app.evaluation.raw import raw_figures
-
-    methods = list(results["methods"])
-    width = 26
-    lines = ["figure".ljust(18) + "".join(m.rjust(width) for m in methods)]
-    figures = raw_figures(results)
-    for f in figures:
-        cells = []
-        for m in methods:
-            e = results["methods"][m]
-            cells.append(_cell(e["mean"].get(f), e.get("ci95", {}).get(f)).rjust(width))
-        lines.append(f.ljust(18) + "".join(cells))
-    lines.append(
-        "seconds".ljust(18)
-        + "".join(f"{results['methods'][m]['elapsed_s']:.0f}".rjust(width) for m in methods)
-    )
-    lines += paired_lines(results, figures)
-    return "\n".join(lines)
+    return table(results)
