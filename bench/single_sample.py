@@ -261,8 +261,8 @@ def main() -> None:
         groups["with novel classes"] = {
             m: with_novel(model, dataset, args.novel) for m, model in models.items()
         }
-    report: dict = {"machine": cpu_model(), "numpy": np.__version__, "args": vars(args)}
-    report["args"]["json"] = None if args.json is None else str(args.json)
+    options = {**vars(args), "json": None if args.json is None else str(args.json)}
+    report: dict = {"machine": cpu_model(), "numpy": np.__version__, "args": options}
     report["side_by_side"] = {
         label: side_by_side(label, group, dataset, args) for label, group in groups.items()
     }
