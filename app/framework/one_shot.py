@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from app.framework.synthesis import l1_nearest
-
 
 def one_shot_training_set(
     sample_features: np.ndarray, sample_labels: np.ndarray, real_features: np.ndarray, k: int
@@ -16,6 +14,10 @@ def one_shot_training_set(
         return sample_features, sample_labels
     if k <= 0:
         return sample_features, sample_labels
+    # here, not at the top: best and prototypes import this module's bounds and answer
+    # without torch, which synthesis loads
+    from app.framework.synthesis import l1_nearest
+
     nn_idx = l1_nearest(sample_features, real_features, k=k)
     feats = np.concatenate([sample_features[:, None, :], real_features[nn_idx]], axis=1)
     labels = np.repeat(sample_labels, nn_idx.shape[1] + 1)
