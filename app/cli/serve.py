@@ -40,14 +40,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import logging
-
     import uvicorn
 
     from app.api.main import create_app
     from app.config import Settings
     from app.server import processes
     from app.server.http_protocol import CoalescingHttpToolsProtocol
+    from app.server.logs import configure_logging
     from app.service.bootstrap import ensure_ready
     from app.store.db import make_engine, make_sessionmaker
 
@@ -62,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     }
     overrides = {k: v for k, v in overrides.items() if v is not None}
     settings = Settings(**overrides)
-    logging.basicConfig(level=logging.INFO, format=processes.LOG_FORMAT)
+    configure_logging()
     # migrate and bootstrap before the server starts, so a bad dataset or an unreachable
     # database is a one-line error here rather than a failed ASGI startup
     engine = make_engine(settings.sqlalchemy_url, settings.db_timeout_seconds)

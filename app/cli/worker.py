@@ -18,19 +18,17 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import logging
     import signal
     import threading
 
     from app.config import Settings
     from app.framework.runtime import configure_threads
+    from app.server.logs import configure_logging
     from worker import run_worker
 
     settings = Settings(**({"data_dir": args.data_dir} if args.data_dir else {}))
     configure_threads(settings.torch_threads)  # as every serve and worker process does
-    logging.basicConfig(
-        level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
-    )
+    configure_logging()  # serve's format; faiss's loader quiet
     stop = threading.Event()
     # finish the round in progress, then leave; a kill instead leaves jobs for re-queueing
     signal.signal(signal.SIGTERM, lambda *_: stop.set())

@@ -26,9 +26,10 @@ from typing import Any
 import uvicorn
 from prometheus_client import multiprocess
 
+from app.server.logs import configure_logging
+
 log = logging.getLogger(__name__)
 
-LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
 PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
 
@@ -154,7 +155,7 @@ def _run_one(overrides: dict[str, Any], server: dict[str, Any], index: int, serv
     from app.api.main import create_app
     from app.config import Settings
 
-    logging.basicConfig(level=logging.INFO, format=LOG_FORMAT)
+    configure_logging()
     _stop_with_parent()
     settings = Settings(**overrides)
     sock = socket.socket(_family(settings.host), socket.SOCK_STREAM)
