@@ -49,6 +49,8 @@ from app.framework.registry import make_method
 from bench.withdrawal import cpu_model
 
 CLOCKS = {"wall": time.perf_counter, "cpu": time.thread_time}
+#: the code the figures come from: the methods, the framework, the simulator, the batcher
+CODE = ("app/methods", "app/framework", "app/data", "app/service", "bench")
 
 
 def median_seconds(fn, repeats: int, clock=time.perf_counter) -> float:
@@ -239,6 +241,32 @@ def side_by_side(label: str, models: dict, dataset, args) -> dict:
     return out
 
 
+def code_and_machine() -> dict:
+    """``bench.scale.machine()`` with the CPU's name, and ``dirty`` over the code this bench
+    runs (``CODE``; ``changed_elsewhere``: the other tracked files that differed from HEAD,
+    on a tree others edit)."""
+    import subprocess
+
+    from bench.scale import machine
+
+    def changed(*paths: str) -> list[str]:
+        out = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no", "--", *paths],
+            capture_output=True,
+            text=True,
+        ).stdout
+        return [line[3:] for line in out.splitlines() if line]
+
+    mine, every = changed(*CODE), changed()
+    return {
+        **machine(),
+        "cpu": cpu_model(),
+        "dirty": bool(mine),
+        "changed": mine,
+        "changed_elsewhere": [c for c in every if c not in mine],
+    }
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--methods", default="best,prototypes", help="comma-separated, first: base")
@@ -262,7 +290,7 @@ def main() -> None:
             m: with_novel(model, dataset, args.novel) for m, model in models.items()
         }
     options = {**vars(args), "json": None if args.json is None else str(args.json)}
-    report: dict = {"machine": cpu_model(), "numpy": np.__version__, "args": options}
+    report: dict = {"machine": code_and_machine(), "numpy": np.__version__, "args": options}
     report["side_by_side"] = {
         label: side_by_side(label, group, dataset, args) for label, group in groups.items()
     }
