@@ -50,7 +50,7 @@ from bench.withdrawal import cpu_model
 
 CLOCKS = {"wall": time.perf_counter, "cpu": time.thread_time}
 #: the code the figures come from: the methods, the framework, the simulator, the batcher
-CODE = ("app/methods", "app/framework", "app/data", "app/service", "bench")
+CODE = ("app/methods", "app/framework", "app/data", "app/service/batcher.py", "bench")
 
 
 def median_seconds(fn, repeats: int, clock=time.perf_counter) -> float:
