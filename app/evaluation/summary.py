@@ -70,10 +70,10 @@ SHARED_PARTS = (
 )
 
 _KEPT_NOTE = (
-    "touches<k>_nd_known_kept counts the known objects' test trials kept known at the tuned "
-    "threshold (with k = 1 that is nd_test_kept, printed with --ceilings); nd_known_kept is the "
-    "fit's own tuning figure on held-out trials of its known training objects (Table II, "
-    "X_te), so the two differ"
+    "nd_known_kept is the fit's own tuning figure, on held-out trials of its known training "
+    "objects (Table II, X_te); nd_test_kept (--ceilings) and touches<k>_nd_known_kept count "
+    "the known objects' test trials kept known at the same threshold (touches1_nd_known_kept "
+    "is nd_test_kept), so they differ from it"
 )
 
 
@@ -181,8 +181,14 @@ def _lower_is_better(figure: str) -> bool:
 def _rows(results: dict[str, Any]) -> list[str]:
     # only what was measured: a figure no method has a finite mean of gets no row of "—"
     present = set(measured_figures(results))
+    # the mixed figures in the order seen, unseen, h
+    mixed = {"seen": "0", "unseen": "1", "h": "2"}
     return [f for f in ORDER if f in present] + sorted(
-        present - set(ORDER), key=lambda f: (f.startswith("ceil_"), f)
+        present - set(ORDER),
+        key=lambda f: (
+            f.startswith("ceil_"),
+            re.sub(r"_(seen|unseen|h)$", lambda m: "_" + mixed[m.group(1)], f),
+        ),
     )
 
 
@@ -273,7 +279,8 @@ def _notes(
     if folded:
         lines += ["", "not printed, equal on every split by definition:"]
         lines += [f"  {f} = {g} ({why})" for f, g, why in folded]
-    if any(f.startswith("touches") and f.endswith("_nd_known_kept") for f in rows):
+    kept = [f for f in rows if f == "nd_test_kept" or re.fullmatch(r"touches\d+_nd_known_kept", f)]
+    if kept and "nd_known_kept" in rows:
         lines += ["", _KEPT_NOTE]
     for group, figs in identical_rows(results, rows).items():
         if len(group) < 2:
@@ -318,8 +325,13 @@ def paired_lines(results: dict[str, Any], rows: Sequence[str]) -> list[str]:
     others = list(paired["methods"])
     body = []
     reversed_rows = False
+    equal = []
     for f in rows:
         if all(not _finite(paired["methods"][m]["mean"].get(f)) for m in others):
+            continue
+        splits = [paired["methods"][m].get("splits", {}).get(f) for m in others]
+        if all(d and all(v == 0 for v in d) for d in splits):
+            equal.append(f)
             continue
         cells = [f]
         for m in others:
@@ -341,12 +353,13 @@ def paired_lines(results: dict[str, Any], rows: Sequence[str]) -> list[str]:
     )
     if reversed_rows:
         legend += "; in the adaptive rule's _time and _procedures rows the lower figure wins"
-    return [
-        "",
-        f"paired difference from {ref} on the same splits: mean [95% CI] won/lost",
-        *render(["figure", *(f"{m} - {ref}" for m in others)], body),
-        legend,
-    ]
+    lines = ["", f"paired difference from {ref} on the same splits: mean [95% CI] won/lost"]
+    if body:
+        lines += render(["figure", *(f"{m} - {ref}" for m in others)], body)
+        lines.append(legend)
+    if equal:
+        lines.append(f"no difference from {ref} on any split, not printed: {', '.join(equal)}")
+    return lines
 
 
 def raw_summary_table(results: dict[str, Any]) -> str:
