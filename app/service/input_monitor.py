@@ -92,7 +92,7 @@ class InputMonitor:
         self._next = self._filled = 0
         self._seen = 1  # the gauges change even before a sample arrives
         self._channel_names = tuple(names) or tuple(str(i) for i in range(profile.n_channels))
-        self.metrics.input_drift.clear()
+        self.metrics.forget_input_channels()
 
     def _write(self, statistics: np.ndarray, flags: np.ndarray) -> None:
         n, start = len(statistics), self._next

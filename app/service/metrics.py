@@ -35,6 +35,12 @@ _LOOKBACK = timedelta(seconds=30)
 LATENCY_BUCKETS = (0.001, 0.0025, 0.005, 0.01, 0.015, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 5)
 
 
+def multiprocess_mode() -> bool:
+    """Whether prometheus_client takes this process for one of several sharing files (the
+    supervisor of ``serve`` sets the variable; it also reads the older lower-case name)."""
+    return "PROMETHEUS_MULTIPROC_DIR" in os.environ or "prometheus_multiproc_dir" in os.environ
+
+
 class Metrics:
     def __init__(self) -> None:
         self.registry = CollectorRegistry()
@@ -147,6 +153,14 @@ class Metrics:
             self._request_series[key] = series
         series[0].inc()
         series[1].observe(seconds)
+
+    def forget_input_channels(self) -> None:
+        """Drop the per-channel drift series of a model whose channels no longer apply.
+        prometheus_client cannot drop labelled series in multiprocess mode (its files keep
+        them, and ``clear()`` only warns, at each new model of each process): there a
+        channel's series keeps its last value until set again or the process ends."""
+        if not multiprocess_mode():
+            self.input_drift.clear()
 
     def exposition(self) -> tuple[bytes, str]:
         """The Prometheus text and its content type: this process's figures, or those of
