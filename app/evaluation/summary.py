@@ -240,8 +240,8 @@ def summary_table(results: dict[str, Any]) -> str:
     lines.append(f"mean [95% CI]: Student's t over the {n} splits' values, clipped to [0, 1]")
     jobs, wall = results.get("jobs", 1), results.get("elapsed_s")
     side = (
-        f"; the splits ran in {jobs} processes side by side, so the sum exceeds this run's "
-        f"{wall:.1f} s of wall time"
+        f"; the splits ran in {jobs} processes side by side, so these sums can exceed the "
+        f"run's {wall:.1f} s of wall time"
         if jobs and jobs > 1 and _finite(wall)
         else ""
     )
@@ -347,8 +347,10 @@ def paired_lines(results: dict[str, Any], rows: Sequence[str]) -> list[str]:
             cells.append(f"{cell} {won}/{lost}")
         body.append(cells)
     n = results.get("splits")
+    pressure = any(r[0].startswith("pressure_") for r in body)
+    repeats = " (for pressure_* rows, repeats)" if pressure else ""
     legend = (
-        f"won/lost: of the {n} splits, those on which the column's method beat {ref} / "
+        f"won/lost: of the {n} splits{repeats}, those on which the column's method beat {ref} / "
         f"{ref} beat it (a higher figure wins; ties count in neither)"
     )
     if reversed_rows:

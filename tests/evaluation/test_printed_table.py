@@ -199,3 +199,29 @@ def test_figures_of_some_methods_get_a_section_of_their_own(run):
         "0.500 [0.400, 0.600]"
     ]
     assert "measured by dap only" in text
+
+
+def test_raw_trial_table_has_units_legend_and_aligned_columns(tmp_path):
+    """The raw-trial protocol's table on the BioTac pilot: the same rules."""
+    from tests.framework.raw_data import pilot_path
+
+    out = tmp_path / "raw.json"
+    args = ["evaluate", "--dataset", f"biotac:{pilot_path()}", "--splits", "2"]
+    args += ["--methods", "extratrees,dap", "--out", str(out), "--no-progress"]
+    # forests of different sizes: the two differ (with equal ones they are one forest)
+    args += ["--param", "extratrees.n_estimators=20", "--param", "dap.n_estimators=7"]
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        assert main(args) == 0
+    text = printed.getvalue()
+    results = json.loads(out.read_text())
+    found = tables(text)
+    assert found
+    for header, rows in found:
+        for row in rows:
+            assert misaligned(header, row) is None, (header, row)
+    shown = values(found[0][1])
+    assert "seconds" not in shown and "run_s_all_fits" in shown
+    assert "run_s_all_fits: seconds," in text
+    assert [f for f in shown if f not in results["methods"]["dap"]["mean"]] == ["run_s_all_fits"]
+    assert "won/lost: of the 2 splits (for pressure_* rows, repeats), those on which the " in text
