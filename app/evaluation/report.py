@@ -253,7 +253,10 @@ def markdown(results: dict[str, Any], images: dict[str, list[str]] | None = None
         "",
         "## Wall time",
         "",
-        "| method | total s | mean fit s per split |",
+        "Seconds of fitting and measuring, summed over splits (splits that ran in processes "
+        "side by side count each), and the mean over splits of one fit's seconds.",
+        "",
+        "| method | s, summed over splits | fit s, mean per split |",
         "| --- | --- | --- |",
     ]
     for m in methods:
