@@ -6,6 +6,8 @@ import asyncio
 import socket
 import threading
 import time
+import urllib.error
+import urllib.request
 
 import pytest
 import uvicorn
@@ -106,6 +108,10 @@ def server():
     async def sized(n: int) -> PlainTextResponse:
         return PlainTextResponse("a" * n)
 
+    @app.post("/refuse")
+    async def refuse() -> PlainTextResponse:  # answers without reading the body, as a 413 does
+        return PlainTextResponse("too large", status_code=413)
+
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
@@ -143,3 +149,17 @@ def test_a_real_server_answers_pipelined_requests_in_order(server, sizes):
             for n in sizes:
                 status, body = read_response(f)
                 assert status == 200 and body == b"a" * n
+
+
+def test_an_answer_before_the_body_reaches_a_client_that_closes_after_it(server):
+    """urllib sends ``Connection: close`` and its whole body before it reads: an answer
+    given without reading the body (a 413 from its Content-Length) reaches it instead of
+    a connection reset, and the server serves on."""
+    body = b"x" * (64 * 1024 * 1024)  # far beyond what the sockets' buffers hold
+    for _ in range(2):
+        request = urllib.request.Request(f"http://127.0.0.1:{server}/refuse", data=body)
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(request, timeout=30)
+        assert refused.value.code == 413 and refused.value.read() == b"too large"
+    with urllib.request.urlopen(f"http://127.0.0.1:{server}/size/3", timeout=10) as r:
+        assert r.read() == b"aaa"
