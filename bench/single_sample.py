@@ -241,6 +241,10 @@ def side_by_side(label: str, models: dict, dataset, args) -> dict:
     return out
 
 
+def _key(label: str) -> str:
+    return label.replace(" ", "_").replace("-", "_")
+
+
 def code_and_machine() -> dict:
     """``bench.scale.machine()`` with the CPU's name, and ``dirty`` over the code this bench
     runs (``CODE``; ``changed_elsewhere``: the other tracked files that differed from HEAD,
@@ -291,11 +295,15 @@ def main() -> None:
         }
     options = {**vars(args), "json": None if args.json is None else str(args.json)}
     report: dict = {"machine": code_and_machine(), "numpy": np.__version__, "args": options}
+    # keys without spaces: docs/BENCHMARKS.md links a figure by its key path
     report["side_by_side"] = {
-        label: side_by_side(label, group, dataset, args) for label, group in groups.items()
+        _key(label): side_by_side(label, group, dataset, args) for label, group in groups.items()
     }
     report["paths"] = {
-        label: {m: measure(label, model, dataset, args) for m, model in group.items()}
+        _key(label): {
+            m: {_key(path): v for path, v in measure(label, model, dataset, args).items()}
+            for m, model in group.items()
+        }
         for label, group in groups.items()
     }
     if args.json is not None:
