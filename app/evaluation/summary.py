@@ -141,11 +141,11 @@ def identical_rows(
 def _forest_baselines(methods: Sequence[str]) -> bool:
     """Every method a forest baseline (``app.baselines.common.ForestBaseline``)."""
     from app.baselines.common import ForestBaseline
-    from app.framework.registry import method_class
+    from app.framework.registry import UnknownMethodError, method_class
 
     try:
         return all(issubclass(method_class(m), ForestBaseline) for m in methods)
-    except Exception:  # a method this install no longer knows (an old results.json)
+    except UnknownMethodError:  # a method this install no longer knows (an old results.json)
         return False
 
 

@@ -225,3 +225,15 @@ def test_raw_trial_table_has_units_legend_and_aligned_columns(tmp_path):
     assert "run_s_all_fits: seconds," in text
     assert [f for f in shown if f not in results["methods"]["dap"]["mean"]] == ["run_s_all_fits"]
     assert "won/lost: of the 2 splits (for pressure_* rows, repeats), those on which the " in text
+
+
+def test_only_the_forest_baselines_get_the_shared_parts_reason(run):
+    """Methods that are not forest baselines (here unknown names) get the fact, not the
+    baselines' reason."""
+    results, _ = run
+    res = copy.deepcopy(results)
+    res["methods"] = {f"{m}-renamed": e for m, e in res["methods"].items()}
+    res.pop("paired")
+    text = summary_table(res)
+    assert "eszsl-renamed, dap-renamed, extratrees-renamed: identical on every split in" in text
+    assert SHARED_PARTS not in text
