@@ -17,6 +17,7 @@ from app.api.deps import (
     ReadAccess,
     RowId,
     SessionDep,
+    SettingsDep,
 )
 from app.api.problems import Problem, blame, not_found
 from app.api.sample_input import sample_array
@@ -113,6 +114,7 @@ def add_sample(
     response: Response,
     idempotency: IdempotencyDep,
     principal: Enroller,
+    settings: SettingsDep,
 ) -> SampleCreated:
     """Add one real sample of a novel class (one-shot learning). Stored and queued
     before the 202; the job says when a model including it is live. The answer says what
@@ -122,7 +124,7 @@ def add_sample(
     the first answer and adds nothing."""
     idempotency.replay(session)
     cls = enrolment.novel_class(session, class_id)
-    kept, recognized_as = _read_and_recognize(body, model)
+    kept, recognized_as = _read_and_recognize(body, model, settings.known_kept)
 
     warnings = enrolment.doubts(cls, recognized_as, model.recognizer.registry.all_names)
 
@@ -150,7 +152,9 @@ def add_sample(
     return out
 
 
-def _read_and_recognize(body: SampleCreate, model: LoadedModel) -> tuple[Any, dict]:
+def _read_and_recognize(
+    body: SampleCreate, model: LoadedModel, known_kept: float | None
+) -> tuple[Any, dict]:
     """The body's sample or raw trial as the store keeps it, and what ``model`` makes of it
     before learning from it (one answer for all of it: both fingers of a trial)."""
     rec = model.recognizer
@@ -172,7 +176,10 @@ def _read_and_recognize(body: SampleCreate, model: LoadedModel) -> tuple[Any, di
         with blame("sample", one=True):
             x = rec.validate_samples(x)  # NaN and infinity become a named 422
         kept = x[0]
-    answer = rec.recognize_batch(x, groups=np.zeros(len(x), np.int64))
+    # at the service's operating point, as POST /v1/recognize answers it
+    answer = rec.recognize_batch(
+        x, groups=np.zeros(len(x), np.int64), known_kept=rec.operating_point(None, known_kept)
+    )
     return kept, answer.records(model.class_ids)[0]
 
 
