@@ -18,9 +18,10 @@ candidate on its own training data and then fits the winner on all of it:
 
 Where the data hold no probe (fewer than 3 such classes, as in a service's first model of
 2 classes with 2 enrolled samples each) or no candidate could be probed, ``unprobed`` wins
-by rule: ``best``, which named held-out touches right 0.89-1.00 of the time where
-``prototypes`` did 0.69-0.91, with 2 samples a class of 2 to 5 classes (PHAC-2 and the
-simulator, 8 development seeds: ``python -m bench.research.small_catalogue``). A rule that
+by rule: ``best``, which named held-out touches right 0.89-1.00 of the time on PHAC-2
+where ``prototypes`` did 0.69-0.91, and 0.93-1.00 against 0.90-1.00 on the simulator,
+with 2 samples a class of 2 to 5 classes (8 development seeds:
+``python bench/research/small_catalogue.py``, docs/results/small_catalogue.json). A rule that
 fails on the data falls back to the next candidate that fits.
 
 The probe's fits leave out what it does not measure (``best``'s per-procedure models).
