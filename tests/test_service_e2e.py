@@ -294,7 +294,9 @@ def test_a_robot_touches_procedure_by_procedure_as_the_service_asks(tmp_path):
     touch = dataset.samples[3] + rng.normal(0, dataset.samples.std(), dataset.input_shape)
     rows = touch.shape[0] // len(dataset.procedures)
     service = Service(tmp_path / "data", free_port())
-    service.env.update(TACTILE_METHOD="best", TACTILE_METHOD_PARAMS=json.dumps({"best": BEST_PARAMS}))
+    service.env.update(
+        TACTILE_METHOD="best", TACTILE_METHOD_PARAMS=json.dumps({"best": BEST_PARAMS})
+    )
     service.start()
     try:
         with httpx.Client(base_url=f"http://127.0.0.1:{service.port}", timeout=30) as client:

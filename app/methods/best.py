@@ -269,7 +269,6 @@ class BestRecognizer(DescribedClasses, TactileRecognizer):
         attribute_samples: int = 50000,
         dap_clip: float = 0.02,
         shot_temperature: float = 0.05,
-        shot_margin: float | None = SHOT_MARGIN,
         knn_weight: float = 0.1,
         top_weight: float = 0.1,
         novelty_val_fraction: float = 0.1,
@@ -286,6 +285,7 @@ class BestRecognizer(DescribedClasses, TactileRecognizer):
         featurizer_params: dict[str, Any] | None = None,
         by_procedure: bool = True,
         procedure_estimators: int | None = None,
+        shot_margin: float | None = SHOT_MARGIN,
     ) -> None:
         super().__init__()
         self.seed = seed

@@ -120,7 +120,7 @@ def test_bundles_carry_the_parameter_names_they_always_had():
         "novelty_holdout_trials",
         "tuning_rounds", "tuning_objects", "distance_components", "forest_grower", "forest_codes",
         "approximate_above", "sae_lambda", "sae_temperature", "n_jobs", "featurizer_params",
-        "by_procedure", "procedure_estimators",
+        "by_procedure", "procedure_estimators", "shot_margin",
     ]  # fmt: skip
     # tuning_objects, forest_codes, approximate_above and attribute_samples came with the
     # forest grown on class codes; a bundle without them loads as what it was made with (0:
@@ -129,7 +129,9 @@ def test_bundles_carry_the_parameter_names_they_always_had():
     # procedures, and a bundle without it loads as one whole model (False);
     # procedure_estimators came later, and a bundle without it refits its per-procedure
     # models with n_estimators trees, as it was made (None); forest_grower came with the
-    # compiled Gini grower, and a bundle without it grows scikit-learn's trees ("sklearn")
+    # compiled Gini grower, and a bundle without it grows scikit-learn's trees ("sklearn");
+    # shot_margin came with the one-shot bound (2026-11-28), and a bundle without it loads
+    # with today's default
 
 
 def test_a_constructor_with_kwargs_is_refused():

@@ -37,6 +37,14 @@ def test_members_are_the_strings_stored_and_sent():
         "withdraw_sample",
         "add_attribute",
         "retire_attribute",
+        "choose_method",
+    ]
+    assert [m.value for m in VersionReason] == [
+        "bootstrap",
+        "update",
+        "promotion",
+        "withdrawal",
+        "method choice",
     ]
 
 
