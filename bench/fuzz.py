@@ -74,6 +74,7 @@ NEEDS: dict[str, str | None] = {
     "GET /v1/models/active/bundle": "read",
     "GET /v1/models/{version}/bundle": "read",
     "POST /v1/models/{version}/activate": "admin",
+    "POST /v1/models/choice": "admin",
 }
 PROBLEM = "application/problem+json"
 

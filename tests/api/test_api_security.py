@@ -96,7 +96,7 @@ def test_every_v1_operation_needs_a_key_once_one_exists(client, app):
         if path.startswith("/v1")
         for method in item
     ]
-    assert len(operations) == 23  # POST /v1/attributes/interpret among them
+    assert len(operations) == 24  # POST /v1/attributes/interpret, POST /v1/models/choice among them
     for path, item in paths.items():
         for method, operation in item.items():
             if path.startswith("/v1"):
