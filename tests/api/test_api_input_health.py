@@ -191,7 +191,7 @@ def test_an_unknown_outlier_policy_is_a_422_naming_it(client, sample):
 
 def test_the_setting_answers_outliers_for_every_request(tmp_path, base_model):
     model, dataset = base_model
-    broken = broken_of(dataset.samples[0])
+    broken = broken_of(live_channel(dataset), dataset.samples[0])
     settings = quick_settings(tmp_path / "o", outliers="answer")
     with TestClient(create_app(settings, trainer=lambda: base_model)) as c:
         results = c.post("/v1/recognize", json={"samples": broken.tolist()}).json()["results"]
