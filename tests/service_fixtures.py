@@ -236,3 +236,34 @@ def best_stores_service(settings, best_base):
     with TestClient(app) as client:
         state = app.state.service
         yield client, app, Worker(state.settings, state.sessions, on_activate=state.holder.serve)
+
+
+def refit_stopped(client, app, worker, dataset, **limit) -> tuple[int, int, dict, list]:
+    """Register class 'heavy', give it 2 samples so that the next one promotes it (every
+    promotion refits), set the settings ``limit`` (e.g. ``refit_seconds=2``) and add that
+    sample in a worker round run in a thread while this one recognises. Returns (class id,
+    the version active before, the last sample's answer, [(status, model_version) of each
+    recognition meanwhile])."""
+    import threading
+
+    settings = app.state.service.settings
+    settings.promotion_threshold = 2
+    settings.grow_fraction = 0  # every promotion refits
+    cid = register(client, dataset, "heavy")["class"]["id"]
+    worker.run_once()
+    add_sample(client, cid, dataset.samples[0] + 0.01)
+    worker.run_once()
+    active = client.get("/v1/models/active").json()["version"]
+    for name, value in limit.items():
+        setattr(settings, name, value)
+    last = add_sample(client, cid, dataset.samples[1] + 0.01)
+    finished = []
+    round_ = threading.Thread(target=lambda: finished.append(worker.run_once()))
+    round_.start()
+    answers = []
+    while round_.is_alive():  # the refit's child runs meanwhile
+        r = client.post("/v1/recognize", json={"samples": [dataset.samples[2].tolist()]})
+        answers.append((r.status_code, r.json().get("model_version")))
+    round_.join()
+    assert finished == [1]
+    return cid, active, last, answers

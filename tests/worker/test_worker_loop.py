@@ -10,7 +10,7 @@ import pytest
 
 from app.framework.recognizer import TactileRecognizer
 from app.store import leases, repo
-from tests.service_fixtures import add_sample, job, register
+from tests.service_fixtures import add_sample, job, refit_stopped, register
 from worker import loop
 
 
@@ -350,27 +350,11 @@ def test_a_promotion_whose_refit_runs_out_of_memory_fails_clearly_and_the_model_
     round, and the next sample with room for the refit promotes it. (The limit here is
     below what the child's imports take, ~250 MB: test_worker_refit stops a fit that
     grows past a limit of 1,000 MiB.)"""
-    import threading
-
     settings = app.state.service.settings
-    settings.promotion_threshold = 2
-    settings.grow_fraction = 0  # every promotion refits
-    cid = register(client, dataset, "heavy")["class"]["id"]
-    worker.run_once()
-    add_sample(client, cid, dataset.samples[0] + 0.01)
-    worker.run_once()
-    active = client.get("/v1/models/active").json()["version"]
-    settings.refit_memory_limit_mb = 100
-    last = add_sample(client, cid, dataset.samples[1] + 0.01)
-    finished = []
-    round_ = threading.Thread(target=lambda: finished.append(worker.run_once()))
-    round_.start()
-    answers = []
-    while round_.is_alive():  # the refit's child runs meanwhile
-        r = client.post("/v1/recognize", json={"samples": [dataset.samples[2].tolist()]})
-        answers.append((r.status_code, r.json().get("model_version")))
-    round_.join()
-    assert finished == [1] and len(answers) >= 3
+    cid, active, last, answers = refit_stopped(
+        client, app, worker, dataset, refit_memory_limit_mb=100
+    )
+    assert len(answers) >= 3
     assert set(answers) == {(200, active)}
     failed = job(client, last["job"]["id"])
     assert failed["status"] == "failed"

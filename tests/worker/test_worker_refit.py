@@ -9,7 +9,6 @@ import os
 import re
 import signal
 import subprocess
-import threading
 import time
 from pathlib import Path
 
@@ -19,7 +18,7 @@ import pytest
 from app.data.simulator import simulate_dataset
 from app.framework import bundle
 from app.framework.registry import make_method
-from tests.service_fixtures import add_sample, job, register
+from tests.service_fixtures import add_sample, job, refit_stopped
 from worker.refit import (
     RefitError,
     RefitMemoryError,
@@ -210,24 +209,8 @@ def test_a_promotion_whose_refit_runs_out_of_time_fails_clearly_and_the_model_st
     than the child takes to start) fails its jobs with that reason; the active model
     answers throughout, the class stays novel, and with time enough it is promoted."""
     settings = app.state.service.settings
-    settings.promotion_threshold = 2
-    settings.grow_fraction = 0  # every promotion refits
-    cid = register(client, dataset, "heavy")["class"]["id"]
-    worker.run_once()
-    add_sample(client, cid, dataset.samples[0] + 0.01)
-    worker.run_once()
-    active = client.get("/v1/models/active").json()["version"]
-    settings.refit_seconds = 2
-    last = add_sample(client, cid, dataset.samples[1] + 0.01)
-    finished = []
-    round_ = threading.Thread(target=lambda: finished.append(worker.run_once()))
-    round_.start()
-    answers = []
-    while round_.is_alive():  # the refit's child runs meanwhile
-        r = client.post("/v1/recognize", json={"samples": [dataset.samples[2].tolist()]})
-        answers.append((r.status_code, r.json().get("model_version")))
-    round_.join()
-    assert finished == [1] and set(answers) == {(200, active)}
+    cid, active, last, answers = refit_stopped(client, app, worker, dataset, refit_seconds=2)
+    assert set(answers) == {(200, active)}
     failed = job(client, last["job"]["id"])
     assert failed["status"] == "failed"
     assert "RefitTimeoutError" in failed["error"] and "time limit of 2 s" in failed["error"]
