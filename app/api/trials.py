@@ -47,7 +47,10 @@ def parse(data: Any, batch_limit: int) -> list[RawTrial]:
         raise Problem(422, "'trials' must be a non-empty list of trials", "trials")
     if len(trials) > batch_limit:
         raise Problem(
-            422, f"{len(trials)} trials is more than the batch limit of {batch_limit}", "trials"
+            422,
+            f"{len(trials)} trials is more than the batch limit of {batch_limit}: send at most "
+            f"{batch_limit} a request, or raise TACTILE_BATCH_LIMIT on the service",
+            "trials",
         )
     extra = set(data) - {"trials"}
     if extra:
@@ -84,7 +87,10 @@ def from_hdf5(body: bytes, batch_limit: int) -> list[RawTrial]:
         raise Problem(422, str(err), field_of(err, "trials")) from None
     if len(trials) > batch_limit:
         raise Problem(
-            422, f"{len(trials)} trials is more than the batch limit of {batch_limit}", "trials"
+            422,
+            f"{len(trials)} trials is more than the batch limit of {batch_limit}: send at most "
+            f"{batch_limit} a request, or raise TACTILE_BATCH_LIMIT on the service",
+            "trials",
         )
     try:
         for i, t in enumerate(trials):

@@ -121,6 +121,7 @@ def test_oversized_batch(client, app, dataset):
     x = dataset.samples[:3]
     body = problem(client.post("/v1/recognize", json={"samples": x.tolist()}), 422, "samples")
     assert "batch limit of 2" in body["detail"]
+    assert "send at most 2 a request, or raise TACTILE_BATCH_LIMIT" in body["detail"]
     problem(client.post("/v1/recognize", content=npy(x), headers=NPY), 422, "samples")
     assert client.post("/v1/recognize", json={"samples": x[:2].tolist()}).status_code == 200
 

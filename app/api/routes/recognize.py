@@ -355,7 +355,12 @@ async def read_body(
             return parsed
         samples, n = parsed.samples, parsed.n
     if n > batch_limit:
-        raise Problem(422, f"{n} samples is more than the batch limit of {batch_limit}", "samples")
+        raise Problem(
+            422,
+            f"{n} samples is more than the batch limit of {batch_limit}: send at most "
+            f"{batch_limit} a request, or raise TACTILE_BATCH_LIMIT on the service",
+            "samples",
+        )
     return Body(samples, None, n)
 
 
