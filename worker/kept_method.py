@@ -22,11 +22,10 @@ import logging
 from typing import Any
 
 from app.config import Settings
+from app.framework.defaults import AUTO
 from app.framework.recognizer import TactileRecognizer
 
 log = logging.getLogger(__name__)
-
-AUTO = "auto"
 
 
 def refit_method(

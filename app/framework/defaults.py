@@ -8,7 +8,9 @@ from __future__ import annotations
 # training data (app/methods/choice.py): best's figures on PHAC-2, shrinkage LDA's on
 # thousands of simulated objects (docs/RESULTS.md, docs/BENCHMARKS.md); each method, and
 # the paper pipeline ("paper"), stays selectable by name.
-DEFAULT_METHOD = "auto"
+#: the method that chooses among the others (app/methods/choice.py), by name
+AUTO = "auto"
+DEFAULT_METHOD = AUTO
 
 # the operating point every served answer is routed by unless one is asked for: the novelty
 # threshold that kept this share of held-out known touches known at fit, for every method

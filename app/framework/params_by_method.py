@@ -12,6 +12,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from app.framework.defaults import AUTO
+
 
 def check_params_by_method(value: Any) -> dict[str, dict[str, Any]]:
     """``value`` if every key names a registered method and every value is keyword
@@ -48,7 +50,7 @@ def check_params_by_method(value: Any) -> dict[str, dict[str, Any]]:
                 f"TACTILE_METHOD_PARAMS[{name!r}] has {unknown}, which {name} does not take; "
                 f"its parameters: {', '.join(sorted(takes))}"
             )
-        if name == "auto" and "params" in params:
+        if name == AUTO and "params" in params:
             raise ValueError(
                 "TACTILE_METHOD_PARAMS['auto'] must not hold 'params': give each candidate's "
                 'parameters under its own name, e.g. {"best": {...}, "prototypes": {...}}'
@@ -66,8 +68,8 @@ def check_placed(method: str, params_by_method: dict[str, dict[str, Any]]) -> No
     from app.methods.choice import CANDIDATES
 
     fitted = {method}
-    if method == "auto":
-        fitted |= set(params_by_method.get("auto", {}).get("candidates", CANDIDATES))
+    if method == AUTO:
+        fitted |= set(params_by_method.get(AUTO, {}).get("candidates", CANDIDATES))
     misplaced = sorted(set(params_by_method) - fitted)
     if misplaced:
         raise ValueError(
@@ -80,7 +82,7 @@ def params_for(method: str, params_by_method: dict[str, dict[str, Any]]) -> dict
     """The keyword arguments that make ``method``: its own parameters, and for ``auto`` its
     candidates' under ``params`` (``MethodChoice``)."""
     own = dict(params_by_method.get(method, {}))
-    if method == "auto":
+    if method == AUTO:
         from app.methods.choice import CANDIDATES
 
         candidates = own.get("candidates", CANDIDATES)

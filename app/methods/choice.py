@@ -49,6 +49,7 @@ from sklearn.metrics import roc_auc_score
 
 from app.data.biotac_dataset import BioTacDataset
 from app.data.dataset import DatasetError, TactileDataset
+from app.framework.defaults import AUTO
 from app.framework.errors import FrameworkError
 from app.framework.params import Constraint, Hyperparameters, between, check, integer
 from app.framework.recognizer import TactileRecognizer
@@ -90,7 +91,7 @@ class MethodChoice(Hyperparameters):
         None: ``best`` where it is a candidate, else the first candidate.
     """
 
-    method: ClassVar[str] = "auto"
+    method: ClassVar[str] = AUTO
     # every candidate shares these (checked in tests/methods/test_choice.py), so a service
     # can ask them of this class before its first model exists
     novel_part_separable: ClassVar[bool] = True
@@ -163,6 +164,7 @@ class MethodChoice(Hyperparameters):
                 f"trials), got {type(dataset).__name__}"
             )
         t0 = time.perf_counter()
+        self.probed_classes_ = 0
         scores = self.probe(dataset) if len(self.candidates) > 1 else {}
         scored = [c for c in self.candidates if "score" in scores.get(c, {})]
         if scored:
@@ -188,21 +190,19 @@ class MethodChoice(Hyperparameters):
         model.metrics = {  # kept in its bundle
             **model.metrics,
             "chosen_by": choice_record(
-                winner, reason, dataset, scores, probe_s, self._probed_classes(dataset), model
+                winner, reason, dataset, scores, probe_s, self.probed_classes_, model
             )
             | ({"candidates_failed": failed} if failed else {}),
         }
         return model
 
-    def _probed_classes(self, dataset: TactileDataset | BioTacDataset) -> int:
-        """How many classes a probe of ``dataset`` draws."""
-        return min(len(_eligible(dataset)), int(self.probe_classes))
-
     def probe(self, dataset: TactileDataset | BioTacDataset) -> dict[str, dict[str, Any]]:
         """Each candidate's probe figures: ``known_acc``, ``nd_auroc`` and their sum
         ``score``, means over the folds, or ``error`` where the candidate could not fit a
         fold; empty when the data hold no probe (fewer than three classes with
-        ``PROBE_MIN_TRIALS`` trials or more)."""
+        ``PROBE_MIN_TRIALS`` trials or more). Sets ``probed_classes_``, how many classes it
+        drew (0 without a probe)."""
+        self.probed_classes_ = 0  # how many classes the probe drew (0: no probe)
         eligible = _eligible(dataset)
         if len(eligible) < 3:
             return {}
@@ -213,6 +213,7 @@ class MethodChoice(Hyperparameters):
             dataset = featurize_dataset(dataset, featurizer, augment=False)
         rng = np.random.default_rng(self.seed)
         drawn = rng.permutation(eligible)[: self.probe_classes]
+        self.probed_classes_ = len(drawn)
         n_novel = min(len(drawn) - 2, max(1, int(round(self.probe_novel * len(drawn)))))
         figures: dict[str, list[tuple[float, float]]] = {c: [] for c in self.candidates}
         errors: dict[str, str] = {}
@@ -273,7 +274,7 @@ def choice_record(
         "reason": reason,
         "n_classes": n_classes,
         "n_samples": int(len(dataset)),
-        "probe_classes": probe_classes if scores else 0,
+        "probe_classes": probe_classes,
         "probe": scores,
         "probe_seconds": round(probe_seconds, 1),
     }

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 from sqlalchemy.orm import Session
 
+from app.framework.defaults import AUTO
 from app.store import repo
 from app.store.enums import JobKind
 from app.store.models import Job
-
-AUTO = "auto"
 
 
 class NothingToChoose(ValueError):
