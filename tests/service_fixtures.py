@@ -267,3 +267,12 @@ def refit_stopped(client, app, worker, dataset, **limit) -> tuple[int, int, dict
     round_.join()
     assert finished == [1]
     return cid, active, last, answers
+
+
+def live_channel(dataset) -> int:
+    """The channel that reads farthest from 0 in training: one that goes dead (reads 0) is a
+    fault, where a channel that reads near 0 anyway looks alike dead or alive. The quick
+    model's profile holds 60 samples, so its threshold comes from them (12.3 here, not 2.5:
+    ``app.framework.input_health``), and a channel that read near 0 went unflagged."""
+    levels = np.abs(dataset.samples.reshape(len(dataset.samples), dataset.samples.shape[1], -1))
+    return int(np.argmax(levels.mean(axis=(0, 2))))

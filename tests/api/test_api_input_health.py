@@ -14,7 +14,7 @@ from app.api.main import create_app
 from app.api.schemas import RecognizeResponse
 from app.framework.input_health import OUTLIER_THRESHOLD
 from app.testing.service import quick_settings
-from tests.service_fixtures import npy
+from tests.service_fixtures import live_channel, npy
 
 NPY = {"content-type": "application/x-npy"}
 
@@ -25,15 +25,6 @@ def gauge(text: str, name: str, labels: str = "") -> float:
     found = re.search(pattern, text, re.MULTILINE)
     assert found, f"{name}{labels} is not in /metrics"
     return float(found.group(1))
-
-
-def live_channel(dataset) -> int:
-    """The channel that reads farthest from 0 in training: one that goes dead (reads 0) is a
-    fault, where a channel that reads near 0 anyway looks alike dead or alive. The quick
-    model's profile holds 60 samples, so its threshold comes from them (12.3 here, not 2.5:
-    ``app.framework.input_health``), and a channel that read near 0 went unflagged."""
-    levels = np.abs(dataset.samples.reshape(len(dataset.samples), dataset.samples.shape[1], -1))
-    return int(np.argmax(levels.mean(axis=(0, 2))))
 
 
 def test_each_answer_carries_its_input_health(client, dataset):

@@ -13,7 +13,7 @@ from app.client import ServiceError, ServiceUnreachable, TactileClient
 from app.framework import bundle
 from app.testing.harness import free_port
 from app.testing.service import list_all, unused_vectors
-from tests.api.test_api_input_health import live_channel
+from tests.service_fixtures import live_channel
 
 
 @pytest.fixture
