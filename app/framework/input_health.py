@@ -37,7 +37,9 @@ drawn at random), normal touches flagged: 0 at 4 to 6 samples, 0.029 at 15 and 0
 (simulator and PHAC-2 alike); zeros and a 1000-fold scale flagged from 6 samples on (all
 but 0.02), a dead channel from 50 on the simulator (0.20 at 6, 0.80 at 15) and from 150
 on PHAC-2 (0.6 at 50). Below 6 samples the profile tells little: 2 touches of 2 objects
-flag a zeroed sensor one time in five. Statistics of a missing procedure (NaN
+flag a zeroed sensor one time in five. These are development figures: the rule was chosen
+on the same 5 draws (seeds 0 to 4, by a one-off script not kept), and no draws held apart
+have measured it yet. Statistics of a missing procedure (NaN
 throughout its block) are skipped: a sample is never an outlier for lacking procedures.
 
 Drift. ``window_drift`` compares recent samples with training, per channel: the median of
