@@ -20,7 +20,7 @@ Where the data hold no probe (fewer than 3 such classes, as in a service's first
 2 classes with 2 enrolled samples each) or no candidate could be probed, ``unprobed`` wins
 by rule: ``best``, which named held-out touches right 0.89-1.00 of the time on PHAC-2
 where ``prototypes`` did 0.69-0.91, and 0.93-1.00 against 0.90-1.00 on the simulator,
-with 2 samples a class of 2 to 5 classes (8 development seeds:
+with 2 samples a class of 2 to 5 classes (8 development seeds, the ones the rule was chosen on:
 ``python bench/research/small_catalogue.py``, docs/results/small_catalogue.json). A rule that
 fails on the data falls back to the next candidate that fits.
 
