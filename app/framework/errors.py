@@ -85,3 +85,8 @@ class MissingProcedureError(InputShapeError, NonFiniteInputError):
     answers only from every procedure (or takes only complete samples, as enrolment does).
     A missing value is NaN, so this is also a ``NonFiniteInputError``: code that refuses
     NaN samples catches it unchanged."""
+
+
+class TableError(FrameworkError):
+    """A table of objects to name jointly (``app.framework.tables``) is malformed: object
+    labels of the wrong length or kind, or a scoring option out of range."""
