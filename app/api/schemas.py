@@ -38,6 +38,8 @@ ClassName = Annotated[
         strip_whitespace=True, min_length=1, max_length=200, pattern=r"^[^\x00-\x1f\x7f]+$"
     ),
 ]
+# a table's object label (docs/TABLES.md): the route checks them by hand, naming the fix
+ObjectLabel = Annotated[str, StringConstraints(min_length=1, max_length=200)] | int
 # an attribute's value for a class: 1 has it, 0 has it not, graded in between ("somewhat
 # soft": 0.5); kept to 4 decimals
 AttributeValue = Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
@@ -408,6 +410,16 @@ class RecognizeRequest(Strict):
             ]
         ],
     )
+    objects: list[ObjectLabel] | None = Field(
+        None,
+        description="A table of objects (docs/TABLES.md): the physical object each sample "
+        "was touched on, one label per sample (a non-empty string or an integer); distinct "
+        "labels are distinct objects. The objects are named jointly: no class, known or "
+        "novel, goes to two of them; novel, not any registered class, may repeat. One "
+        "result per object, in order of first appearance. Not with `same_object`; a `.npy` "
+        "body gives them in the query parameter `objects` or the header `X-Tactile-Objects`.",
+        examples=[["cup", "box", "cup"], [1, 2, 1]],
+    )
 
 
 class RecognizeTrialsRequest(Strict):
@@ -417,6 +429,12 @@ class RecognizeTrialsRequest(Strict):
         min_length=1,
         description="1 … batch_limit raw BioTac trials; one answer per trial, from all its "
         "fingers.",
+    )
+    objects: list[ObjectLabel] | None = Field(
+        None,
+        description="A table of objects: the object each trial was touched on, one label "
+        "per trial (docs/TABLES.md); one answer per object, its trials' fingers together.",
+        examples=[["cup", "box", "cup"]],
     )
 
 
@@ -519,9 +537,63 @@ class RecognitionOut(BaseModel):
     )
 
 
+class AloneOut(BaseModel):
+    """What a table's object would have been called alone, from its own touches."""
+
+    class_id: int | None = Field(
+        description="The store's id of that class; null for novel, not any registered class."
+    )
+    class_name: str | None = Field(
+        description="That class; null for novel, not any registered class."
+    )
+    kind: Literal["known", "novel"]
+
+
+def _absent(value: Any) -> bool:
+    return value is None
+
+
+class RecognizeResult(RecognitionOut):
+    """One answer of `POST /v1/recognize`: a sample's, a trial's, or (with `objects`) a
+    table object's, which alone carries `object`, `alone`, `margin` and `touches`."""
+
+    object: str | int | None = Field(
+        None, exclude_if=_absent, description="A table's object (`objects`): its label, as sent."
+    )
+    alone: AloneOut | None = Field(
+        None,
+        exclude_if=_absent,
+        description="A table's object: what it would have been called alone, from its "
+        "own touches, before the joint naming (`class_name` null: novel, not any "
+        "registered class). Where it differs from `class_name`, another object's "
+        "evidence for that class was stronger.",
+    )
+    margin: float | None = Field(
+        None,
+        exclude_if=_absent,
+        description="A table's object: the summed log-score the best joint naming that "
+        "calls this object anything else loses against the one answered (0: a tie). "
+        "Small: the table's naming of it is a guess; large: confident.",
+        examples=[2.3],
+    )
+    touches: int | None = Field(
+        None,
+        exclude_if=_absent,
+        description="A table's object: how many samples (or raw trials) of the request "
+        "were of it; its answer fuses them.",
+        examples=[3],
+    )
+
+
 class RecognizeResponse(BaseModel):
     model_version: int
-    results: list[RecognitionOut]
+    results: list[RecognizeResult] = Field(
+        description="One answer per sample (or raw trial); with `same_object`, one; with "
+        "`objects`, one per object, in order of first appearance, named jointly: `class_name` "
+        "and `kind` are the joint naming (`class_name` null and `kind` `novel`: novel, not any "
+        "registered class), the other fields those of the object's touches fused, as "
+        "`same_object` gives them."
+    )
 
 
 class AttributeScore(BaseModel):

@@ -27,6 +27,7 @@ from app.service.batcher import RecognitionBatcher
 from app.service.holder import LoadedModel
 from app.service.input_monitor import InputMonitor
 from app.service.metrics import Metrics
+from app.service.table_answers import Label, Table, answer_table, table_records
 from app.store.enums import ClassKind
 
 
@@ -128,6 +129,35 @@ class RecognitionService:
             return rec.recognize_batch(images, self.top_k, groups, known_kept=kept, touches=touches)
 
         return self._counted(model, await run_in_threadpool(run))
+
+    async def recognize_table(
+        self,
+        model: LoadedModel,
+        objects: list[Label],
+        samples: np.ndarray | None = None,
+        trials: list | None = None,
+        target_confidence: float | None = None,
+        known_kept: float | None = None,
+    ) -> Table:
+        """A table of objects named jointly (``app.service.table_answers``): one label of
+        ``objects`` per sample, or per raw trial."""
+        rec = model.recognizer
+        kept = self._kept(rec, known_kept)
+        table = await run_in_threadpool(
+            answer_table, rec, objects, samples, trials, self.top_k, target_confidence, kept
+        )
+        self._counted(model, table.batch)
+        return table
+
+    def table_json(self, model: LoadedModel, table: Table, outliers: str | None = None) -> bytes:
+        """The RecognizeResponse body of a table: one result per object (``table_records``)."""
+        label, _ = self._model_labels(model, table.batch)
+        by_name = dict(zip(table.batch.class_names, label, strict=True))
+        kinds = dict(zip(table.batch.class_names, table.batch.class_kinds, strict=True))
+        records = table_records(
+            table, self.records(model, table.batch, outliers), by_name.__getitem__, kinds
+        )
+        return orjson.dumps({"model_version": model.version, "results": records})
 
     def _kept(self, rec: TactileRecognizer, known_kept: float | None) -> float | None:
         """The share of known touches an answer is routed by: the request's, else the

@@ -192,6 +192,8 @@ def test_touches_of_one_object_get_one_fused_answer(client, dataset):
         "known_kept",
         "outliers",
         "min_model_version",
+        "objects",
+        "X-Tactile-Objects",
     ]
 
 

@@ -11,7 +11,7 @@ from fastapi.exceptions import RequestValidationError
 from pydantic import TypeAdapter, ValidationError
 
 from app.api import problems, trials
-from app.api.deps import JSON, NPY, api_key_header, get_recognizing, media_type
+from app.api.deps import JSON, NPY, api_key_header, get_recognizing, header, media_type
 from app.api.deps import service as service_state
 from app.api.problems import Problem, blame
 from app.api.sample_input import is_one_sample, sample_array
@@ -24,6 +24,8 @@ from app.framework.recognizer import (
     TactileRecognizer,
 )
 from app.service.holder import LoadedModel, ModelWaitTimeout
+from app.service.recognition import RecognitionService
+from app.service.table_answers import Label, LabelError, check_labels, split_labels
 
 router = APIRouter(prefix="/v1", tags=["recognize"], responses=problems.responses(401, 403, 429))
 
@@ -96,6 +98,18 @@ KNOWN_KEPT = (
     "Each answer states the threshold it used (`novelty_threshold`, `known_kept`, "
     "`operating_point`)."
 )
+OBJECTS = (
+    "A table of objects (docs/TABLES.md): the physical object each sample (or raw trial) was "
+    "touched on, one label per sample in their order, comma-separated (`objects=cup,box,cup`; "
+    "spaces around a label are dropped), for a `.npy` or HDF5 body or a JSON one (which may "
+    "give them as its `objects` list instead). Distinct labels are distinct objects, named "
+    "jointly: no class, known or novel, is given to two of them; novel, not any registered "
+    "class, may repeat. The answer has one result per object, in order of first appearance, "
+    "with `object`, `alone`, `margin` and `touches`. Not with `same_object`. The header "
+    "`X-Tactile-Objects` takes the same list (for lists longer than a URL takes); given "
+    "both, they must agree."
+)
+OBJECTS_HEADER = b"x-tactile-objects"
 # recognize reads its query by hand too: FastAPI's parameter machinery cost ~25 µs a request
 # (bench/side_by_side.py measures the route against the framework's floor)
 RECOGNIZE_EXTRA = {
@@ -144,6 +158,22 @@ RECOGNIZE_EXTRA = {
             "schema": {"type": "integer", "minimum": 1},
             "description": MIN_MODEL_VERSION,
         },
+        {
+            "name": "objects",
+            "in": "query",
+            "required": False,
+            "schema": {"type": "string"},
+            "example": "cup,box,cup",
+            "description": OBJECTS,
+        },
+        {
+            "name": "X-Tactile-Objects",
+            "in": "header",
+            "required": False,
+            "schema": {"type": "string"},
+            "example": "cup,box,cup",
+            "description": "The `objects` labels of a table, as the query parameter takes them.",
+        },
     ],
 }
 _BOOL = TypeAdapter(bool)
@@ -152,11 +182,13 @@ _VERSION = TypeAdapter(int)
 
 
 class Body(NamedTuple):
-    """A recognition request's input: ``n`` samples, or ``n`` raw trials."""
+    """A recognition request's input: ``n`` samples, or ``n`` raw trials; ``objects``: the
+    JSON body's labels as sent (None when it has none), checked by ``_table_labels``."""
 
     samples: np.ndarray | None
     trials: list[RawTrial] | None
     n: int
+    objects: Any = None
 
 
 @router.post(
@@ -197,6 +229,10 @@ async def answer(request: Request) -> bytes:
         request, rec.input_shape, service.batch_limit, rec.procedures, rec.input_kind
     )
     takes_kind(rec, body)
+    labelled = _labels_given(request)
+    if labelled is not None or body.objects is not None:
+        objects = _table_labels(labelled, body, same_object)
+        return await _table(service, model, body, objects, target, kept, outliers)
     if body.trials is not None:
         with blame("trials"):
             results = await service.recognize_trials(model, body.trials, same_object, kept)
@@ -207,6 +243,79 @@ async def answer(request: Request) -> bytes:
             else:
                 results = await service.recognize(model, body.samples, body.n, target, kept)
     return service.to_json(model, results, outliers)
+
+
+async def _table(
+    service: RecognitionService,
+    model: LoadedModel,
+    body: Body,
+    objects: list[Label],
+    target: float | None,
+    kept: float | None,
+    outliers: str | None,
+) -> bytes:
+    """The answer to a table of objects (docs/TABLES.md): one result per object."""
+    field = "trials" if body.trials is not None else "samples"
+    with blame(field):
+        table = await service.recognize_table(
+            model, objects, body.samples, body.trials, target, kept
+        )
+    return service.table_json(model, table, outliers)
+
+
+def _labels_given(request: Request) -> tuple[str, list[str]] | None:
+    """The labels of the query parameter ``objects`` or the header ``X-Tactile-Objects``
+    (where they came from, and the labels); None when neither is given. Both given must
+    agree."""
+    query = _query(request, "objects")
+    head = header(request, OBJECTS_HEADER)
+    if query is None and head is None:
+        return None
+    if query is not None and head is not None and split_labels(query) != split_labels(head):
+        raise Problem(
+            422,
+            "objects: the query parameter objects and the header X-Tactile-Objects give "
+            "different labels; give them once (the header for long lists)",
+            "objects",
+        )
+    return (
+        ("objects", split_labels(query))
+        if query is not None
+        else (
+            "X-Tactile-Objects",
+            split_labels(head),
+        )
+    )
+
+
+def _table_labels(
+    labelled: tuple[str, list[str]] | None, body: Body, same_object: bool
+) -> list[Label]:
+    """The checked object labels of a table request, from the JSON body's ``objects`` or
+    the query/header ones (both given must agree); a 422 naming the fix otherwise."""
+    what = "trials" if body.trials is not None else "samples"
+    if same_object:
+        raise Problem(
+            422,
+            "objects: same_object=true says every touch is of one object, objects labels "
+            "each touch's object; use one or the other (objects with one label throughout "
+            "is one object too)",
+            "objects",
+        )
+    labels = body.objects
+    if labelled is not None:
+        where, given = labelled
+        if labels is not None and labels != given:
+            raise Problem(
+                422,
+                f"objects: the body's objects and the {where} labels differ; give the labels once",
+                "objects",
+            )
+        labels = given
+    try:
+        return check_labels(labels, body.n, what)
+    except LabelError as exc:
+        raise Problem(422, str(exc), exc.field) from None
 
 
 def _query(request: Request, name: str) -> str | None:
@@ -341,6 +450,7 @@ async def read_body(
             raise trials.refused(input_shape, "trials")
         parsed = await run_in_threadpool(trials.from_hdf5, body, batch_limit)
         return Body(None, parsed, len(parsed))
+    objects = None  # a JSON body's table labels
     if content_type == NPY:
         samples = _from_npy(body)
         n = 1 if samples.ndim <= len(input_shape) else len(samples)  # one bare sample
@@ -353,7 +463,7 @@ async def read_body(
         )
         if parsed.trials is not None:
             return parsed
-        samples, n = parsed.samples, parsed.n
+        samples, n, objects = parsed.samples, parsed.n, parsed.objects
     if n > batch_limit:
         raise Problem(
             422,
@@ -361,7 +471,7 @@ async def read_body(
             f"{batch_limit} a request, or raise TACTILE_BATCH_LIMIT on the service",
             "samples",
         )
-    return Body(samples, None, n)
+    return Body(samples, None, n, objects)
 
 
 def _from_json(
@@ -379,11 +489,18 @@ def _from_json(
     of numbers or of lists of numbers. Anything else (NaN/Infinity literals, strings,
     ragged or mis-nested lists, extra fields) goes to pydantic, which names the problem.
     """
+    objects = None
     try:
         data = orjson.loads(body)
         if isinstance(data, dict) and "trials" in data:
             return _trials(data, input_shape, batch_limit, input_kind)
-        samples = data["samples"] if isinstance(data, dict) and len(data) == 1 else None
+        if isinstance(data, dict) and len(data) == 1:
+            samples = data["samples"]
+        elif isinstance(data, dict) and "objects" in data:  # a table (docs/TABLES.md)
+            objects = data.pop("objects")
+            samples = data["samples"] if len(data) == 1 else None
+        else:
+            samples = None
         if isinstance(samples, list) and samples:
             x = np.asarray(samples)
             if x.dtype.kind in "fiu" and x.shape == input_shape:  # one sample alone
@@ -391,7 +508,7 @@ def _from_json(
             if x.dtype.kind in "fiu" and x.ndim in (2, 3) and x.shape[1:] == input_shape:
                 with np.errstate(over="ignore"):  # beyond float32 is inf: rejected by name below
                     x = x.astype(np.float32, copy=False)
-                    return Body(x, None, len(x))
+                    return Body(x, None, len(x), objects)
     except (orjson.JSONDecodeError, KeyError, ValueError, OverflowError):
         pass
     # json and pydantic read NaN/Infinity literals, which the trial validator or the
@@ -401,10 +518,14 @@ def _from_json(
         data = json.loads(body)
         if isinstance(data, dict) and "trials" in data:
             return _trials(data, input_shape, batch_limit, input_kind)
+    if isinstance(data, dict) and "objects" in data:  # checked by hand, with their fix
+        objects = data.pop("objects")
     alone = isinstance(data, dict) and is_one_sample(data.get("samples"), input_shape, procedures)
     try:
         if alone:  # validated as the batch of one it stands for, its errors named as sent
             request = RecognizeRequest.model_validate({**data, "samples": [data["samples"]]})
+        elif objects is not None:
+            request = RecognizeRequest.model_validate(data)
         else:
             request = RecognizeRequest.model_validate_json(body)
     except ValidationError as exc:
@@ -420,7 +541,7 @@ def _from_json(
             for i, s in enumerate(request.samples)
         ]
     )
-    return Body(samples, None, len(samples))
+    return Body(samples, None, len(samples), objects)
 
 
 def _unwrapped(loc: tuple) -> tuple:
@@ -433,8 +554,9 @@ def _trials(data: dict, input_shape: tuple[int, ...], batch_limit: int, input_ki
     samples."""
     if input_kind != RAW_TRIALS:
         raise trials.refused(input_shape, "trials")
+    objects = data.pop("objects", None)  # a table's labels (docs/TABLES.md)
     parsed = trials.parse(data, batch_limit)
-    return Body(None, parsed, len(parsed))
+    return Body(None, parsed, len(parsed), objects)
 
 
 def _from_npy(body: bytes) -> np.ndarray:
