@@ -5,15 +5,18 @@ and enrolments that a retry never doubles.
                            model_file="/var/lib/robot/tactile.bundle")
     client.sync_model()                      # downloads the active version only when it changed
     answer = client.recognize(touches)       # the service's answer, or the model file's offline
-    job = client.register_class("teapot", attributes=["hard", "smooth"], wait=20)
-    added = client.add_sample(job["class_id"], touch, wait=20)  # added["recognized_as"]: what
-                                             # the model made of the touch before learning it
-    job = client.register_class("mug", samples=touches, wait=20)  # learnt from its touches
+    created = client.register_class("teapot", attributes=["hard", "smooth"], wait=20)
+    class_id = created["class"]["id"]        # POST /v1/classes' answer: {"class", "job"}
+    added = client.add_sample(class_id, touch, wait=20)  # added["recognized_as"]: what the
+                                             # model made of the touch before learning it
+    created = client.register_class("mug", samples=touches, wait=20)  # learnt from its touches
 
-``recognize`` answers as ``POST /v1/recognize`` does, plus ``"source"``: ``"service"``, or
-``"offline"`` when the service cannot be reached (connection errors and timeouts, after
-``retries``, or 502 / 503 / 504): then the model file of the last ``sync_model`` answers,
-with the version and class ids of that moment. Input the service refuses (4xx) is not
+Every call answers as its route does (docs/CLIENT.md lists them), with ``wait`` reading the
+``job`` of a 202 again once it finished or the wait ran out. ``recognize`` answers as
+``POST /v1/recognize`` does, plus ``"source"``: ``"service"``, or ``"offline"`` when the
+service cannot be reached (connection errors and timeouts, after ``retries``, or 502 / 503 /
+504): then the model file of the last ``sync_model`` answers, with the version and class ids
+of that moment. Input the service refuses (4xx) is not
 answered offline: it raises ``ServiceError`` with the service's explanation. Enrolments
 need the service; every one carries an ``Idempotency-Key``, so a retry after a lost answer
 gets the original job and never enrols twice.
@@ -42,6 +45,8 @@ from app.framework.recognizer import (
 )
 
 UNREACHABLE_STATUS = frozenset({502, 503, 504})
+LISTS = frozenset({"classes", "jobs", "models"})  # the lists every() reads, page by page
+PAGE_MAX = 1000  # the most rows a list's page holds (app/api/deps.py)
 
 
 class ServiceError(RuntimeError):
@@ -84,6 +89,7 @@ class TactileClient:
         self.timeout, self.retries, self.offline_top_k = timeout, retries, offline_top_k
         self._offline = bundle.BundleFile(self.model_file) if self.model_file is not None else None
         self._offline_meta: dict[str, Any] = {}
+        self._batch_limit: int | None = None
 
     def close(self) -> None:
         """Close the HTTP connections (the client's own; one passed in as ``http`` stays open)."""
@@ -101,6 +107,7 @@ class TactileClient:
         self,
         samples: Any,
         same_object: bool = False,
+        *,
         target_confidence: float | None = None,
         min_model_version: int | None = None,
         known_kept: float | None = None,
@@ -119,24 +126,32 @@ class TactileClient:
         calibration curve); each result names the threshold it used. ``outliers``:
         what an input outlier's answer is, ``"abstain"`` (no class named, ``kind``
         ``"input_outlier"``) or ``"answer"`` (the model's guess, flagged); None: the
-        service's, offline ``"abstain"``."""
+        service's, offline ``"abstain"``.
+
+        A batch of more samples than the service's batch limit (``batch_limit()``) is sent
+        in requests under it and the answers joined in order, all from one model version;
+        touches of one object (``same_object``) are one request, which the service refuses
+        (422) past its limit."""
         x = np.asarray(samples, dtype=np.float32)
-        params: dict[str, Any] = {"same_object": same_object}
-        if outliers is not None:
-            params["outliers"] = check_outliers(outliers)
-        if target_confidence is not None:
-            params["target_confidence"] = target_confidence
-        if known_kept is not None:
-            params["known_kept"] = known_kept
-        if min_model_version is not None:
-            params["min_model_version"] = min_model_version
+        params = _query(
+            same_object=same_object,
+            outliers=None if outliers is None else check_outliers(outliers),
+            target_confidence=target_confidence,
+            known_kept=known_kept,
+            min_model_version=min_model_version,
+        )
         try:
-            r = self._send(
-                "POST",
-                "/v1/recognize",
-                content=_npy(x),
-                params=params,
-                headers={"Content-Type": "application/x-npy"},
+            split = None if same_object else self._split(x)
+            answer = self._in_batches(
+                lambda part, query: self._send(
+                    "POST",
+                    "/v1/recognize",
+                    content=_npy(part),
+                    params=query,
+                    headers={"Content-Type": "application/x-npy"},
+                ).json(),
+                [x] if split is None else split,
+                params,
             )
         except ServiceUnreachable as exc:
             model, meta = self._offline_model(exc)
@@ -146,7 +161,47 @@ class TactileClient:
             kept = model.operating_point(known_kept)
             batch = model.recognize_batch(x, self.offline_top_k, groups, target, kept)
             return self._offline_answer(batch, meta, outliers)
-        return {**r.json(), "source": "service"}
+        return {**answer, "source": "service"}
+
+    def batch_limit(self, refresh: bool = False) -> int:
+        """The most samples (or trials) one recognize request may carry, as the service's
+        ``GET /healthz`` states it (``TACTILE_BATCH_LIMIT``); read once, then remembered
+        (``refresh``: read it again)."""
+        if self._batch_limit is None or refresh:
+            self._batch_limit = int(self._send("GET", "/healthz").json()["batch_limit"])
+        return self._batch_limit
+
+    def _split(self, x: np.ndarray) -> list[np.ndarray] | None:
+        """``x`` in parts of at most the batch limit, or None where one request takes it:
+        a batch within the limit, or one sample alone (told apart from a batch by the
+        served model's input shape, asked only when the first axis is over the limit)."""
+        if x.ndim < 2 or len(x) <= (limit := self.batch_limit()):
+            return None
+        if x.ndim <= len(self.active_model()["input_shape"]):
+            return None
+        return [x[i : i + limit] for i in range(0, len(x), limit)]
+
+    def _in_batches(
+        self, post: Callable[[Any, dict[str, Any]], dict[str, Any]], parts: list, params: dict
+    ) -> dict[str, Any]:
+        """``post(part, query)`` for each part, the results joined in order. Every part is
+        answered by one model version: a part that an older version answered, while a newer
+        one went live during the batch, is asked again at the newer one."""
+        answers: list[dict[str, Any] | None] = [None] * len(parts)
+        newest = params.get("min_model_version")
+        for _ in range(3):  # a new version a round would be a very busy service
+            for i, part in enumerate(parts):
+                if answers[i] is None or answers[i]["model_version"] < newest:
+                    query = params if newest is None else {**params, "min_model_version": newest}
+                    answers[i] = post(part, query)
+                    newest = max(newest or 0, answers[i]["model_version"])
+            if all(a["model_version"] == newest for a in answers):
+                results = [r for a in answers for r in a["results"]]
+                return {**answers[-1], "results": results}
+        raise ServiceError(
+            f"the served model changed version in every round of a batch of {len(parts)} "
+            "requests; send the batch again"
+        )
 
     def explore(
         self, touch: Callable[[str], Any], target_confidence: float | None = None
@@ -180,17 +235,36 @@ class TactileClient:
         return {**answer, "model_version": result["model_version"], "procedures_done": done}
 
     def recognize_trials(
-        self, trials: Any, same_object: bool = False, outliers: str | None = None
+        self,
+        trials: Any,
+        same_object: bool = False,
+        outliers: str | None = None,
+        *,
+        known_kept: float | None = None,
+        min_model_version: int | None = None,
     ) -> dict[str, Any]:
         """Recognise raw BioTac trials (``RawTrial``s or their JSON form), one answer per
         trial from all its fingers (with ``same_object``, one for all of them); offline,
-        the model file's own featurizer makes the images. ``outliers`` as ``recognize``."""
+        the model file's own featurizer makes the images. ``outliers``, ``known_kept`` and
+        ``min_model_version`` as ``recognize``; more trials than the batch limit are sent in
+        parts, as ``recognize`` sends samples."""
         body = [_json_trial(t) for t in trials]
-        params: dict[str, Any] = {"same_object": same_object}
-        if outliers is not None:
-            params["outliers"] = check_outliers(outliers)
+        params = _query(
+            same_object=same_object,
+            outliers=None if outliers is None else check_outliers(outliers),
+            known_kept=known_kept,
+            min_model_version=min_model_version,
+        )
         try:
-            r = self._send("POST", "/v1/recognize", json={"trials": body}, params=params)
+            one = same_object or len(body) <= 1
+            limit = max(1, len(body)) if one else self.batch_limit()
+            answer = self._in_batches(
+                lambda part, query: self._send(
+                    "POST", "/v1/recognize", json={"trials": part}, params=query
+                ).json(),
+                [body[i : i + limit] for i in range(0, len(body), limit)] or [body],
+                params,
+            )
         except ServiceUnreachable as exc:
             model, meta = self._offline_model(exc)
             images, groups = model.trial_samples(body)
@@ -201,11 +275,11 @@ class TactileClient:
                 images,
                 self.offline_top_k,
                 groups,
-                known_kept=model.operating_point(),
+                known_kept=model.operating_point(known_kept),
                 touches=touches,
             )
             return self._offline_answer(batch, meta, outliers)
-        return {**r.json(), "source": "service"}
+        return {**answer, "source": "service"}
 
     @staticmethod
     def _offline_answer(
@@ -282,8 +356,8 @@ class TactileClient:
         agree with it); or learn it from its touches: ``samples`` (a batch (N, *input
         shape), or a list of samples) or ``trials`` (raw BioTac trials, ``RawTrial``s or
         their JSON form, for a model of raw trials), with or without a description. Returns
-        its job (``class_id`` names the class), after up to ``wait`` seconds for it to
-        finish."""
+        ``POST /v1/classes``' answer, ``{"class": ..., "job": ...}``, its ``job`` read again
+        after up to ``wait`` seconds for it to finish (``class`` as the 202 gave it)."""
         if samples is not None and trials is not None:
             raise ValueError("give samples or trials, not both")
         described = (attributes, attribute_vector, description) != (None, None, None)
@@ -297,19 +371,14 @@ class TactileClient:
             body["samples"] = [_json_sample(x) for x in samples]
         if trials is not None:
             body["trials"] = [_json_trial(t) for t in trials]
-        job = self._send(
-            "POST", "/v1/classes", json=body, idempotency_key=str(uuid.uuid4())
-        ).json()["job"]
-        return self.job(job["id"], wait) if wait else job
+        return self.create_class(body, wait)
 
     def create_class(self, body: dict[str, Any], wait: float = 0) -> dict[str, Any]:
         """``POST /v1/classes`` with ``body``, its JSON as a robot relays it (``name`` and
-        attributes, a description, samples or raw trials); returns its job, after up to
-        ``wait`` seconds for it to finish."""
-        job = self._send(
-            "POST", "/v1/classes", json=body, idempotency_key=str(uuid.uuid4())
-        ).json()["job"]
-        return self.job(job["id"], wait) if wait else job
+        attributes, a description, samples or raw trials); returns its answer, ``{"class",
+        "job"}``, the job after up to ``wait`` seconds for it to finish."""
+        created = self._send("POST", "/v1/classes", json=body, idempotency_key=str(uuid.uuid4()))
+        return self._waited(created.json(), wait)
 
     def redescribe_class(
         self,
@@ -321,15 +390,16 @@ class TactileClient:
     ) -> dict[str, Any]:
         """Correct the attributes a class was registered with, keeping its samples (names
         with values set those and keep the rest; for a dataset class, its values for
-        attributes added since), or replace its description in words; returns its job,
-        after up to ``wait`` seconds."""
-        job = self._send(
+        attributes added since), or replace its description in words; returns ``PATCH
+        /v1/classes/{id}``'s answer, ``{"class", "job"}``, the job after up to ``wait``
+        seconds."""
+        updated = self._send(
             "PATCH",
             f"/v1/classes/{int(class_id)}",
             json=_attributes_body(attributes, attribute_vector, description),
             idempotency_key=str(uuid.uuid4()),
-        ).json()["job"]
-        return self.job(job["id"], wait) if wait else job
+        )
+        return self._waited(updated.json(), wait)
 
     def interpret(self, text: str) -> dict[str, Any]:
         """The attribute values the service reads from ``text`` (nothing is stored):
@@ -340,20 +410,19 @@ class TactileClient:
         self, name: str, values: dict[str, float] | None = None, wait: float = 0
     ) -> dict[str, Any]:
         """Add an attribute to the vocabulary (an admin key), with its value for the classes
-        it is known for (class name -> value in [0, 1]); returns its job, after up to
-        ``wait`` seconds for the model to learn it."""
+        it is known for (class name -> value in [0, 1]); returns ``POST /v1/attributes``'
+        answer, ``{"attribute", "job"}``, the job after up to ``wait`` seconds for the model
+        to learn it."""
         body = {"name": name, "values": values or {}}
-        job = self._send(
-            "POST", "/v1/attributes", json=body, idempotency_key=str(uuid.uuid4())
-        ).json()["job"]
-        return self.job(job["id"], wait) if wait else job
+        added = self._send("POST", "/v1/attributes", json=body, idempotency_key=str(uuid.uuid4()))
+        return self._waited(added.json(), wait)
 
     def retire_attribute(self, name: str, wait: float = 0) -> dict[str, Any]:
-        """Take an attribute out of later models (an admin key); returns its job."""
-        job = self._send(
-            "DELETE", f"/v1/attributes/{name}", idempotency_key=str(uuid.uuid4())
-        ).json()["job"]
-        return self.job(job["id"], wait) if wait else job
+        """Take an attribute out of later models (an admin key); returns ``DELETE
+        /v1/attributes/{name}``'s answer, ``{"attribute", "job"}``, the job after up to
+        ``wait`` seconds."""
+        retired = self._send("DELETE", f"/v1/attributes/{name}", idempotency_key=str(uuid.uuid4()))
+        return self._waited(retired.json(), wait)
 
     def add_sample(
         self, class_id: int, sample: Any = None, wait: float = 0, *, trial: Any = None
@@ -371,8 +440,8 @@ class TactileClient:
             f"/v1/classes/{int(class_id)}/samples",
             json=body,
             idempotency_key=str(uuid.uuid4()),
-        ).json()
-        return {**added, "job": self.job(added["job"]["id"], wait)} if wait else added
+        )
+        return self._waited(added.json(), wait)
 
     def sample(self, class_id: int, sample_id: int) -> np.ndarray:
         """A stored sample's data, e.g. to look at an enrolment again."""
@@ -384,11 +453,50 @@ class TactileClient:
         return np.load(io.BytesIO(r.content), allow_pickle=False)
 
     def job(self, job_id: int, wait: float = 0) -> dict[str, Any]:
-        """A job, after up to ``wait`` seconds (at most 20) for it to succeed or fail."""
+        """A job (``GET /v1/jobs/{id}``), after up to ``wait`` seconds (at most 20) for it to
+        succeed or fail."""
         needed = wait + self.timeout  # the answer may take ``wait`` seconds to come
         read = self.http.timeout.read
         extra = {"timeout": needed} if wait > 0 and read is not None and read < needed else {}
         return self._send("GET", f"/v1/jobs/{int(job_id)}", params={"wait": wait}, **extra).json()
+
+    # ------------------------------------------------------------------ lists
+    def classes(self, after: int | None = None, limit: int | None = None) -> dict[str, Any]:
+        """One page of ``GET /v1/classes``: ``{"classes": [...], "next_after"}``; pass
+        ``next_after`` as ``after`` for the next page (``every("classes")``: all of them)."""
+        return self._page("/v1/classes", after, limit)
+
+    def get_class(self, class_id: int) -> dict[str, Any]:
+        """One class (``GET /v1/classes/{id}``): its attributes, samples count and whether
+        the served model covers it (``in_active_model``)."""
+        return self._send("GET", f"/v1/classes/{int(class_id)}").json()
+
+    def jobs(
+        self,
+        after: int | None = None,
+        limit: int | None = None,
+        *,
+        status: str | None = None,
+        kind: str | None = None,
+        class_id: int | None = None,
+    ) -> dict[str, Any]:
+        """One page of ``GET /v1/jobs``, ``{"jobs": [...], "next_after"}``, oldest first;
+        ``status`` (e.g. ``"failed"``), ``kind`` and ``class_id`` filter it."""
+        return self._page(
+            "/v1/jobs", after, limit, **_query(status=status, kind=kind, class_id=class_id)
+        )
+
+    def models(self, after: int | None = None, limit: int | None = None) -> dict[str, Any]:
+        """One page of ``GET /v1/models``, ``{"models": [...], "next_after"}``: the stored
+        versions, oldest first, each without its class list."""
+        return self._page("/v1/models", after, limit)
+
+    def every(self, what: str, **filters: Any) -> list[dict[str, Any]]:
+        """Every row of a list, all its pages read: ``every("classes")``, ``every("jobs",
+        status="failed")``, ``every("models")``."""
+        if what not in LISTS:
+            raise ValueError(f"every() reads one of {sorted(LISTS)}, not {what!r}")
+        return self._every(f"/v1/{what}", what, **_query(**filters))
 
     # ----------------------------------------------------------------- helpers
     def _send(
@@ -422,16 +530,23 @@ class TactileClient:
                 )
             return r
 
-    def _every(self, path: str, key: str) -> list[dict[str, Any]]:
+    def _page(
+        self, path: str, after: int | None, limit: int | None, **filters: Any
+    ) -> dict[str, Any]:
+        return self._send("GET", path, params=_query(after=after, limit=limit, **filters)).json()
+
+    def _every(self, path: str, key: str, **filters: Any) -> list[dict[str, Any]]:
         rows, after = [], None
         while True:
-            page = self._send(
-                "GET", path, params={"limit": 1000, **({"after": after} if after else {})}
-            ).json()
+            page = self._page(path, after, PAGE_MAX, **filters)
             rows += page[key]
             after = page.get("next_after")
             if after is None:
                 return rows
+
+    def _waited(self, accepted: dict[str, Any], wait: float) -> dict[str, Any]:
+        """A 202's answer with its ``job`` read again after up to ``wait`` seconds."""
+        return {**accepted, "job": self.job(accepted["job"]["id"], wait)} if wait else accepted
 
     def _meta_file(self) -> Path:
         assert self.model_file is not None
@@ -456,6 +571,11 @@ class TactileClient:
             meta = self._meta()
             self._offline_meta = meta if meta.get("sha256") == self._offline.sha256 else {}
         return model, self._offline_meta
+
+
+def _query(**params: Any) -> dict[str, Any]:
+    """A request's query parameters: those given (None: the service's default)."""
+    return {k: v for k, v in params.items() if v is not None}
 
 
 def _npy(samples: Any) -> bytes:

@@ -312,7 +312,7 @@ def one_object(client, url: str, name: str, vector, samples, threshold: int) -> 
     reg = enrol(
         client,
         url,
-        lambda: client.register_class(name, attribute_vector=[float(v) for v in vector]),
+        lambda: client.register_class(name, attribute_vector=[float(v) for v in vector])["job"],
         120,
     )
     cid = reg["job"]["class_id"]

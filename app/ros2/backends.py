@@ -96,7 +96,7 @@ class ServiceBackend:
         the problem with which the service refused it."""
 
         def enrol() -> dict[str, Any]:
-            job = self.client.create_class(body)
+            job = self.client.create_class(body)["job"]
             deadline = time.monotonic() + self.enrol_wait
             while job["status"] not in ("succeeded", "failed"):
                 left = deadline - time.monotonic()

@@ -351,7 +351,7 @@ def test_a_robot_enrols_an_object_from_its_trials(raw_service, raw_worker, pilot
     client, _ = raw_service
     robot = TactileClient(http=client, retries=0, timeout=5)
     trials = pilot[3].trials
-    job = robot.register_class(NEW_OBJECT, trials=trials[:2])
+    job = robot.register_class(NEW_OBJECT, trials=trials[:2])["job"]
     raw_worker.run_once()
     assert robot.job(job["id"])["status"] == "succeeded"
     added = robot.add_sample(job["class_id"], trial=trials[2])

@@ -99,7 +99,12 @@ def test_unknown_model_version_is_a_named_404(client):
 
 
 def test_health_and_readiness(client):
-    assert client.get("/healthz").json() == {"status": "ok", "model_version": 1}
+    batch_limit = client.app.state.service.settings.batch_limit  # a client splits by it
+    assert client.get("/healthz").json() == {
+        "status": "ok",
+        "model_version": 1,
+        "batch_limit": batch_limit,
+    }
     assert client.get("/readyz").json() == {"status": "ready", "model_version": 1}
 
 

@@ -38,7 +38,7 @@ def test_the_model_file_follows_the_active_version(robot, client, worker, datase
     assert robot.sync_model() is False  # 304: nothing downloaded
     meta = json.loads(robot.model_file.with_name("model.bundle.json").read_text())
     assert meta["version"] == 1 and meta["etag"]
-    job = robot.register_class("cup", attribute_vector=unused_vectors(dataset, 1)[0])
+    job = robot.register_class("cup", attribute_vector=unused_vectors(dataset, 1)[0])["job"]
     assert worker.run_once() == 1
     assert robot.job(job["id"], wait=2)["status"] == "succeeded"
     assert robot.sync_model() is True
@@ -50,7 +50,7 @@ def test_the_model_file_follows_the_active_version(robot, client, worker, datase
 
 
 def test_offline_answers_are_the_services_answers(robot, client, worker, dataset, tmp_path):
-    job = robot.register_class("cup", attribute_vector=unused_vectors(dataset, 1)[0])
+    job = robot.register_class("cup", attribute_vector=unused_vectors(dataset, 1)[0])["job"]
     worker.run_once()
     robot.sync_model()
     x = dataset.samples[::9][:6]
@@ -119,7 +119,7 @@ def test_a_retry_after_a_lost_answer_enrols_once(client, worker, dataset, sample
         transport=LoseFirstAnswer(client._transport), base_url=str(client.base_url)
     )
     robot = TactileClient(http=flaky, retries=2)
-    job = robot.register_class("teapot", attribute_vector=unused_vectors(dataset, 1)[0])
+    job = robot.register_class("teapot", attribute_vector=unused_vectors(dataset, 1)[0])["job"]
     assert robot.http._transport.lost == 1
     assert [c["name"] for c in list_all(client, "/v1/classes", "classes")].count("teapot") == 1
     worker.run_once()
@@ -148,10 +148,10 @@ def test_bad_client_settings_are_refused(tmp_path):
 
 
 def test_a_class_described_anew_reaches_the_model_file(robot, worker, dataset):
-    job = robot.register_class("cup", attribute_vector=unused_vectors(dataset, 1)[0])
+    job = robot.register_class("cup", attribute_vector=unused_vectors(dataset, 1)[0])["job"]
     worker.run_once()
     vector = unused_vectors(dataset, 2)[1]
-    update = robot.redescribe_class(job["class_id"], attribute_vector=vector)
+    update = robot.redescribe_class(job["class_id"], attribute_vector=vector)["job"]
     assert update["kind"] == "update_class" and update["status"] == "queued"
     worker.run_once()
     assert robot.job(update["id"])["status"] == "succeeded"
@@ -189,8 +189,10 @@ def test_an_operator_adds_an_attribute_and_describes_a_class_with_it(best_servic
     _, dataset = best_base
     robot = TactileClient(http=client, retries=0)
     job = robot.add_attribute("sticky", {dataset.class_names[0]: 1, dataset.class_names[1]: 0.5})
+    assert job["attribute"]["name"] == "sticky"
+    job = job["job"]
     assert job["kind"] == "add_attribute" and job["status"] == "queued"
-    registered = robot.register_class("tape", attributes={"sticky": 1})
+    registered = robot.register_class("tape", attributes={"sticky": 1})["job"]
     with pytest.raises(ServiceError, match="409.*'tape' described by nothing"):
         robot.retire_attribute("sticky")  # tape would be described by nothing
     robot.redescribe_class(registered["class_id"], attributes={dataset.attribute_names[0]: 1})
@@ -201,7 +203,7 @@ def test_an_operator_adds_an_attribute_and_describes_a_class_with_it(best_servic
     with pytest.raises(ServiceError, match="409.*never reused|409.*exists"):
         robot.add_attribute(dataset.attribute_names[0])
     retired = robot.retire_attribute("sticky")
-    assert retired["kind"] == "retire_attribute"
+    assert retired["job"]["kind"] == "retire_attribute" and retired["attribute"]["name"] == "sticky"
 
 
 def test_an_operator_describes_an_object_in_words(best_service):
@@ -209,10 +211,10 @@ def test_an_operator_describes_an_object_in_words(best_service):
     robot = TactileClient(http=client, retries=0)
     read = robot.interpret("slightly rough and not hard")
     assert read["values"]["rough"] == 0.6 and read["values"]["hard"] == 0.0
-    job = robot.register_class("mat", description="a thick, bumpy rubber mat")
+    job = robot.register_class("mat", description="a thick, bumpy rubber mat")["job"]
     worker.run_once()
     assert robot.job(job["id"])["status"] == "succeeded"
-    redo = robot.redescribe_class(job["class_id"], description="a thin bumpy mat")
+    redo = robot.redescribe_class(job["class_id"], description="a thin bumpy mat")["job"]
     worker.run_once()
     assert robot.job(redo["id"])["status"] == "succeeded"
     cls = client.get(f"/v1/classes/{job['class_id']}").json()
@@ -232,7 +234,7 @@ def test_a_class_is_enrolled_from_its_touches(best_service, best_base):
     rng = np.random.default_rng(0)
     touches = dataset.samples[dataset.labels == 2][:4]
     touches = touches + rng.normal(0, 0.05, touches.shape).astype(np.float32)
-    job = robot.register_class("mug", samples=touches[:3])  # a batch (N, *input shape)
+    job = robot.register_class("mug", samples=touches[:3])["job"]  # a batch (N, *input shape)
     assert job["kind"] == "register_class" and job["status"] == "queued"
     worker.run_once()
     assert robot.job(job["id"], wait=2)["status"] == "succeeded"
@@ -246,7 +248,7 @@ def test_a_class_is_enrolled_from_its_touches(best_service, best_base):
     # a list of samples and a description together, as the API takes them
     worded = robot.register_class(
         "mug two", samples=[t.tolist() for t in touches[:2]], description="a smooth hard mug"
-    )
+    )["job"]
     worker.run_once()
     assert robot.job(worded["id"])["status"] == "succeeded"
     assert client.get(f"/v1/classes/{worded['class_id']}").json()["n_samples"] == 2

@@ -17,11 +17,23 @@ log = logging.getLogger(__name__)
 router = APIRouter(tags=["health"])
 
 
-@router.get("/healthz", response_model=Health)
-async def healthz(holder: HolderDep) -> Health:
-    """The process is alive; the model version it serves, once one is loaded."""
+class Liveness(Health):
+    batch_limit: int = Field(
+        description="Most samples or trials one `POST /v1/recognize` or `POST /v1/describe` "
+        "takes (`TACTILE_BATCH_LIMIT`): a client splits larger batches."
+    )
+
+
+@router.get("/healthz", response_model=Liveness)
+async def healthz(request: Request, holder: HolderDep) -> Liveness:
+    """The process is alive; the model version it serves, once one is loaded, and its
+    batch limit."""
     model = holder.current
-    return Health(status="ok", model_version=None if model is None else model.version)
+    return Liveness(
+        status="ok",
+        model_version=None if model is None else model.version,
+        batch_limit=request.app.state.service.recognition.batch_limit,
+    )
 
 
 class Readiness(Health):
