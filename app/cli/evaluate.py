@@ -213,6 +213,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--test-trials, which then holds out that many trials of every known object",
     )
     p.add_argument(
+        "--tables",
+        action="store_true",
+        help="also the figures of tables of objects named jointly (app/evaluation/tables.py): "
+        "tables of the novel objects with 1, 2 and 3 touches each, and tables of the novel "
+        "objects and as many known ones, named jointly and one by one",
+    )
+    p.add_argument(
         "--procedures",
         action="store_true",
         help="also the figures against the exploratory procedures used: every subset of the "
@@ -270,10 +277,10 @@ def run(args: argparse.Namespace) -> int:
     params = method_params(args.param, methods)
     dataset = open_dataset(args.dataset, seed=args.data_seed)
     if isinstance(dataset, BioTacDataset):
-        if args.ceilings or args.touches or args.rerun_splits:
+        if args.ceilings or args.touches or args.rerun_splits or args.tables:
             raise ValueError(
-                "--ceilings, --touches and --rerun-splits apply to known/novel splits, not to "
-                "raw BioTac trials"
+                "--ceilings, --touches and --rerun-splits apply to known/novel splits, as "
+                "--tables does, not to raw BioTac trials"
             )
         results = evaluate_raw(
             dataset,
@@ -307,6 +314,7 @@ def run(args: argparse.Namespace) -> int:
             rerun_splits=args.rerun_splits,
             procedures=args.procedures,
             durations=args.durations,
+            tables=args.tables,
         )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=1))

@@ -74,6 +74,8 @@ from app.evaluation import metrics
 from app.evaluation.procedures import TARGETS, check_durations, procedure_figures
 from app.evaluation.procedures import measure as measure_procedures
 from app.evaluation.splits import ZslSplit, make_zsl_splits
+from app.evaluation.tables import TABLE_FIGURES, TABLES_STREAM
+from app.evaluation.tables import measure as measure_tables
 from app.evaluation.touches import check_touches, touch_figures
 from app.evaluation.touches import measure as measure_touches
 from app.framework.jsonable import jsonable
@@ -130,7 +132,11 @@ _CURVE_POINTS = 200
 
 
 def method_figures(
-    method: str, ceilings: bool = False, touches: Sequence[int] = (), n_procedures: int = 0
+    method: str,
+    ceilings: bool = False,
+    touches: Sequence[int] = (),
+    n_procedures: int = 0,
+    tables: bool = False,
 ) -> tuple[str, ...]:
     extra = CEILING_FIGURES if ceilings else ()
     return (
@@ -139,6 +145,7 @@ def method_figures(
         + extra
         + touch_figures(touches)
         + procedure_figures(n_procedures)
+        + (TABLE_FIGURES if tables else ())
     )
 
 
@@ -165,12 +172,14 @@ def evaluate_split(
     ceilings: bool = False,
     touches: Sequence[int] = (),
     durations: np.ndarray | None = None,
+    tables: bool = False,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """(figures, details) of one method on one split; details hold matrices, curve, timings.
     ``ceilings``: also the measured limits of ``CEILING_FIGURES``; ``touches``: also the
     figures after that many touches of each test object, and after one enrolled touch
     (``app.evaluation.touches``); ``durations`` (seconds per procedure): also the figures
-    against the procedures used (``app.evaluation.procedures``)."""
+    against the procedures used (``app.evaluation.procedures``); ``tables``: also the figures
+    of tables of objects named jointly (``app.evaluation.tables``)."""
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     train = split.train_dataset(dataset)
@@ -283,6 +292,20 @@ def evaluate_split(
         )
         timings["procedures_s"] = time.perf_counter() - t
 
+    if tables:
+        t = time.perf_counter()
+        figures.update(
+            measure_tables(
+                zsl_model,
+                (xk, yk, dataset.trials[split.known_test_idx]),
+                (xn, yn, dataset.trials[split.novel_test_idx]),
+                known_names,
+                names,
+                np.random.default_rng([seed, split.index, TABLES_STREAM]),
+            )
+        )
+        timings["tables_s"] = time.perf_counter() - t
+
     timings["total_s"] = time.perf_counter() - t0
     details["timings"] = timings
     details["model_metrics"] = jsonable(getattr(model, "metrics", {}) or {})
@@ -321,6 +344,7 @@ def evaluate(
     rerun_splits: int | None = None,
     procedures: bool = False,
     durations: Mapping[str, float] | None = None,
+    tables: bool = False,
 ) -> dict[str, Any]:
     """Every method on the same ``n_splits`` splits; a JSON-ready results dict.
 
@@ -341,7 +365,8 @@ def evaluate(
     figures; ValueError naming the problem otherwise. ``rerun_splits``: the size of the
     re-run that ``rerun95`` predicts (default ``n_splits``). ``procedures``: also the
     figures against the procedures used (``app.evaluation.procedures``), with each
-    procedure's seconds from ``durations`` (else ``procedures.DURATIONS``).
+    procedure's seconds from ``durations`` (else ``procedures.DURATIONS``). ``tables``: also
+    the figures of tables of objects named jointly (``app.evaluation.tables``).
     """
     touches = check_touches(touches, test_trials)
     seconds = None
@@ -397,6 +422,7 @@ def evaluate(
     results["touches"] = touches
     results["procedures_measured"] = seconds is not None
     results["procedures"] = list(dataset.procedures)
+    results["tables"] = bool(tables)
     if seconds is not None:
         results["durations"] = seconds.tolist()
         results["procedure_targets"] = list(TARGETS)
@@ -441,6 +467,7 @@ def evaluate(
                             ceilings,
                             touches,
                             seconds,
+                            tables,
                         )
                     )
                     bar.update(1)
@@ -465,6 +492,7 @@ def evaluate(
                         ceilings,
                         touches,
                         seconds,
+                        tables,
                     ): split
                     for split in splits
                 }
@@ -489,7 +517,7 @@ def evaluate(
     for m in methods:
         summarize_entry(
             results["methods"][m],
-            method_figures(m, ceilings, touches, n_procedures),
+            method_figures(m, ceilings, touches, n_procedures, tables),
             results["rerun_splits"],
         )
     if len(methods) > 1:
@@ -507,11 +535,12 @@ def _run_method(
     ceilings: bool,
     touches: Sequence[int] = (),
     durations: np.ndarray | None = None,
+    tables: bool = False,
 ) -> tuple[dict[str, Any], dict[str, Any], float]:
     t = time.perf_counter()
     own_seed = split_method_seed(seed, split.index)
     figures, details = evaluate_split(
-        dataset, split, method, params, own_seed, ceilings, touches, durations
+        dataset, split, method, params, own_seed, ceilings, touches, durations, tables
     )
     details["method_seed"] = own_seed
     return figures, details, time.perf_counter() - t
@@ -548,12 +577,21 @@ def _split_task(
     ceilings: bool,
     touches: Sequence[int] = (),
     durations: np.ndarray | None = None,
+    tables: bool = False,
 ) -> list[tuple[dict[str, Any], dict[str, Any], float]]:
     """Every method on one split, in order (a worker process's task)."""
     assert _WORKER_DATASET is not None, "worker not initialised"
     return [
         _run_method(
-            _WORKER_DATASET, split, m, method_params.get(m), seed, ceilings, touches, durations
+            _WORKER_DATASET,
+            split,
+            m,
+            method_params.get(m),
+            seed,
+            ceilings,
+            touches,
+            durations,
+            tables,
         )
         for m in methods
     ]

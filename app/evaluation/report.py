@@ -166,6 +166,15 @@ def describe(figure: str) -> str:
     if match := re.fullmatch(r"adaptive(\d+)_(.+)", figure):
         target, base = match.groups()
         return f"{ADAPTIVE.get(base) or describe(base)}, by the adaptive rule at target {target} %"
+    if match := re.fullmatch(r"tables(\d+)_zsl_(joint|alone)", figure):
+        k, how = match.groups()
+        return f"zero-shot accuracy in tables of every novel object, {k} touches each, named " + (
+            "jointly (no class twice)" if how == "joint" else "one by one"
+        )
+    if match := re.fullmatch(r"tables_mixed_(alone_)?(.+)", figure):
+        alone, base = match.groups()
+        how = "one by one, each touch routed alone" if alone else "jointly (app.framework.tables)"
+        return f"{describe(base)}, in tables of the novel objects and as many known, named {how}"
     if figure.startswith("zsl_"):
         return f"zero-shot accuracy among the novel objects, by the method's variant {figure}"
     return f"a figure of the method's own ({figure}); results.json holds its value per split"
