@@ -93,7 +93,9 @@ def check_labels(labels: Any, n: int, what: str = "samples") -> list[Label]:
 def _type(value: Any) -> str:
     if value is None:
         return "null"
-    return {bool: "true or false", float: "a number with a fraction", list: "a list"}.get(
+    if isinstance(value, float):  # orjson reads integers beyond 64 bits as floats too
+        return f"the number {value!r}"
+    return {bool: "true or false", list: "a list", dict: "an object"}.get(
         type(value), type(value).__name__
     )
 
