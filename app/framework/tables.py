@@ -157,6 +157,9 @@ class TableScorer:
     novel_temperature : float, default 1.0
         The novel classes' probabilities are raised to 1 / temperature and normalised again
         before the log (1: as the model gives them). Positive.
+    novelty_offset : float, default 0.0
+        Added to the logit of P(novel): above 0 an object on the routing threshold leans
+        novel. Finite.
     floor : float, default 1e-4
         Probabilities are clipped to at least this before the log, so that a forest's 0
         stays a finite, large penalty. In (0, 0.5).
@@ -165,6 +168,7 @@ class TableScorer:
     unregistered_prior: float = 0.05
     novelty_slope: float = 1.0
     novel_temperature: float = 1.0
+    novelty_offset: float = 0.0
     floor: float = 1e-4
 
     def __post_init__(self) -> None:
@@ -173,6 +177,7 @@ class TableScorer:
             "novelty_slope": self.novelty_slope > 0 and math.isfinite(self.novelty_slope),
             "novel_temperature": self.novel_temperature > 0
             and math.isfinite(self.novel_temperature),
+            "novelty_offset": math.isfinite(self.novelty_offset),
             "floor": 0.0 < self.floor < 0.5,
         }
         for name, ok in checks.items():
@@ -188,6 +193,7 @@ class TableScorer:
             hard = np.asarray(novelty) > threshold
             return np.where(hard, 1.0 - self.floor, self.floor)
         logit = self.novelty_slope * slope * (np.asarray(novelty) - threshold)
+        logit = logit + self.novelty_offset
         return 1.0 / (1.0 + np.exp(-np.clip(logit, -50, 50)))
 
     def scores(
