@@ -491,6 +491,11 @@ class TactileClient:
         versions, oldest first, each without its class list."""
         return self._page("/v1/models", after, limit)
 
+    def attributes(self) -> dict[str, Any]:
+        """``GET /v1/attributes``: ``{"attributes": [...]}``, the vocabulary in attribute-
+        vector order, and ``"vocabulary"``, every attribute with its origin."""
+        return self._send("GET", "/v1/attributes").json()
+
     def every(self, what: str, **filters: Any) -> list[dict[str, Any]]:
         """Every row of a list, all its pages read: ``every("classes")``, ``every("jobs",
         status="failed")``, ``every("models")``."""
