@@ -7,7 +7,7 @@ import json
 import sys
 from collections.abc import Iterable
 from pathlib import Path
-from typing import TextIO
+from typing import Any, NamedTuple, TextIO
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -27,6 +27,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "for a model trained on raw trials, one answer per trial), or - for that JSON on stdin",
     )
     p.add_argument("--top-k", type=int, default=3, help="scores to list per sample (default 3)")
+    p.add_argument(
+        "--objects",
+        metavar="LABELS",
+        help="a table of objects (docs/TABLES.md): the object each sample (or trial) was "
+        "touched on, comma-separated, one per sample in order (cup,box,cup); the objects are "
+        "named jointly, one answer per object, as POST /v1/recognize?objects= answers. A JSON "
+        'request may give them as its "objects" list instead (with --lines, per line)',
+    )
     p.add_argument(
         "--lines",
         action="store_true",
@@ -62,16 +70,45 @@ class Trials(list):
     """Raw trials read from a request's ``"trials"`` (answered one per trial)."""
 
 
+class Labelled(NamedTuple):
+    """A table's request: its samples (or ``Trials``) and the object label of each."""
+
+    request: Any
+    objects: Any
+
+
 def _from_json(text: str, where: str):
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise ValueError(f"{where} is not JSON: {exc}") from None
     if isinstance(data, dict) and isinstance(data.get("trials"), list) and "samples" not in data:
-        return Trials(data["trials"])
+        return _labelled(Trials(data["trials"]), data)
     if not isinstance(data, dict) or "samples" not in data:
         raise ValueError(f'{where} must hold an object {{"samples": [...]}} or {{"trials": [...]}}')
-    return data["samples"]
+    return _labelled(data["samples"], data)
+
+
+def _labelled(request: Any, data: dict) -> Any:
+    """``request``, with its table's labels where ``data`` gives ``objects``."""
+    return request if data.get("objects") is None else Labelled(request, data["objects"])
+
+
+def with_objects(request: Any, labels: str | None) -> Any:
+    """``request`` labelled with ``--objects`` (comma-separated), where given; a request's
+    own ``objects`` must agree."""
+    from app.service.table_answers import split_labels
+
+    if labels is None:
+        return request
+    objects = split_labels(labels)
+    if isinstance(request, Labelled):
+        if request.objects != objects:
+            raise ValueError(
+                'the request\'s "objects" and --objects give different labels; give them once'
+            )
+        return request
+    return Labelled(request, objects)
 
 
 def answers(model, request, top_k: int):
@@ -83,6 +120,26 @@ def answers(model, request, top_k: int):
     return model.recognize_batch(request, top_k=top_k, known_kept=kept)
 
 
+def results(model, request, top_k: int) -> list[dict[str, Any]]:
+    """The ``results`` printed for a request: one per sample or trial, or for a table
+    (``Labelled``), one per object, as ``POST /v1/recognize`` answers them (without the
+    store's class ids)."""
+    from app.service.table_answers import answer_table, check_labels, table_records
+
+    if not isinstance(request, Labelled):
+        return answers(model, request, top_k).records()
+    request, objects = request
+    trials = list(request) if isinstance(request, Trials) else None
+    samples = None if trials is not None else model.validate_samples(request, partial=True)
+    what = "trials" if trials is not None else "samples"
+    labels = check_labels(objects, len(trials if trials is not None else samples), what)
+    kept = model.operating_point()
+    table = answer_table(model, labels, samples, trials, top_k, known_kept=kept)
+    batch = table.batch
+    kinds = dict(zip(batch.class_names, batch.class_kinds, strict=True))
+    return table_records(table, batch.records(), lambda name: {"class_name": name}, kinds)
+
+
 def run(args: argparse.Namespace) -> int:
     from app.framework import bundle
     from app.framework.runtime import configure_threads
@@ -91,13 +148,15 @@ def run(args: argparse.Namespace) -> int:
     if args.top_k < 1:
         raise ValueError(f"--top-k must be at least 1, got {args.top_k}")
     if args.lines:
+        if args.objects is not None:
+            raise ValueError('--objects labels one request; with --lines give each line "objects"')
         if args.samples == "-":
             return answer_lines(args.model, sys.stdin, sys.stdout, args.top_k)
         with open(args.samples) as lines:
             return answer_lines(args.model, lines, sys.stdout, args.top_k)
     model = bundle.load(args.model)
-    results = answers(model, read_samples(args.samples), args.top_k)
-    print(json.dumps({"method": model.method, "results": results.records()}))
+    request = with_objects(read_samples(args.samples), args.objects)
+    print(json.dumps({"method": model.method, "results": results(model, request, args.top_k)}))
     return 0
 
 
@@ -124,8 +183,10 @@ def answer_lines(model_file: Path, lines: Iterable[str], out: TextIO, top_k: int
                 "answering with the one read before"
             )
         try:
-            results = answers(model, _from_json(line, "the line"), top_k)
-            answer = {"method": model.method, "results": results.records()}
+            answer = {
+                "method": model.method,
+                "results": results(model, _from_json(line, "the line"), top_k),
+            }
         except ValueError as exc:  # the framework's errors name the problem
             answer = {"error": str(exc)}
         out.write(json.dumps({**answer, **({"warning": warning} if warning else {})}) + "\n")
