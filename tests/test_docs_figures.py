@@ -14,6 +14,11 @@ The shown figure must equal the file's value rounded to the shown decimals. Ever
 file a document names (by link or by path) must exist and must not come from a tree with
 uncommitted changes (``machine.dirty``, or a commit stamped ``+changes``): its code is in
 no commit.
+
+Every document (README.md, CONTRIBUTING.md, docs/*.md) is read for the paths it points a
+reader at: each relative markdown link (from the document's folder), each path under
+``docs/``, ``bench/``, ``app/``, ``tests/`` or ``worker/`` in backticks (from the
+repository root) and each ``python -m`` module of the tree must exist.
 """
 
 from __future__ import annotations
@@ -26,8 +31,19 @@ from pathlib import Path
 
 import pytest
 
-DOCS = Path(__file__).resolve().parents[1] / "docs"
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
 DOCUMENTS = ("RESULTS.md", "BENCHMARKS.md")
+EVERY_DOCUMENT = sorted(
+    p.relative_to(ROOT).as_posix()
+    for p in (ROOT / "README.md", ROOT / "CONTRIBUTING.md", *DOCS.glob("*.md"))
+    if p.is_file()
+)
+MD_LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
+CODE = re.compile(r"`([^`\n]+)`")
+TREE_PATH = re.compile(r"(?<![\w./-])((?:docs|bench|app|tests|worker)/[\w./-]*[\w/])")
+MODULE = re.compile(r"python -m ((?:app|bench|worker|tests)(?:\.\w+)+)")
+PLACEHOLDER = "<*{["  # `docs/results/<run>/`: a pattern, not a path
 LINK = re.compile(r"\[([^\]]+)\]\((results/[^)#\s]+\.json)#([^)\s]+)\)")
 NAMED = re.compile(r"(?:docs/)?(results/[\w./-]+\.json)")
 TERM = re.compile(r"([*/~+])")
@@ -117,6 +133,64 @@ def check_document(text: str, docs: Path, name: str = "document") -> tuple[int, 
         if abs(value - figure) > 0.5 * 10**-decimals + 1e-9 * max(1.0, abs(value)):
             problems.append(f"{where}: the file holds {value!r}")
     return checked, problems
+
+
+def missing_paths(text: str, folder: Path, root: Path = ROOT, name: str = "document") -> list[str]:
+    """The paths ``text`` (a document in ``folder``) points at that do not exist: relative
+    markdown links, backticked paths of the tree, and ``python -m`` modules."""
+    problems = []
+    for target in MD_LINK.findall(text):
+        path = target.split("#", 1)[0]
+        if re.match(r"[a-z][a-z0-9+.-]*:", target) or not path:
+            continue  # a URL (http:, mailto:) or an anchor in the same document
+        if not (folder / path).exists():
+            problems.append(f"{name}: link ({target}) names no file")
+    for code in CODE.findall(text):
+        for found in TREE_PATH.finditer(code):
+            after = code[found.end() : found.end() + 1]
+            if after and after in PLACEHOLDER:
+                continue
+            if not (root / found.group(1)).exists():
+                problems.append(f"{name}: `{found.group(1)}` does not exist")
+    for module in MODULE.findall(text):
+        stem = root / module.replace(".", "/")
+        if not (stem.with_suffix(".py").is_file() or (stem / "__main__.py").is_file()):
+            problems.append(f"{name}: python -m {module}: no such module in the tree")
+    return problems
+
+
+@pytest.mark.parametrize("document", EVERY_DOCUMENT)
+def test_every_path_a_document_names_exists(document):
+    path = ROOT / document
+    problems = missing_paths(path.read_text(), path.parent, name=document)
+    assert not problems, "\n".join(problems)
+
+
+@pytest.mark.parametrize("document", sorted(p.name for p in DOCS.glob("*.md")))
+def test_every_result_file_a_document_cites_is_committed_and_its_figures_hold(document):
+    _, problems = check_document((DOCS / document).read_text(), DOCS, document)
+    assert not problems, "\n".join(problems)
+
+
+def test_a_path_that_does_not_exist_fails(tmp_path):
+    """The path check can fail: a broken link, a backticked path and a module, each named;
+    URLs, anchors and patterns pass."""
+    (tmp_path / "app").mkdir()
+    (tmp_path / "app" / "real.py").write_text("")
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "HERE.md").write_text("")
+    text = (
+        "[here](HERE.md#a-part) [gone](GONE.md) [web](https://example.org) [up](#top) "
+        "`app/real.py` `app/lost.py` `see app/real.py and tests/none/` `docs/results/<run>/` "
+        "`python -m app.real` `python -m app.absent`"
+    )
+    problems = missing_paths(text, tmp_path / "docs", tmp_path)
+    assert problems == [
+        "document: link (GONE.md) names no file",
+        "document: `app/lost.py` does not exist",
+        "document: `tests/none/` does not exist",
+        "document: python -m app.absent: no such module in the tree",
+    ], problems
 
 
 def opening(text: str) -> str:
