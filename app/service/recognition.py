@@ -138,13 +138,24 @@ class RecognitionService:
         trials: list | None = None,
         target_confidence: float | None = None,
         known_kept: float | None = None,
+        outliers: str | None = None,
     ) -> Table:
         """A table of objects named jointly (``app.service.table_answers``): one label of
-        ``objects`` per sample, or per raw trial."""
+        ``objects`` per sample, or per raw trial; ``outliers`` None: the service's (an
+        object that abstains takes no part in the naming)."""
         rec = model.recognizer
         kept = self._kept(rec, known_kept)
+        policy = outliers or self.outliers
         table = await run_in_threadpool(
-            answer_table, rec, objects, samples, trials, self.top_k, target_confidence, kept
+            answer_table,
+            rec,
+            objects,
+            samples,
+            trials,
+            self.top_k,
+            target_confidence,
+            kept,
+            policy,
         )
         self._counted(model, table.batch)
         return table

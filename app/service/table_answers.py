@@ -11,13 +11,19 @@ object. Both the route and the command build their answers here, so they agree.
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from app.framework.recognizer import TARGET_CONFIDENCE, RecognitionBatch, TactileRecognizer
+from app.framework.recognizer import (
+    ABSTAIN,
+    TARGET_CONFIDENCE,
+    RecognitionBatch,
+    TactileRecognizer,
+)
 
 #: the longest label taken, in characters (a class name's limit)
 MAX_LABEL = 200
@@ -101,13 +107,15 @@ def _type(value: Any) -> str:
 
 
 class Table(NamedTuple):
-    """A table's answer: ``batch`` holds one row per object (in order of first
-    appearance), its touches fused; ``answers`` the joint naming of each
-    (``app.framework.tables.TableAnswer``), ``columns`` the names of the classes it
+    """A table's answer: ``batch`` holds one row per object of ``objects`` (the distinct
+    labels in order of first appearance), its touches fused; ``answers`` the joint naming
+    of each (``app.framework.tables.TableAnswer``; None for an object that abstains on an
+    input outlier, left out of the naming), ``columns`` the names of the classes it
     assigns (``None``: novel, not any registered class); ``touches`` how many samples (or
     trials) each object has."""
 
     batch: RecognitionBatch
+    objects: list[Label]
     answers: list[Any]
     columns: list[str | None]
     touches: list[int]
@@ -121,10 +129,15 @@ def answer_table(
     top_k: int = 3,
     target_confidence: float | None = None,
     known_kept: float | None = None,
+    outliers: str = ABSTAIN,
 ) -> Table:
     """Name the objects of ``samples`` (or of raw ``trials``, featurized by the model's
     featurizer: a trial's fingers are touches of its object) jointly, one label of
-    ``objects`` per sample or trial (``check_labels`` first)."""
+    ``objects`` per sample or trial (``check_labels`` first).
+
+    An object whose fused answer abstains on an input outlier (``outliers`` ``abstain``)
+    takes no part in the naming: a broken sensor's touches are no evidence, and must not
+    take a class from an object touched well."""
     from app.framework.tables import name_table
 
     if trials is not None:
@@ -133,19 +146,31 @@ def answer_table(
     else:
         x = rec.validate_samples(samples, partial=True)
         labels = list(objects)
-    answers, columns = name_table(rec, x, labels, known_kept=known_kept)
-    groups = np.empty(len(x), np.int64)
-    for g, answer in enumerate(answers):
-        groups[np.asarray(answer.rows)] = g
-    counts: dict[Label, int] = {}
+    order: dict[Label, int] = {}
+    counts: list[int] = []
     for label in objects:  # trials (or samples) per object: the touches its answer fuses
-        counts[label] = counts.get(label, 0) + 1
-    touches = [counts[a.object] for a in answers]
+        if label not in order:
+            order[label] = len(order)
+            counts.append(0)
+        counts[order[label]] += 1
+    groups = np.fromiter((order[label] for label in labels), np.int64, len(labels))
     target = TARGET_CONFIDENCE if target_confidence is None else target_confidence
     batch = rec.recognize_batch(
-        x, top_k, groups, target, known_kept, touches=np.asarray(touches, np.int64)
+        x, top_k, groups, target, known_kept, touches=np.asarray(counts, np.int64)
     )
-    return Table(batch, list(answers), list(columns), touches)
+    named = np.ones(len(order), bool)
+    if outliers == ABSTAIN and batch.input_outlier is not None:
+        named = ~batch.input_outlier
+    answers: list[Any] = [None] * len(order)
+    columns: list[str | None] = []
+    if named.any():
+        rows = named[groups]
+        table, columns = name_table(
+            rec, x[rows], [lab for lab, r in zip(labels, rows, strict=True) if r], known_kept
+        )
+        for answer in table:
+            answers[order[answer.object]] = answer
+    return Table(batch, list(order), answers, list(columns), counts)
 
 
 def table_records(
@@ -158,16 +183,17 @@ def table_records(
     the joint assignment, with ``object``, ``alone``, ``margin`` and ``touches``.
     ``label(name)``: a class's label fields (``class_name``, and ``class_id`` on the
     service); ``kinds``: ``known`` or ``novel`` by class name. An answer that abstained on
-    an input outlier keeps naming no class."""
+    an input outlier names no class, and its ``alone`` and ``margin`` are None."""
     out = []
-    for record, answer, touches in zip(records, table.answers, table.touches, strict=True):
-        joint = _named(table.columns[answer.column], record, label, kinds)
-        alone = _named(table.columns[answer.alone], record, label, kinds)
-        if record["kind"] != "input_outlier":
-            record.update(joint)
-        record.update(
-            object=answer.object, alone=alone, margin=float(answer.margin), touches=touches
-        )
+    for record, obj, answer, touches in zip(
+        records, table.objects, table.answers, table.touches, strict=True
+    ):
+        alone = margin = None
+        if answer is not None:
+            record.update(_named(table.columns[answer.column], record, label, kinds))
+            alone = _named(table.columns[answer.alone], record, label, kinds)
+            margin = float(answer.margin) if math.isfinite(answer.margin) else None
+        record.update(object=obj, alone=alone, margin=margin, touches=touches)
         out.append(record)
     return out
 

@@ -336,3 +336,27 @@ def test_raw_trials_are_named_as_a_table_from_json_or_hdf5(raw_service, pilot, t
         "objects",
     )
     assert "1 labels for 2 trials; give exactly one label per trial" in body["detail"]
+
+
+def test_an_object_touched_by_a_broken_sensor_abstains_and_takes_no_class(best_service, best_base):
+    """Its touches are no evidence: it names no class, and the other objects are named as
+    if it were not on the table; outliers=answer names it with the others."""
+    client, app, _ = best_service
+    data = best_base[1]
+    x = table_of(data, 1, range(3))
+    zeros = np.zeros_like(x[:1])
+    table = np.concatenate([zeros, x])
+    objects = ["broken", "a", "b", "c"]
+    r = client.post("/v1/recognize", json={"samples": table.tolist(), "objects": objects})
+    assert r.status_code == 200, r.text
+    broken, *rest = r.json()["results"]
+    assert broken["object"] == "broken" and broken["kind"] == "input_outlier"
+    assert broken["class_name"] is None and broken["alone"] is None and broken["margin"] is None
+    rec, kept = served(app)
+    class_ids = app.state.service.holder.current.class_ids
+    assert_same_table(rest, expected(rec, x, objects[1:], kept, class_ids))
+    guessed = client.post(
+        "/v1/recognize?outliers=answer", json={"samples": table.tolist(), "objects": objects}
+    ).json()["results"]
+    assert guessed[0]["input_outlier"] is True and guessed[0]["alone"] is not None
+    assert_same_table(guessed, expected(rec, table, objects, kept, class_ids))

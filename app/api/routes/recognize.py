@@ -258,7 +258,7 @@ async def _table(
     field = "trials" if body.trials is not None else "samples"
     with blame(field):
         table = await service.recognize_table(
-            model, objects, body.samples, body.trials, target, kept
+            model, objects, body.samples, body.trials, target, kept, outliers
         )
     return service.table_json(model, table, outliers)
 
