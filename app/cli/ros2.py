@@ -16,10 +16,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "frames (~/frames, with ~/procedure) in, the answers of POST /v1/recognize out "
         "(~/recognition), enrolments (~/enrol -> ~/enrolment) and /diagnostics; through a "
         "running service (--url) or a model bundle file in this process (--model). "
-        "Standard ROS arguments follow --ros-args (remapping, namespace, parameters: "
-        "docs/ROS2.md). Needs the ros2 extra or a sourced ROS 2 installation.",
+        "Standard ROS arguments follow --ros-args (remapping, namespace, parameters, "
+        "--params-file: docs/ROS2.md); every flag below is a shorthand for a parameter and "
+        "wins over it. Needs the ros2 extra or a sourced ROS 2 installation.",
     )
-    source = p.add_mutually_exclusive_group(required=True)
+    source = p.add_mutually_exclusive_group()
     source.add_argument("--url", help="the service's base URL, e.g. http://fleet-server:8000")
     source.add_argument(
         "--model",
@@ -27,11 +28,22 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="a model bundle file to answer with, offline (read again whenever it changes)",
     )
     p.add_argument("--api-key", help="the service's API key (with --url)")
+    p.add_argument("--timeout", type=float, help="seconds per request to the service (10)")
+    p.add_argument("--top-k", type=int, help="scores listed per answer with --model (default 3)")
     p.add_argument(
-        "--timeout", type=float, default=10.0, help="seconds per request to the service (10)"
+        "--known-kept",
+        type=float,
+        help="novelty operating point, a share in (0, 1) (default: the service's own)",
     )
     p.add_argument(
-        "--top-k", type=int, default=3, help="scores listed per answer with --model (default 3)"
+        "--target-confidence",
+        type=float,
+        help="probability at which an answer names no next procedure (default: the model's)",
+    )
+    p.add_argument(
+        "--lifecycle",
+        action="store_true",
+        help="a managed (lifecycle) node: it answers once configured and activated",
     )
     p.add_argument(
         "--ros-args",
@@ -44,26 +56,42 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=run)
 
 
+#: flags and the parameters they stand for
+SHORTHANDS = {
+    "url": "url",
+    "model": "model",
+    "api_key": "api_key",
+    "timeout": "timeout",
+    "top_k": "top_k",
+    "known_kept": "known_kept",
+    "target_confidence": "target_confidence",
+}
+
+
 def run(args: argparse.Namespace) -> int:
     from app.ros2 import require_rclpy
 
     if args.api_key and args.model:
         raise ValueError("--api-key goes with --url, not --model")
-    if args.timeout <= 0 or args.top_k < 1:
+    if (args.timeout is not None and args.timeout <= 0) or (
+        args.top_k is not None and args.top_k < 1
+    ):
         raise ValueError("--timeout must be > 0 and --top-k at least 1")
     try:
         require_rclpy()
     except ImportError as exc:
         print(f"tactile-zsl ros2: error: {exc}", file=sys.stderr)
         return 2
-    from app.ros2.backends import ModelFileBackend, ServiceBackend
+    from app.ros2.node import check_setting
     from app.ros2.node import run as spin
 
-    if args.model is not None:
-        from app.framework.runtime import configure_threads
-
-        configure_threads()  # as tactile-zsl recognize: one thread unless told otherwise
-        backend = ModelFileBackend(args.model, top_k=args.top_k)
-    else:
-        backend = ServiceBackend(args.url, api_key=args.api_key, timeout=args.timeout)
-    return spin(backend, ["--ros-args", *args.ros_args] if args.ros_args else [])
+    overrides = {}
+    for flag, name in SHORTHANDS.items():
+        value = getattr(args, flag)
+        if value is not None:
+            overrides[name] = str(value) if isinstance(value, Path) else value
+    for name in ("known_kept", "target_confidence"):
+        if name in overrides and (why := check_setting(name, overrides[name])):
+            raise ValueError(why)
+    ros_args = ["--ros-args", *args.ros_args] if args.ros_args else []
+    return spin(ros_args, overrides, lifecycle=args.lifecycle)

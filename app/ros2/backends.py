@@ -24,6 +24,7 @@ from app.framework import bundle
 from app.framework.defaults import DEFAULT_KNOWN_KEPT
 from app.framework.errors import FrameworkError
 from app.framework.results import ABSTAIN, check_outliers
+from app.framework.some_procedures import TARGET_CONFIDENCE
 
 RECOGNIZE, CLASSES = "/v1/recognize", "/v1/classes"
 
@@ -84,12 +85,33 @@ class ServiceBackend:
     def source(self) -> str:
         return self.url
 
-    def recognize(self, samples: np.ndarray) -> dict[str, Any]:
-        return self._call(RECOGNIZE, lambda: self.client.recognize(samples))
+    def recognize(
+        self,
+        samples: np.ndarray,
+        target_confidence: float | None = None,
+        known_kept: float | None = None,
+    ) -> dict[str, Any]:
+        """``target_confidence``, ``known_kept``: the request's (None: the service's)."""
+        return self._call(
+            RECOGNIZE,
+            lambda: self.client.recognize(
+                samples, target_confidence=target_confidence, known_kept=known_kept
+            ),
+        )
 
-    def recognize_trial(self, trial: dict[str, Any]) -> dict[str, Any]:
+    def recognize_trial(
+        self, trial: dict[str, Any], known_kept: float | None = None
+    ) -> dict[str, Any]:
         wire = {**trial, "fingers": [_lists(f) for f in trial["fingers"]]}
-        return self._call(RECOGNIZE, lambda: self.client.recognize_trials([wire]))
+        params = {} if known_kept is None else {"known_kept": known_kept}
+
+        def send() -> dict[str, Any]:
+            # the client's recognize_trials takes no known_kept; the route does
+            return self.client._send(
+                "POST", RECOGNIZE, json={"trials": [wire]}, params=params
+            ).json()
+
+        return self._call(RECOGNIZE, send)
 
     def enrol(self, body: dict[str, Any]) -> dict[str, Any]:
         """The enrolment's job once it succeeded or failed (its class live, or why not), or
@@ -198,27 +220,41 @@ class ModelFileBackend:
         rec = self._file.model
         return ModelInfo(self._meta.get("version"), rec.input_shape, rec.input_kind, rec.procedures)
 
-    def recognize(self, samples: np.ndarray) -> dict[str, Any]:
+    def recognize(
+        self,
+        samples: np.ndarray,
+        target_confidence: float | None = None,
+        known_kept: float | None = None,
+    ) -> dict[str, Any]:
+        """``target_confidence``, ``known_kept``: this answer's (None: the backend's)."""
         from app.api.routes.recognize import Body, takes_kind
+
+        target = TARGET_CONFIDENCE if target_confidence is None else target_confidence
+        kept = self.known_kept if known_kept is None else known_kept
 
         def run(rec: Any) -> Any:
             takes_kind(rec, Body(samples, None, 1))
             with blame("samples"):
                 return rec.recognize_batch(
-                    samples, self.top_k, known_kept=rec.operating_point(None, self.known_kept)
+                    samples,
+                    self.top_k,
+                    target_confidence=target,
+                    known_kept=rec.operating_point(None, kept),
                 )
 
         return self._answered(run)
 
-    def recognize_trial(self, trial: dict[str, Any]) -> dict[str, Any]:
+    def recognize_trial(
+        self, trial: dict[str, Any], known_kept: float | None = None
+    ) -> dict[str, Any]:
         from app.api import trials
+
+        kept = self.known_kept if known_kept is None else known_kept
 
         def run(rec: Any) -> Any:
             parsed = trials.one(trial, "trials", 0)
             with blame("trials"):
-                return rec.recognize_trials(
-                    [parsed], self.top_k, rec.operating_point(None, self.known_kept)
-                )
+                return rec.recognize_trials([parsed], self.top_k, rec.operating_point(None, kept))
 
         return self._answered(run)
 
@@ -280,3 +316,26 @@ class ModelFileBackend:
 
 def _lists(finger: dict[str, Any]) -> dict[str, Any]:
     return {k: np.asarray(v).tolist() for k, v in finger.items()}
+
+
+def backend_of(settings: dict[str, Any]) -> ServiceBackend | ModelFileBackend:
+    """The backend the node's parameters name: ``url`` (with ``api_key``, ``timeout``) or
+    ``model`` (with ``top_k``); ValueError naming the parameter otherwise."""
+    url, model = settings.get("url") or "", settings.get("model") or ""
+    if bool(url) == bool(model):
+        raise ValueError(
+            "give the service's URL or a model file, one of them: --url or --model "
+            "(the parameters url and model: --ros-args -p url:=http://host:8000)"
+        )
+    if settings.get("api_key") and model:
+        raise ValueError("--api-key (the parameter api_key) goes with --url, not --model")
+    if float(settings.get("timeout", 10.0)) <= 0 or int(settings.get("top_k", 3)) < 1:
+        raise ValueError("--timeout (timeout) must be > 0 and --top-k (top_k) at least 1")
+    if model:
+        from app.framework.runtime import configure_threads
+
+        configure_threads()  # as tactile-zsl recognize: one thread unless told otherwise
+        return ModelFileBackend(model, top_k=int(settings.get("top_k", 3)))
+    return ServiceBackend(
+        url, api_key=settings.get("api_key") or None, timeout=float(settings.get("timeout", 10.0))
+    )

@@ -51,6 +51,8 @@ class TrialAssembler:
         self._phases: dict[str, tuple[int, int | None]] = {}
         self._current: str | None = None
         self._fault: str | None = None
+        self._missing = 0  # frames of the open trial lost on the way (``lost``)
+        self.completed_missing = 0  # of the trial the last completed procedure answers
 
     @property
     def open(self) -> bool:
@@ -73,6 +75,12 @@ class TrialAssembler:
             self.fault(f"the trial is longer than {self.max_frames} frames; publish 'end'")
         else:
             self._frames.append(frame)
+
+    def lost(self, n: int) -> None:
+        """``n`` frames were lost on the way just before the next one (``SequenceGaps``):
+        counted against the open trial; lost rest frames are not counted."""
+        if self._frames is not None:
+            self._missing += n
 
     def fault(self, why: str) -> None:
         """A frame of the open trial could not be read: the trial's answers are problems."""
@@ -123,6 +131,7 @@ class TrialAssembler:
         name, (start, _) = self._current, self._phases[self._current]
         end = len(self._frames) - late
         self._current = None
+        self.completed_missing = self._missing
         if self._fault is not None:
             raise TrialProblem(self._fault, "frames")
         if end <= start:
@@ -135,6 +144,7 @@ class TrialAssembler:
 
     def _reset(self) -> None:
         self._frames, self._phases, self._current, self._fault = None, {}, None, None
+        self._missing = 0
 
 
 class MarkOrder:

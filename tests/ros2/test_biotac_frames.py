@@ -6,6 +6,7 @@ frames; held-out trials are recognised."""
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import httpx
@@ -53,7 +54,10 @@ def test_replayed_recordings_get_the_answers_http_gives_after_each_procedure(pil
     for name, trial in held.items():
         replay = replay_trial(bridge, trial, procedures, PERIOD)
         published += replay.frames
-        answers = [a.body for a in bridge.next_answers(len(procedures), timeout=120)]
+        got = bridge.next_answers(len(procedures), timeout=120)
+        # each answer names the mark that completed its procedure; no frame was lost
+        assert [a.body["input"]["frames_missing"] for a in got] == [0] * len(procedures)
+        answers = [{k: v for k, v in a.body.items() if k != "input"} for a in got]
         assert answers == [http_answer(url, t) for t in replay.expected], name
         used = [a["results"][0]["procedures_used"] for a in answers]
         assert used == [list(procedures[: i + 1]) for i in range(len(procedures))]
@@ -100,7 +104,44 @@ def test_the_model_file_answers_replayed_frames_as_the_service(
     procedures = tuple(httpx.get(f"{url}/v1/models/active").json()["procedures"])
     bridge = bridge_factory("--model", str(model_file))
     replay = replay_trial(bridge, held["glass_bottle"], procedures, PERIOD)
-    answers = [a.body for a in bridge.next_answers(len(procedures), timeout=120)]
+    answers = [
+        {k: v for k, v in a.body.items() if k != "input"}
+        for a in bridge.next_answers(len(procedures), timeout=120)
+    ]
     bridge.wait_diagnostics(lambda d: d["answered"] == str(len(procedures)))
     assert bridge.diagnostics["frames"] == str(replay.frames), "frames were lost on the way"
     assert answers == [http_answer(url, t) for t in replay.expected]
+
+
+def test_frames_lost_on_the_way_are_counted_and_named_in_the_trials_answer(pilot, bridge_factory):
+    """A subscription history of one frame overflows under a burst: frames are lost in
+    the bridge's own queue, and the gaps in their sequence numbers count them."""
+    url, held = pilot
+    bridge = bridge_factory("--url", url, params={"frame_depth": 1})
+    frames = frames_of(held["cork"])
+    for frame in frames[:150]:
+        bridge.publish_frame(frame)
+        time.sleep(0.002)
+    rest = bridge.wait_diagnostics(
+        lambda d: int(d["frames"]) + int(d["frames_missing"]) == 150, timeout=30
+    )
+    bridge.procedure("tap")
+    time.sleep(0.5)
+    published = 150
+    for _ in range(5):  # a burst as fast as the robot's side can publish
+        for frame in frames[150:1150]:
+            bridge.publish_frame(frame)
+        published += 1000
+        time.sleep(0.5)
+        if int(bridge.diagnostics.get("frames_missing", 0)) and bridge.diagnostics.get(
+            "frames"
+        ) == str(published - int(bridge.diagnostics["frames_missing"])):
+            break
+    bridge.procedure("rest")
+    (answer,) = bridge.next_answers(1, timeout=120)
+    diagnostics = bridge.wait_diagnostics(lambda d: d["answered"] == "1")
+    missing = int(diagnostics["frames_missing"])
+    assert missing > 0, "no frame was lost: the test did not overflow the history"
+    assert int(diagnostics["frames"]) + missing == published
+    # the trial's answer counts the frames it lost (not those of its rest)
+    assert answer.body["input"]["frames_missing"] == missing - int(rest["frames_missing"])

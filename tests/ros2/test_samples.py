@@ -9,6 +9,7 @@ import json
 import socket
 import threading
 import time
+from pathlib import Path
 
 import httpx
 import numpy as np
@@ -24,7 +25,7 @@ pytestmark = pytest.mark.slow
 WARN, ERROR = 1, 2  # diagnostic_msgs/DiagnosticStatus levels
 
 
-def http_answer(url: str, samples: np.ndarray) -> dict:
+def http_answer(url: str, samples: np.ndarray, **params) -> dict:
     """POST /v1/recognize's body (answer or problem) for ``samples`` sent as .npy."""
     body = io.BytesIO()
     np.save(body, np.asarray(samples, np.float32))
@@ -32,9 +33,23 @@ def http_answer(url: str, samples: np.ndarray) -> dict:
         f"{url}/v1/recognize",
         content=body.getvalue(),
         headers={"Content-Type": "application/x-npy"},
+        params=params,
         timeout=60,
     )
     return r.json()
+
+
+def split(url: str, x: np.ndarray, shape: tuple[int, ...]) -> list[dict]:
+    """What the bridge answers for ``x``: HTTP's answer, one per sample of a message that
+    held several."""
+    body = http_answer(url, x)
+    if np.ndim(x) == len(shape) + 1 and "results" in body:
+        return [{**body, "results": [r]} for r in body["results"]]
+    return [body]
+
+
+def without_input(answers) -> list[dict]:
+    return [{k: v for k, v in a.body.items() if k != "input"} for a in answers]
 
 
 def inputs(shape: tuple[int, ...], n_procedures: int) -> list[np.ndarray]:
@@ -76,10 +91,20 @@ def test_each_sample_gets_the_answer_http_gives_in_order(samples_service, bridge
         bridge.publish_samples(x)
     flat = Float32MultiArray(data=sent[0].ravel().tolist())  # no layout: the model's shape
     bridge.samples.publish(flat)
-    answers = [a.body for a in bridge.next_answers(len(sent) + 1)]
+    got = bridge.next_answers(len(sent) + 3)  # the message of three: an answer each
+    # HTTP's answers once the bridge's are in: the service batches concurrent requests
+    expected = [split(samples_service, x, shape) for x in [*sent, sent[0]]]
+    answers = without_input(got)
 
-    assert answers == [http_answer(samples_service, x) for x in [*sent, sent[0]]]
-    assert [len(a.get("results", [])) for a in answers] == [1, 1, 1, 3, 1, 1, 1, 0, 0, 0, 1]
+    # a message of three samples gets an answer per sample, each naming its index
+    assert answers == [a for each in expected for a in each]
+    named = [(a.body["input"]["sequence"], a.body["input"]["index"]) for a in got]
+    assert named == [(1, None), (2, None), (3, None), (4, 0), (4, 1), (4, 2)] + [
+        (k, None) for k in range(5, len(sent) + 2)
+    ]
+    assert all(a.body["input"]["stamp"]["sec"] > 0 for a in got)
+    del answers[4:6]  # the batch's answers, one kept
+    assert [len(a.get("results", [])) for a in answers] == [1, 1, 1, 1, 1, 1, 1, 0, 0, 0, 1]
     assert answers[2]["results"][0]["procedures_used"] == [procedures[0]]
     assert answers[2]["results"][0]["next_procedure"] in procedures[1:]
     for broken in answers[5:7]:  # a broken sensor is not answered as an object
@@ -95,8 +120,10 @@ def test_each_sample_gets_the_answer_http_gives_in_order(samples_service, bridge
     bridge.samples.publish(torn)
     (answer,) = bridge.next_answers(1)
     assert answer.body["status"] == 422 and "layout.dim gives shape [4]" in answer.body["detail"]
+    assert answer.body["input"]["sequence"] == len(sent) + 2
 
-    diagnostics = bridge.wait_diagnostics(lambda d: d["answered"] == str(len(sent) + 2))
+    diagnostics = bridge.wait_diagnostics(lambda d: d["answered"] == str(len(sent) + 4))
+    assert diagnostics["samples_missing"] == "0"
     assert diagnostics["level"] == 0 and diagnostics["reachable"] == "true"
     assert diagnostics["model_version"] == str(active["version"])
     assert float(diagnostics["latency_p50_ms"]) > 0
@@ -115,8 +142,8 @@ def test_a_model_file_answers_as_the_service_and_is_read_again_after_an_enrolmen
     sent = inputs(shape, len(procedures))
     for x in sent:
         offline.publish_samples(x)
-    answers = [a.body for a in offline.next_answers(len(sent))]
-    assert answers == [http_answer(samples_service, x) for x in sent]
+    expected = [a for x in sent for a in split(samples_service, x, shape)]
+    assert without_input(offline.next_answers(len(expected))) == expected
 
     # enrolments need the service: the model file's bridge says so
     dataset = quick_dataset()
@@ -125,16 +152,17 @@ def test_a_model_file_answers_as_the_service_and_is_read_again_after_an_enrolmen
     refused = offline.enrolments.get(timeout=30)
     assert refused["status"] == 503 and "--url" in refused["detail"]
 
-    # malformed and refused enrolments get their problem; a good one its finished job
-    online.enrol("{not json")
-    malformed = online.enrolments.get(timeout=30)
-    assert malformed["status"] == 422 and malformed["errors"][0]["field"] == "body"
-    online.enrol({"name": "", "attributes": ["hard"]})
-    refused = online.enrolments.get(timeout=30)
-    direct = httpx.post(f"{samples_service}/v1/classes", json={"name": "", "attributes": ["hard"]})
-    assert direct.status_code == 422 and refused == direct.json()
+    # each enrolment gets its answer in the order they came: problems that need no
+    # service do not overtake an enrolment still waiting for its model
     online.enrol(body)
-    job = online.enrolments.get(timeout=300)
+    online.enrol("{not json")
+    online.enrol({"name": "", "attributes": ["hard"]})
+    job, malformed, refused = (online.enrolments.get(timeout=300) for _ in range(3))
+    assert [e["input"]["sequence"] for e in (job, malformed, refused)] == [1, 2, 3]
+    assert malformed["status"] == 422 and malformed["errors"][0]["field"] == "body"
+    direct = httpx.post(f"{samples_service}/v1/classes", json={"name": "", "attributes": ["hard"]})
+    del refused["input"]
+    assert direct.status_code == 422 and refused == direct.json()
     assert job["status"] == "succeeded", job
     assert job["model_version"] > active["version"]
     names = [c["name"] for c in httpx.get(f"{samples_service}/v1/classes").json()["classes"]]
@@ -150,18 +178,18 @@ def test_a_model_file_answers_as_the_service_and_is_read_again_after_an_enrolmen
             assert time.monotonic() < deadline, "the service never served the new version"
             time.sleep(0.5)
     offline.publish_samples(sent[0])
-    (after,) = offline.next_answers(1)
-    assert after.body == http_answer(samples_service, sent[0])
-    assert after.body["model_version"] >= job["model_version"]
-    offline.wait_diagnostics(lambda d: d["model_version"] == str(after.body["model_version"]))
+    (after,) = without_input(offline.next_answers(1))
+    assert after == http_answer(samples_service, sent[0])
+    assert after["model_version"] >= job["model_version"]
+    offline.wait_diagnostics(lambda d: d["model_version"] == str(after["model_version"]))
 
     # a replacement that cannot be read: the model read before answers on, with a warning
     broken = tmp_path / "broken.bundle"
     broken.write_bytes(b"not a bundle")
     broken.replace(model_file)
     offline.publish_samples(sent[0])
-    (still,) = offline.next_answers(1)
-    assert still.body == after.body
+    (still,) = without_input(offline.next_answers(1))
+    assert still == after
     warned = offline.wait_diagnostics(lambda d: d["level"] == WARN)
     assert "cannot be read" in warned["message"]
 
@@ -223,8 +251,8 @@ def test_a_service_down_is_an_error_and_the_bridge_reconnects(samples_service, b
     try:
         bridge.wait_diagnostics(lambda d: d["level"] == 0 and d["model_version"], timeout=60)
         bridge.publish_samples(sample)
-        (up,) = bridge.next_answers(1)
-        assert up.body == http_answer(samples_service, sample)
+        (up,) = without_input(bridge.next_answers(1))
+        assert up == http_answer(samples_service, sample)
     finally:
         proxy.close()
 
@@ -237,9 +265,12 @@ def test_a_full_queue_answers_each_input_in_its_place(samples_service, bridge_fa
         samples = quick_dataset().samples[:8]
         for x in samples:
             bridge.publish_samples(x)
-        answers = [a.body for a in bridge.next_answers(len(samples), timeout=120)]
+        got = bridge.next_answers(len(samples), timeout=120)
     finally:
         proxy.close()
+    # every answer, refusals included, names the message it answers, in order
+    assert [a.body["input"]["sequence"] for a in got] == list(range(1, len(samples) + 1))
+    answers = without_input(got)
     refused = [i for i, a in enumerate(answers) if a.get("status") == 503]
     kept = [i for i in range(len(samples)) if i not in refused]
     assert len(kept) >= 2 and len(refused) >= 4, answers
@@ -251,3 +282,126 @@ def test_a_full_queue_answers_each_input_in_its_place(samples_service, bridge_fa
         assert answers[i] == http_answer(samples_service, samples[i])
     diagnostics = bridge.wait_diagnostics(lambda d: d["answered"] == str(len(samples)))
     assert diagnostics["refused_queue_full"] == str(len(refused))
+
+
+def call(ros, service_type, name: str, request, timeout: float = 20.0):
+    """Call the bridge's ROS service ``name`` from the robot's node; its response."""
+    client = ros.node.create_client(service_type, name)
+    assert client.wait_for_service(timeout_sec=timeout), f"no service {name}"
+    future = client.call_async(request)
+    deadline = time.monotonic() + timeout
+    while not future.done():
+        assert time.monotonic() < deadline, f"{name} did not answer"
+        time.sleep(0.02)
+    return future.result()
+
+
+def set_parameters(ros, bridge, **values) -> list:
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.parameter import Parameter
+
+    request = SetParameters.Request(
+        parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
+    )
+    return call(ros, SetParameters, f"{bridge.prefix}/set_parameters", request).results
+
+
+def test_a_parameter_changed_at_run_time_takes_effect_at_the_next_answer(
+    samples_service, bridge_factory, ros
+):
+    bridge = bridge_factory("--url", samples_service)
+    sample = quick_dataset().samples[0]
+    bridge.publish_samples(sample)
+    (before,) = bridge.next_answers(1)
+    assert before.body["results"][0]["known_kept"] != 0.5
+
+    (changed,) = set_parameters(ros, bridge, known_kept=0.5)
+    assert changed.successful, changed.reason
+    bridge.publish_samples(sample)
+    (after,) = without_input(bridge.next_answers(1))
+    assert after["results"][0]["known_kept"] == 0.5
+    assert after == http_answer(samples_service, sample, known_kept=0.5)
+    bridge.wait_diagnostics(lambda d: d["known_kept"] == "0.5")
+
+    # out of range, or fixed at the start: refused, naming why; the setting stays
+    (bad,) = set_parameters(ros, bridge, known_kept=1.0)
+    assert not bad.successful and "known_kept must lie in (0, 1)" in bad.reason
+    (fixed,) = set_parameters(ros, bridge, queue_size=3)
+    assert not fixed.successful
+    bridge.publish_samples(sample)
+    (still,) = without_input(bridge.next_answers(1))
+    assert still["results"][0]["known_kept"] == 0.5
+
+
+def test_the_shipped_parameter_file_names_every_parameter_with_its_default():
+    import yaml
+
+    from app.ros2.node import PARAMETERS
+
+    shipped = Path(__file__).resolve().parents[2] / "docs" / "ros2_params.yaml"
+    (section,) = yaml.safe_load(shipped.read_text()).values()
+    values = section["ros__parameters"]
+    assert values == {name: p.default for name, p in PARAMETERS.items()}
+
+
+def test_a_parameter_file_sets_the_bridge_up(samples_service, bridge_factory, tmp_path):
+    import yaml
+
+    shipped = Path(__file__).resolve().parents[2] / "docs" / "ros2_params.yaml"
+    settings = yaml.safe_load(shipped.read_text())
+    (values,) = (s["ros__parameters"] for s in settings.values())
+    values.update(url=samples_service, queue_size=3, known_kept=0.25)
+    params = tmp_path / "params.yaml"
+    params.write_text(yaml.safe_dump(settings))
+    bridge = bridge_factory("--ros-args", "--params-file", str(params))
+    diagnostics = bridge.wait_diagnostics(lambda d: d["queue"] == "0/3")
+    assert diagnostics["known_kept"] == "0.25" and diagnostics["reachable"] == "true"
+    sample = quick_dataset().samples[0]
+    bridge.publish_samples(sample)
+    (answer,) = without_input(bridge.next_answers(1))
+    assert answer == http_answer(samples_service, sample, known_kept=0.25)
+
+
+def test_a_lifecycle_bridge_answers_only_while_active_and_keeps_what_came_meanwhile(
+    samples_service, bridge_factory, ros
+):
+    from lifecycle_msgs.msg import State, Transition
+    from lifecycle_msgs.srv import ChangeState, GetState
+
+    def change(bridge, transition: int) -> bool:
+        request = ChangeState.Request(transition=Transition(id=transition))
+        return call(ros, ChangeState, f"{bridge.prefix}/change_state", request).success
+
+    def state(bridge) -> int:
+        return call(
+            ros, GetState, f"{bridge.prefix}/get_state", GetState.Request()
+        ).current_state.id
+
+    # configure fails where the service cannot be reached; the node stays unconfigured
+    down = bridge_factory("--url", f"http://127.0.0.1:{free_port()}", "--lifecycle", ready=False)
+    assert state(down) == State.PRIMARY_STATE_UNCONFIGURED
+    assert not change(down, Transition.TRANSITION_CONFIGURE)
+    assert state(down) == State.PRIMARY_STATE_UNCONFIGURED
+
+    bridge = bridge_factory("--url", samples_service, "--lifecycle", ready=False)
+    assert state(bridge) == State.PRIMARY_STATE_UNCONFIGURED
+    assert change(bridge, Transition.TRANSITION_CONFIGURE)
+    bridge.wait_ready()
+    samples = quick_dataset().samples[:3]
+    bridge.publish_samples(samples[0])
+    time.sleep(1.0)
+    assert bridge.answers.empty(), "an inactive bridge answered"
+    assert change(bridge, Transition.TRANSITION_ACTIVATE)
+    (first,) = bridge.next_answers(1)
+    assert first.body["input"]["sequence"] == 1
+
+    assert change(bridge, Transition.TRANSITION_DEACTIVATE)
+    for x in samples[1:]:
+        bridge.publish_samples(x)
+    time.sleep(1.0)
+    assert bridge.answers.empty(), "a deactivated bridge answered"
+    assert change(bridge, Transition.TRANSITION_ACTIVATE)
+    kept = bridge.next_answers(2)
+    assert [a.body["input"]["sequence"] for a in kept] == [2, 3]
+    assert without_input(kept) == [http_answer(samples_service, x) for x in samples[1:]]
+    assert state(bridge) == State.PRIMARY_STATE_ACTIVE
