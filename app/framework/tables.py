@@ -256,14 +256,17 @@ def novelty_slope(tuning: Any) -> float | None:
     return float(a / scale) if a > 0 else None
 
 
-def object_groups(objects: Sequence[Hashable], n: int) -> tuple[np.ndarray, list[Any]]:
-    """(group of each of the ``n`` samples, the distinct labels in first-appearance order);
-    TableError for a wrong length or a label that cannot name an object."""
+def object_groups(
+    objects: Sequence[Hashable], n: int, what: str = "sample"
+) -> tuple[np.ndarray, list[Any]]:
+    """(group of each of the ``n`` inputs, the distinct labels in first-appearance order);
+    TableError for a wrong length or a label that cannot name an object. ``what``: the
+    inputs' name in the messages ("sample", "trial")."""
     if isinstance(objects, str | bytes) or not hasattr(objects, "__len__"):
-        raise TableError(f"objects must be a sequence of labels, one per sample, got {objects!r}")
+        raise TableError(f"objects must be a sequence of labels, one per {what}, got {objects!r}")
     if len(objects) != n:
         raise TableError(
-            f"objects must give one label per sample: {n} samples, {len(objects)} labels"
+            f"objects must give one label per {what}: {n} {what}s, {len(objects)} labels"
         )
     order: dict[Any, int] = {}
     group = np.empty(n, np.int64)
@@ -283,7 +286,7 @@ def _fused(recognizer: Any, samples: Any, objects: Sequence[Hashable], known_kep
     routing threshold)."""
     if recognizer.featurizer is not None and not isinstance(samples, np.ndarray):
         images, trial = recognizer.trial_samples(samples)
-        by_input, labels = object_groups(objects, int(trial[-1]) + 1)
+        by_input, labels = object_groups(objects, int(trial[-1]) + 1, "trial")
         x, used = recognizer._checked(images)
         group = by_input[trial]
     else:

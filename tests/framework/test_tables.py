@@ -186,3 +186,27 @@ def test_grouping_without_labels(table_model):
     assert adjusted_rand_score(novel.labels, groups) > 0.3
     answers, _ = name_table(model, novel.samples, groups.tolist())
     assert len(answers) == len(set(groups.tolist()))
+
+
+def test_raw_trials_name_a_table_of_trials():
+    # a model fitted on raw BioTac trials takes trials, one label each; each trial's
+    # finger images are touches of its object; without novel classes the columns are the
+    # known classes and UNREGISTERED
+    from app.framework.registry import make_method
+
+    from .raw_data import synthetic_biotac
+
+    raw = synthetic_biotac(n_objects=3, trials_per_object=6)
+    model = make_method("best", n_estimators=30, tuning_rounds=1).fit(
+        raw.subset(raw.trial_ids % 6 != 0)
+    )
+    test = raw.subset(raw.trial_ids % 6 == 0)
+    trials = list(test.trials)
+    answers, names = name_table(model, trials, ["a", "b", "c"])
+    assert names == [*model.registry.known_names, UNREGISTERED]
+    assert [a.rows.tolist() for a in answers] == [[0], [1], [2]]
+    alone = model.recognize_trials(trials, top_k=1)
+    fused = [alone.class_names[i] for i in alone.top_index[:, 0]]
+    assert [names[a.column] for a in answers] == fused == list(test.class_names)
+    with pytest.raises(TableError, match="one label per trial: 3 trials, 2 labels"):
+        name_table(model, trials, ["a", "b"])
