@@ -59,6 +59,10 @@ EQUAL_BY_DEFINITION: dict[str, tuple[str, str]] = {
     "touches1_gzsl_seen": ("gzsl_seen", _ONE_TOUCH),
     "touches1_gzsl_unseen": ("gzsl_unseen", _ONE_TOUCH),
     "touches1_gzsl_h": ("gzsl_h", _ONE_TOUCH),
+    "tables1_zsl_alone": (
+        "zsl",
+        "the 1-touch tables hold every novel test trial once, each table every novel object",
+    ),
 }
 
 #: why the forest baselines print the same figures in many rows
