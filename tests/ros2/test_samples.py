@@ -405,3 +405,23 @@ def test_a_lifecycle_bridge_answers_only_while_active_and_keeps_what_came_meanwh
     assert [a.body["input"]["sequence"] for a in kept] == [2, 3]
     assert without_input(kept) == [http_answer(samples_service, x) for x in samples[1:]]
     assert state(bridge) == State.PRIMARY_STATE_ACTIVE
+
+
+def test_the_readmes_rclpy_snippet_runs_against_a_real_bridge(samples_service, bridge_factory):
+    import re
+    import subprocess
+    import sys
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    section = readme[readme.index("## ROS 2\n") : readme.index("## The API")]
+    (snippet,) = re.findall(r"```python\n(.*?)```", section, re.S)
+    bridge = bridge_factory("--url", samples_service)
+    # the snippet's service and node, moved to this test's service and namespace
+    code = snippet.replace("http://127.0.0.1:8000", samples_service).replace(
+        '"/tactile_zsl"', repr(bridge.prefix)
+    )
+    assert code != snippet
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    sequence, _, results = out.stdout.strip().partition(" ")
+    assert sequence == "1" and "class_name" in results, out.stdout
