@@ -117,3 +117,45 @@ def multiarray(x: Any, labels: tuple[str, ...] | None = None) -> Any:
     values.frombytes(x.tobytes())  # what rclpy keeps a float32[] in: no copy per value
     msg.data = values
     return msg
+
+
+def header_of(value: Any) -> dict[str, Any]:
+    """A ``std_msgs/Header`` as JSON (``{"stamp": {"sec", "nanosec"}, "frame_id"}``),
+    checked; MessageShapeError naming what is wrong."""
+    if not isinstance(value, dict):
+        raise MessageShapeError("header: an object {stamp: {sec, nanosec}, frame_id} is needed")
+    stamp = value.get("stamp", {"sec": 0, "nanosec": 0})
+    if not isinstance(stamp, dict) or set(stamp) != {"sec", "nanosec"}:
+        raise MessageShapeError("header.stamp: an object {sec, nanosec} is needed")
+    sec, nanosec = stamp["sec"], stamp["nanosec"]
+    if not all(isinstance(v, int) and not isinstance(v, bool) for v in (sec, nanosec)) or not (
+        0 <= nanosec < 10**9
+    ):
+        raise MessageShapeError(
+            f"header.stamp: integers sec and nanosec in [0, 1e9) are needed, got {stamp}"
+        )
+    frame_id = value.get("frame_id", "")
+    if not isinstance(frame_id, str):
+        raise MessageShapeError(f"header.frame_id: a string is needed, got {frame_id!r}")
+    return {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": frame_id}
+
+
+def stamped_of(text: str) -> tuple[np.ndarray, dict[str, Any]]:
+    """A ``~/samples_stamped`` message's JSON, ``{"header": {...}, "samples": [...]}``: the
+    samples (nested lists, one sample or several) and the robot's header."""
+    import json
+
+    try:
+        body = json.loads(text)
+    except ValueError as exc:
+        raise MessageShapeError(f"body: malformed JSON: {exc}") from None
+    if not isinstance(body, dict) or "samples" not in body or "header" not in body:
+        raise MessageShapeError("body: an object {header, samples} is needed")
+    header = header_of(body["header"])
+    try:
+        x = np.asarray(body["samples"], dtype=np.float32)
+    except (TypeError, ValueError):
+        raise MessageShapeError(
+            "samples: nested lists of numbers of one shape are needed"
+        ) from None
+    return x, header

@@ -39,7 +39,7 @@ from std_msgs.msg import Float32MultiArray, String
 
 from app.api.problems import problem_body
 from app.ros2 import topics
-from app.ros2.arrays import MessageShapeError, frame_of, samples_of
+from app.ros2.arrays import MessageShapeError, frame_of, samples_of, stamped_of
 from app.ros2.backends import CLASSES, RECOGNIZE, Health, backend_of, internal_problem
 from app.ros2.queue import AnswerQueue, InputRef, SequenceGaps, Work
 from app.ros2.trials import MarkOrder, TrialAssembler, TrialProblem
@@ -179,6 +179,12 @@ class BridgeCore:
                 topics.sensor_qos(int(p["input_depth"])),
             ),
             self.create_subscription(
+                String,
+                topics.SAMPLES_STAMPED,
+                self._on_stamped,
+                topics.sensor_qos(int(p["input_depth"])),
+            ),
+            self.create_subscription(
                 Float32MultiArray,
                 topics.FRAMES,
                 self._on_frame,
@@ -255,6 +261,27 @@ class BridgeCore:
             work = Work("problem", _shape_problem(exc), received, [ref])
         except Exception:  # noqa: BLE001 - the input still gets its answer
             log.exception("reading a samples message")
+            work = Work("problem", internal_problem(RECOGNIZE), received, [ref])
+        self.answers.put(work)
+
+    def _on_stamped(self, msg: String, info: Any) -> None:
+        """Samples as JSON with the robot's ``std_msgs/Header``, echoed in the answer."""
+        received = time.perf_counter()
+        ref = InputRef.of(info)
+        self.sample_gaps.seen(info)
+        try:
+            x, header = stamped_of(msg.data)
+            ref = InputRef(ref.sequence, ref.stamp, None, header)
+            model = self.backend.model
+            shape = model.input_shape if model else None
+            several = bool(shape) and x.ndim == len(shape) + 1
+            work = Work("samples", (x, several), received, [ref])
+        except MessageShapeError as exc:
+            field = str(exc).split(":", 1)[0].split(".", 1)[0]
+            problem = problem_body(422, str(exc), RECOGNIZE, [{"field": field, "reason": str(exc)}])
+            work = Work("problem", problem, received, [ref])
+        except Exception:  # noqa: BLE001 - the input still gets its answer
+            log.exception("reading a stamped samples message")
             work = Work("problem", internal_problem(RECOGNIZE), received, [ref])
         self.answers.put(work)
 

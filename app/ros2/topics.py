@@ -18,6 +18,7 @@ from rclpy.qos import (
 )
 
 SAMPLES = "~/samples"  # std_msgs/Float32MultiArray in
+SAMPLES_STAMPED = "~/samples_stamped"  # std_msgs/String in: {"header", "samples"} as JSON
 FRAMES = "~/frames"  # std_msgs/Float32MultiArray in: raw BioTac frames
 PROCEDURE = "~/procedure"  # std_msgs/String in: a procedure's name, or "end"
 RECOGNITION = "~/recognition"  # std_msgs/String out: POST /v1/recognize's JSON body

@@ -425,3 +425,40 @@ def test_the_readmes_rclpy_snippet_runs_against_a_real_bridge(samples_service, b
     assert out.returncode == 0, out.stderr
     sequence, _, results = out.stdout.strip().partition(" ")
     assert sequence == "1" and "class_name" in results, out.stdout
+
+
+def test_stamped_samples_get_the_robots_header_echoed(samples_service, bridge_factory, ros):
+    from std_msgs.msg import String
+
+    from app.ros2 import topics
+
+    bridge = bridge_factory("--url", samples_service)
+    publisher = ros.node.create_publisher(
+        String, f"{bridge.prefix}/samples_stamped", topics.reliable_qos(10)
+    )
+    try:
+        deadline = time.monotonic() + 20
+        while not publisher.get_subscription_count():
+            assert time.monotonic() < deadline, "the bridge never subscribed"
+            time.sleep(0.05)
+        x = quick_dataset().samples[:2].astype(np.float32)
+        header = {"stamp": {"sec": 1700000000, "nanosec": 5}, "frame_id": "left_index_tip"}
+        publisher.publish(String(data=json.dumps({"header": header, "samples": x[0].tolist()})))
+        publisher.publish(String(data=json.dumps({"header": header, "samples": x.tolist()})))
+        bad = {"header": {"stamp": {"sec": 1}}, "samples": x[0].tolist()}
+        publisher.publish(String(data=json.dumps(bad)))
+        got = bridge.next_answers(4)
+    finally:
+        ros.destroy(publisher)
+    assert [a.body["input"].get("header") for a in got] == [header] * 3 + [None]
+    assert [(a.body["input"]["sequence"], a.body["input"]["index"]) for a in got] == [
+        (1, None),
+        (2, 0),
+        (2, 1),
+        (3, None),
+    ]
+    expected = [*split(samples_service, x[0], x.shape[1:]), *split(samples_service, x, x.shape[1:])]
+    assert without_input(got[:3]) == expected
+    problem = got[3].body
+    assert problem["status"] == 422 and problem["errors"][0]["field"] == "header"
+    assert "header.stamp" in problem["detail"]
