@@ -7,7 +7,10 @@ from __future__ import annotations
 import functools
 import json
 
+from app.data.sources import load_dataset
+from app.evaluation.splits import make_zsl_splits
 from tests.bench import run_bench
+from tests.kept_share import assert_keeps
 
 run = functools.partial(run_bench, "bench.operating_points", timeout=600)
 
@@ -26,7 +29,17 @@ def test_each_stated_share_is_measured_on_trials_and_objects_it_never_saw(tmp_pa
         for figures in (own, half, most):
             assert 0 <= figures["kept"] <= 1 and 0 <= figures["detected"] <= 1
     kept = report["summary"][2]["kept"]
-    assert kept["low"] <= kept["mean"] <= kept["high"] and kept["mean"] >= 0.8
+    assert kept["low"] <= kept["mean"] <= kept["high"]
+    # each stated share, over both splits' held-out known touches (equal counts: the mean
+    # is the pooled share), within 3 binomial sigmas and the curve's resolution: the probe
+    # holds out one trial, one sample, of each known object, so its curve steps by one of
+    # them (0.35 kept for 0.5 and 1.0 for 0.99 measured on 2026-11-28)
+    dataset = load_dataset("simulated:30")
+    splits = make_zsl_splits(dataset, 4, 2, 3)
+    n = sum(len(s.known_test_idx) for s in splits)
+    resolution = 1 / (dataset.n_classes - 4)
+    for stated, figures in zip((0.9, 0.5, 0.99), report["summary"], strict=True):
+        assert_keeps(figures["kept"]["mean"], stated, n, resolution)
     assert (tmp_path / "operating_points.png").read_bytes()[:4] == b"\x89PNG"
     assert "| 0.99 |" in done.stdout
 
