@@ -304,13 +304,15 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
         self._set_prototypes(
             owner, np.bincount(embedding.subclass_, minlength=len(owner)).astype(np.float64)
         )
-        self.search_ = PrototypeSearch(
-            self.embedding_.transform(embedding.subclass_means_),
-            int(self.exact_below),
-            int(self.search_dims),
-        )
-        del embedding
+        points = self.embedding_.transform(embedding.subclass_means_)
+        self.search_ = PrototypeSearch(points, int(self.exact_below), int(self.search_dims))
         timings["embedding_s"] = time.perf_counter() - t
+        t = time.perf_counter()
+        self.novelty_tuning.touches = self._touch_curves(
+            z, y, np.asarray(dataset.trials), embedding.subclass_, points
+        )
+        del embedding, points
+        timings["touch_curves_s"] = time.perf_counter() - t
         bar.update()
         bar.close()
 
@@ -340,6 +342,79 @@ class PrototypeRecognizer(DescribedClasses, TactileRecognizer):
             "timings": timings,
             "params": self.get_params(),
         }
+
+    def _touch_curves(
+        self,
+        z: np.ndarray,
+        y: np.ndarray,
+        trials: np.ndarray,
+        subclass: np.ndarray,
+        points: np.ndarray,
+    ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """The calibration curves of answers fusing k touches of one known object
+        (``app.framework.novelty.touch_curves``), from leave-one-trial-out novelty scores of
+        the training touches in the fitted space: each touch scored against the prototypes
+        with its own trial's samples taken out of them (a mean less those samples, one
+        subtraction), as a new touch of a known object meets the deployed model. Read from
+        the whole trials of classes drawn at random, up to ``calibration_samples`` rows.
+        ``subclass``: each training row's prototype; ``points``: the prototypes' coordinates.
+
+        The threshold's own probe holds out one trial a class, too few to fuse: an answer
+        fusing three touches read the single touches' curve and kept more known than it
+        stated. Scored in the space fitted on every trial, a touch sits closer to its class
+        than a held-out one (PHAC-2, 6 development splits: 0.74 kept at 2 touches for 0.90
+        stated): each curve is mapped, through the share of single touches it keeps here,
+        onto the probe's curve of held-out touches."""
+        from app.framework.novelty import touch_curves
+
+        rows = _whole_trials(y, trials, int(self.calibration_samples), int(self.seed))
+        if rows is None:
+            return {}
+        e = self.embedding_.transform(z[rows])
+        yr, tr, sub = y[rows], trials[rows], subclass[rows]
+        # each (prototype, trial)'s samples among the rows: every trial of a drawn class is
+        # there whole, so these are all of the trial's samples in that prototype
+        groups, group_of = np.unique(np.stack([sub, tr], axis=1), axis=0, return_inverse=True)
+        group_of = group_of.ravel()
+        group_n = np.bincount(group_of).astype(np.float64)
+        group_sum = np.zeros((len(groups), e.shape[1]))
+        np.add.at(group_sum, group_of, e)
+        trial_n = np.unique(np.stack([yr, tr], axis=1), axis=0, return_inverse=True)[1].ravel()
+        trial_n = np.bincount(trial_n)[trial_n].astype(np.float64)
+
+        ids, dist = self.search_.nearest(e, int(self.search_k))
+        dist = dist.astype(np.float64)
+        count = self.proto_count_[ids].copy()
+        cls = self.proto_class_[ids]
+        class_n = self.class_n_[cls] - np.where(cls == yr[:, None], trial_n[:, None], 0.0)
+        # candidates holding samples of the row's own trial: their means without them
+        key = groups[:, 0] * (int(tr.max()) + 1) + groups[:, 1]
+        wanted = ids * (int(tr.max()) + 1) + tr[:, None]
+        at = np.minimum(np.searchsorted(key, wanted), len(key) - 1)
+        i, j = np.nonzero((key[at] == wanted) & (ids >= 0))
+        g = at[i, j]
+        left = count[i, j] - group_n[g]
+        mean = points[ids[i, j]] * count[i, j][:, None] - group_sum[g]
+        mean /= np.maximum(left, 1.0)[:, None]
+        count[i, j] = left
+        dist[i, j] = np.where(left > 0, ((e[i] - mean) ** 2).sum(axis=1), dist[i, j])
+        gone = count <= 0
+        count = np.where(gone, 1.0, count)
+        class_n = np.maximum(class_n, 1.0)
+        dims = e.shape[1]
+        logp = class_log_posterior(dist, count, class_n, cls, self.tau_, dims, gone)
+        score = novelty_scores(logp, dist, count, self.tau_, dims, self.distance_weight_, gone)
+        # these scores sit lower than held-out ones (the space was fitted on every trial):
+        # each curve's thresholds are mapped through the share of single touches they keep
+        # here onto the probe's curve, the threshold keeping that share of held-out touches
+        single = np.sort(score)
+        probe = self.novelty_tuning
+
+        def held_out(thresholds: np.ndarray) -> np.ndarray:
+            share = np.searchsorted(single, thresholds, side="right") / len(single)
+            return np.interp(share, probe.known_kept, probe.thresholds)
+
+        return {k: (held_out(t), q) for k, (t, q) in touch_curves(score, np.c_[yr, tr]).items()}
 
     def _embedding(self, modes: int | None = None) -> SubclassEmbedding:
         modes = int(self.max_modes) if modes is None else modes
@@ -899,6 +974,20 @@ def _held_out_trials(y: np.ndarray, trials: np.ndarray, rng: np.random.Generator
     pick = first + (rng.random(len(classes)) * n_trials).astype(np.int64)
     chosen[classes] = np.where(n_trials >= 2, pairs[pick, 1], -1)
     return (chosen[y] == trials) & (chosen[y] != -1)
+
+
+def _whole_trials(y: np.ndarray, trials: np.ndarray, most: int, seed: int) -> np.ndarray | None:
+    """Sorted rows of whole classes with two or more trials, classes drawn at random until
+    ``most`` rows (at least one class); None where no class has two trials."""
+    pairs = np.unique(np.stack([y, trials], axis=1), axis=0)
+    classes, n_trials = np.unique(pairs[:, 0], return_counts=True)
+    classes = classes[n_trials >= 2]
+    if len(classes) == 0:
+        return None
+    rows_of = np.bincount(y, minlength=int(y.max()) + 1)
+    order = np.random.default_rng(seed).permutation(classes)
+    taken = order[: max(1, int(np.searchsorted(np.cumsum(rows_of[order]), most, "right")))]
+    return np.flatnonzero(np.isin(y, taken))
 
 
 def _class_totals(owner: np.ndarray, counts: np.ndarray, n: int | None = None) -> np.ndarray:
