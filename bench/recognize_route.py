@@ -8,14 +8,14 @@ Each tree (this one, and ``--against``: another checkout, e.g. ``git worktree ad
 /tmp/base <commit>``) runs in a process of its own: the quick service of ``app.testing``
 (the simulator, method ``best`` with the tests' quick parameters, SQLite), its ASGI app
 called directly (no socket, no client: the route's own CPU, the fast path included) with
-one-sample JSON bodies, the simulator's first sample. The two alternate round by round,
-``--requests`` requests each a round; each round's ratio (this tree over the other, CPU
-microseconds a request) is taken between adjacent phases, and the median and range over
-``--rounds`` are reported.
+one-sample JSON bodies, the simulator's first sample. The two alternate, ``--requests``
+requests each a round, taking turns going first; each round's ratio (this tree over the
+other, CPU microseconds a request) is taken between adjacent phases, and the median and
+range over ``--rounds`` are reported.
 
-Then, in this tree only: a table of ``--objects`` objects, one touch each
+Then, in this tree only, as many rounds: a table of ``--objects`` objects, one touch each
 (``{"samples", "objects"}``), against ``--objects`` single-sample requests one after
-the other and against one ordinary batch of as many samples, per round, as ratios.
+the other and against one ordinary batch of as many samples, as ratios.
 """
 
 from __future__ import annotations
@@ -187,16 +187,20 @@ def main() -> int:
     other = _start(args.against.resolve()) if args.against else None
     rounds: list[dict] = []
     try:
-        for _ in range(args.rounds):
-            row = {"this_us": _ask(this, f"single {args.requests}")["us"]}
+        for i in range(args.rounds):
+            row: dict = {}
+            # the two trees take turns going first: neither always follows the other
+            for name, proc in (("this", this), ("other", other))[:: 1 if i % 2 == 0 else -1]:
+                if proc is not None:
+                    row[f"{name}_us"] = _ask(proc, f"single {args.requests}")["us"]
             if other is not None:
-                row["other_us"] = _ask(other, f"single {args.requests}")["us"]
                 row["ratio"] = row["this_us"] / row["other_us"]
+            rounds.append(row)
+            print(json.dumps({k: round(v, 3) for k, v in row.items()}), flush=True)
+        for row in rounds:  # tables after every single-request round: none disturbs them
             row.update(_ask(this, f"table {args.requests // 4} {args.objects}"))
             row["table_over_singles"] = row["table_us"] / row["singles_us"]
             row["table_over_batch"] = row["table_us"] / row["batch_us"]
-            rounds.append(row)
-            print(json.dumps({k: round(v, 3) for k, v in row.items()}), flush=True)
     finally:
         for proc in (this, other):
             if proc is not None:
