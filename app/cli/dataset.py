@@ -71,8 +71,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     bag.add_argument("--out", required=True, help="folder to write (created if absent)")
     bag.add_argument(
         "--procedures",
-        default="tap,hold,squeeze",
-        help="the procedures of a trial, in order, as the marks name them (tap,hold,squeeze)",
+        help="the procedures of a trial, in order, as the marks name them (tap,hold,squeeze); "
+        "of samples, their layout (default: the one the recorded /diagnostics name)",
     )
     bag.add_argument("--overwrite", action="store_true", help="replace files already in --out")
     bag.set_defaults(handler=run_bag)
@@ -164,16 +164,20 @@ def run_bag(args: argparse.Namespace) -> int:
     from app.data.sources import open_dataset
 
     recordings = [rosbag.Recording.parse(r) for r in args.recordings]
-    procedures = tuple(p.strip() for p in args.procedures.split(",") if p.strip())
-    if not procedures:
-        raise ValueError("--procedures names no procedure")
+    procedures = None
+    if args.procedures is not None:
+        procedures = tuple(p.strip() for p in args.procedures.split(",") if p.strip())
+        if not procedures:
+            raise ValueError("--procedures names no procedure")
     out = Path(args.out)
     topics, _ = rosbag.read_messages(recordings[0].path, ())
     if rosbag.find_topic(topics, rosbag.FRAMES) is not None:
-        rosbag.write_biotac_from_bags(recordings, out, procedures, args.overwrite)
+        marks = procedures or rosbag.DEFAULT_PROCEDURES
+        rosbag.write_biotac_from_bags(recordings, out, marks, args.overwrite)
         spec = f"biotac:{out}"
     else:
-        write_folder(rosbag.samples_from_bags(recordings), out, overwrite=args.overwrite)
+        dataset = rosbag.samples_from_bags(recordings, procedures)
+        write_folder(dataset, out, overwrite=args.overwrite)
         spec = f"folder:{out}"
     print(json.dumps({"out": str(out), "spec": spec, **summarize(open_dataset(spec))}, indent=2))
     return 0

@@ -30,6 +30,7 @@ from app.data.biotac import RawTrial, RawTrialError, write_biotac_h5
 from app.data.dataset import DatasetError, TactileDataset
 
 FRAMES, PROCEDURE, SAMPLES = "tactile_zsl/frames", "tactile_zsl/procedure", "tactile_zsl/samples"
+DIAGNOSTICS = "/diagnostics"
 DEFAULT_PROCEDURES = ("tap", "hold", "squeeze")
 
 
@@ -98,7 +99,7 @@ def bag_trials(
 ) -> list[RawTrial]:
     """The raw trials of one bag (frames and procedure marks, or frames alone)."""
     from app.ros2.arrays import MessageShapeError, fingers_of, frame_of
-    from app.ros2.trials import END, TrialAssembler, TrialProblem
+    from app.ros2.trials import END, MarkOrder, TrialAssembler, TrialProblem
 
     names, messages = read_messages(path, (FRAMES, PROCEDURE))
     frames = [(stamp, m) for topic, stamp, m in messages if topic == FRAMES]
@@ -111,24 +112,40 @@ def bag_trials(
             return [RawTrial(fingers=fingers_of(stacked))]
         except (MessageShapeError, RawTrialError) as exc:
             raise BagError(f"{path}: {exc}") from None
+    # the bridge's own rule: marks placed among the frames by their stamps (MarkOrder),
+    # here the bag's recorded times (rosbags reads no source stamps), then assembled
     assembler = TrialAssembler(rest_frames=rest_frames, max_frames=10**7)
-    trials, last, n_frames = [], None, 0
-    for topic, stamp, msg in messages:
-        where = f"{path}: {topic} message at {stamp} ns"
+    order = MarkOrder(wait=float("inf"))
+    trials: list[RawTrial] = []
+    last: list[dict[str, Any] | None] = [None]
+
+    def follow(mark: tuple[str, int], late: int) -> None:
+        text, stamp = mark
+        where = f"{path}: {PROCEDURE} message at {stamp} ns"
         try:
-            if topic == FRAMES:
-                assembler.frame(frame_of(msg))
-                n_frames += 1
-                continue
-            done = assembler.procedure(msg.data, procedures)
-            last = done if done is not None else last
-            if msg.data.strip() == END:
-                if last is None:
-                    raise BagError(f"{where}: the trial ended before any procedure was done")
-                trials.append(_whole(last, procedures, f"{path}: trial {len(trials)}"))
-                last = None
-        except (MessageShapeError, TrialProblem) as exc:
+            done = assembler.procedure(text, procedures, late)
+        except TrialProblem as exc:
             raise BagError(f"{where}: {exc}") from None
+        last[0] = done if done is not None else last[0]
+        if text.strip() == END:
+            if last[0] is None:
+                raise BagError(f"{where}: the trial ended before any procedure was done")
+            trials.append(_whole(last[0], procedures, f"{path}: trial {len(trials)}"))
+            last[0] = None
+
+    for topic, stamp, msg in messages:
+        if topic == FRAMES:
+            for mark in order.frame(stamp, 0.0):
+                follow(mark, 0)
+            try:
+                assembler.frame(frame_of(msg))
+            except MessageShapeError as exc:
+                raise BagError(f"{path}: {topic} message at {stamp} ns: {exc}") from None
+        else:
+            for mark, late in order.mark((msg.data, stamp), stamp):
+                follow(mark, late)
+    for mark in order.drain():
+        follow(mark, 0)
     if assembler.open:
         raise BagError(f"{path}: the last trial has no 'end' mark; it would be incomplete")
     return trials
@@ -171,14 +188,37 @@ def write_biotac_from_bags(
     return {name: len(groups) for name, groups in trials.items()}
 
 
-def samples_from_bags(recordings: Sequence[Recording]) -> TactileDataset:
-    """The samples of the bags as a dataset: each message one trial of its bag's object."""
+def recorded_procedures(messages: Sequence[tuple[str, int, Any]]) -> tuple[str, ...] | None:
+    """The procedures the bridge's recorded ``/diagnostics`` name (its model's sample
+    layout), the last recorded; None where the bag holds none."""
+    found = None
+    for topic, _, msg in messages:
+        if topic != DIAGNOSTICS:
+            continue
+        for status in msg.status:
+            if status.name.endswith("tactile_zsl: recognition"):
+                values = {kv.key: kv.value for kv in status.values}
+                if values.get("procedures"):
+                    found = tuple(values["procedures"].split(","))
+    return found
+
+
+def samples_from_bags(
+    recordings: Sequence[Recording], procedures: Sequence[str] | None = None
+) -> TactileDataset:
+    """The samples of the bags as a dataset: each message one trial of its bag's object.
+    ``procedures``: the samples' procedure layout (``app.data.procedures``); None: the one
+    the bridge's ``/diagnostics`` name where the bag recorded them, else none."""
     from app.ros2.arrays import MessageShapeError, array_of
 
     objects = list(dict.fromkeys(rec.object for rec in recordings))
     read: list[tuple[str, np.ndarray, int]] = []  # (where, array, label)
+    layouts: set[tuple[str, ...]] = set()
     for rec in recordings:
-        names, messages = read_messages(rec.path, (SAMPLES,))
+        names, messages = read_messages(rec.path, (SAMPLES, DIAGNOSTICS))
+        if (layout := recorded_procedures(messages)) is not None:
+            layouts.add(layout)
+        messages = [m for m in messages if m[0] == SAMPLES]
         if not messages:
             raise BagError(f"{rec.path}: no samples on a topic ending in {SAMPLES!r} ({names})")
         for _, stamp, msg in messages:
@@ -200,12 +240,23 @@ def samples_from_bags(recordings: Sequence[Recording]) -> TactileDataset:
             raise BagError(f"{where}: NaN or infinite values; a dataset holds whole samples")
         samples += list(batch)
         labels += [label] * len(batch)
-    return TactileDataset(
-        samples=np.stack(samples),
-        labels=np.array(labels),
-        trials=np.arange(len(samples)),
-        class_attributes=np.zeros((len(objects), 0), np.float32),
-        attribute_names=(),
-        class_names=tuple(objects),
-        name="bags",
-    )
+    if procedures is None and len(layouts) > 1:
+        raise BagError(
+            f"the bags' /diagnostics name several procedure layouts ({sorted(layouts)}); "
+            "give --procedures"
+        )
+    if procedures is None:
+        procedures = layouts.pop() if layouts else ()
+    try:
+        return TactileDataset(
+            samples=np.stack(samples),
+            labels=np.array(labels),
+            trials=np.arange(len(samples)),
+            class_attributes=np.zeros((len(objects), 0), np.float32),
+            attribute_names=(),
+            class_names=tuple(objects),
+            name="bags",
+            procedures=tuple(procedures),
+        )
+    except DatasetError as exc:
+        raise BagError(f"samples of shape {list(shape)}: {exc}") from None

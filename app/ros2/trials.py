@@ -166,7 +166,7 @@ class MarkOrder:
         self._last_frame = 0.0
         self._armed = False  # the last flush found the marks due: the next one follows them
 
-    def frame(self, stamp: int, now: float) -> list[str]:
+    def frame(self, stamp: int, now: float) -> list[Any]:
         """The marks due before a frame stamped ``stamp``, in order; it is recorded."""
         due = []
         while self._pending and self._pending[0][0] <= stamp:
@@ -175,8 +175,10 @@ class MarkOrder:
         self._last_frame, self._armed = now, False
         return due
 
-    def mark(self, name: str, stamp: int) -> list[tuple[str, int]]:
-        """The marks to follow now, each with how many frames it falls before."""
+    def mark(self, name: Any, stamp: int) -> list[tuple[Any, int]]:
+        """The marks to follow now, each with how many frames it falls before. ``name``
+        is passed through as it is (the bridge passes the mark with its message's
+        ``InputRef``)."""
         if self._pending or not self._stamps or self._stamps[-1] < stamp:
             self._pending.append((stamp, name))
             return []
@@ -187,7 +189,7 @@ class MarkOrder:
             late += 1
         return [(name, late)]
 
-    def flush(self, now: float) -> list[str]:
+    def flush(self, now: float) -> list[Any]:
         """Marks that waited ``wait`` seconds without a frame, at this flush and the one
         before with no frame between: follow them as they are."""
         if not self._pending or now - self._last_frame < self.wait:
@@ -197,6 +199,10 @@ class MarkOrder:
             self._armed = True
             return []
         self._armed = False
+        return self.drain()
+
+    def drain(self) -> list[Any]:
+        """Every mark still waiting, in order (a recording's end: no frame will come)."""
         due = [name for _, name in self._pending]
         self._pending.clear()
         return due

@@ -139,3 +139,25 @@ def test_bags_that_cannot_become_a_dataset_are_refused_by_name(pilot_trials, tmp
     assert "give each bag as OBJECT=PATH" in capsys.readouterr().err
     assert main(["dataset", "bag", "--out", out, f"cork={tmp_path / 'nowhere'}"]) == 2
     assert "no bag there" in capsys.readouterr().err
+
+
+def test_bags_of_samples_keep_the_procedure_layout_the_bridge_named(tmp_path, capsys):
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    status = DiagnosticStatus(name=f"{NS}: recognition")
+    status.values = [KeyValue(key="procedures", value="squeeze,hold,slide,move_down")]
+    diagnostics = ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", 10**18 - 5)
+    x = np.random.default_rng(1).normal(size=(2, 8, 30)).astype(np.float32)
+    messages = [(*diagnostics, DiagnosticArray(status=[status]))]
+    messages += [(f"{NS}/samples", ARRAY, 10**18 + k, multiarray(s)) for k, s in enumerate(x)]
+    bag = write_bag(tmp_path / "cup", messages, "mcap")
+    out = tmp_path / "dataset"
+    assert main(["dataset", "bag", "--out", str(out), f"cup={bag}"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["procedures"] == ["squeeze", "hold", "slide", "move_down"]
+    assert load_folder(out).procedures == ("squeeze", "hold", "slide", "move_down")
+
+    # a layout given that the samples' 8 rows cannot hold is refused by name
+    again = str(tmp_path / "again")
+    assert main(["dataset", "bag", "--out", again, "--procedures", "a,b,c", f"cup={bag}"]) == 2
+    assert "samples of shape [8, 30]" in capsys.readouterr().err
