@@ -29,7 +29,7 @@ import io
 import json
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -112,6 +112,7 @@ class TactileClient:
         min_model_version: int | None = None,
         known_kept: float | None = None,
         outliers: str | None = None,
+        objects: Sequence[str | int] | None = None,
     ) -> dict[str, Any]:
         """Recognise one sample or a batch (N, *input shape); with ``same_object``, the
         samples are touches of one object and get one answer, their evidence fused. A
@@ -126,12 +127,65 @@ class TactileClient:
         calibration curve); each result names the threshold it used. ``outliers``:
         what an input outlier's answer is, ``"abstain"`` (no class named, ``kind``
         ``"input_outlier"``) or ``"answer"`` (the model's guess, flagged); None: the
-        service's, offline ``"abstain"``.
+        service's, offline ``"abstain"``. ``objects``: a table of objects
+        (docs/TABLES.md), the label (str or int) of the object each sample was touched on;
+        one answer per object, named jointly (no class given to two objects), with
+        ``object``, ``alone``, ``margin`` and ``touches``; offline, the model file names
+        the table as the service would. Not with ``same_object``.
 
         A batch of more samples than the service's batch limit (``batch_limit()``) is sent
         in requests under it and the answers joined in order, all from one model version;
-        touches of one object (``same_object``) are one request, which the service refuses
-        (422) past its limit."""
+        touches of one object (``same_object``) and a table (``objects``) are one request,
+        which the service refuses (422) past its limit."""
+        if objects is not None:  # a table: one JSON request (labels keep their type)
+            objects = list(objects)
+            if same_object:
+                raise ValueError(
+                    "objects labels each touch's object and same_object says all are one: "
+                    "use one or the other"
+                )
+            x = np.asarray(samples, dtype=np.float32)
+            params = _query(
+                outliers=None if outliers is None else check_outliers(outliers),
+                target_confidence=target_confidence,
+                known_kept=known_kept,
+                min_model_version=min_model_version,
+            )
+            # one sample alone goes without its list, as the route takes it
+            body = {"samples": _json_sample(x), "objects": objects}
+            try:
+                answer = self._send("POST", "/v1/recognize", json=body, params=params).json()
+            except ServiceUnreachable as exc:
+                from app.service.table_answers import answer_table, check_labels, table_records
+
+                model, meta = self._offline_model(exc)
+                x = model.validate_samples(x, partial=True)
+                labels = check_labels(objects, len(x))
+                policy = outliers or ABSTAIN
+                table = answer_table(
+                    model,
+                    labels,
+                    x,
+                    None,
+                    self.offline_top_k,
+                    target_confidence,
+                    model.operating_point(known_kept),
+                    policy,
+                )
+                ids = meta.get("class_ids", {})
+                batch = table.batch
+                results = table_records(
+                    table,
+                    batch.records(ids, policy),
+                    lambda name: {"class_id": ids.get(name), "class_name": name},
+                    dict(zip(batch.class_names, batch.class_kinds, strict=True)),
+                )
+                return {
+                    "model_version": meta.get("version"),
+                    "results": results,
+                    "source": "offline",
+                }
+            return {**answer, "source": "service"}
         x = np.asarray(samples, dtype=np.float32)
         params = _query(
             same_object=same_object,

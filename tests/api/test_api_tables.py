@@ -360,3 +360,35 @@ def test_an_object_touched_by_a_broken_sensor_abstains_and_takes_no_class(best_s
     ).json()["results"]
     assert guessed[0]["input_outlier"] is True and guessed[0]["alone"] is not None
     assert_same_table(guessed, expected(rec, table, objects, kept, class_ids))
+
+
+def test_the_client_sends_tables_and_names_them_offline_as_the_service(
+    best_service, best_base, tmp_path
+):
+    from app.client import TactileClient
+    from app.testing.harness import free_port
+
+    client, app, _ = best_service
+    model_file = tmp_path / "robot" / "model.bundle"
+    robot = TactileClient(http=client, model_file=model_file, retries=0, timeout=5)
+    robot.sync_model()
+    x = table_of(best_base[1], 2)
+    labels = [3, "cup", "cup", 3, "lid", "box", "box", "lid"]
+    online = robot.recognize(x, objects=labels)
+    away = TactileClient(
+        f"http://127.0.0.1:{free_port()}", model_file=model_file, retries=0, timeout=2
+    )
+    offline = away.recognize(x, objects=labels)
+    assert online["source"] == "service" and offline["source"] == "offline"
+    assert [a["object"] for a in online["results"]] == [3, "cup", "lid", "box"]
+    assert offline["model_version"] == online["model_version"]
+    assert_same_table(offline["results"], picked(online["results"]))
+    np.testing.assert_allclose(
+        [a["novelty_score"] for a in offline["results"]],
+        [a["novelty_score"] for a in online["results"]],
+        rtol=1e-6,
+    )
+    with pytest.raises(ValueError, match="use one or the other"):
+        robot.recognize(x, same_object=True, objects=labels)
+    with pytest.raises(LabelError, match="2 labels for 8 samples"):
+        away.recognize(x, objects=labels[:2])
