@@ -79,9 +79,13 @@ def _fit(dataset, split, seed, params=None):
 
 
 def _rng(seed, split):
+    """The tables' draws of ``evaluate --tables`` on this split (its method seed's stream).
+    The development files (docs/results/tables/development/) drew from the run seed's
+    instead: other tables of the same splits."""
+    from app.evaluation.protocol import split_method_seed
     from app.evaluation.tables import TABLES_STREAM
 
-    return np.random.default_rng([seed, split.index, TABLES_STREAM])
+    return np.random.default_rng([split_method_seed(seed, split.index), split.index, TABLES_STREAM])
 
 
 def novel_figures(model, novel, rng, log_fusion=False) -> dict[str, float]:
