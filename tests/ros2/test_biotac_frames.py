@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import httpx
+import numpy as np
 import pytest
 
 from app.client import TactileClient
@@ -144,3 +145,58 @@ def test_frames_lost_on_the_way_are_counted_and_named_in_the_trials_answer(pilot
     assert int(diagnostics["frames"]) + missing == published - (150 - heard_from)
     # the trial's answer counts the frames it lost (not those of its rest)
     assert answer.body["input"]["frames_missing"] == missing - int(rest["frames_missing"])
+
+
+def test_a_recording_cut_live_and_from_its_bag_gives_the_same_trials(
+    pilot, bridge_factory, ros, tmp_path
+):
+    """One replay, heard by the bridge and by a recorder as ``ros2 bag record`` hears it
+    (each message at its receipt time): the bag's trial is the one the bridge answered."""
+    from std_msgs.msg import Float32MultiArray, String
+
+    from app.data.rosbag import bag_trials
+    from app.ros2 import topics
+
+    from .test_bags import ARRAY, TEXT, write_bag
+
+    url, held = pilot
+    procedures = tuple(httpx.get(f"{url}/v1/models/active").json()["procedures"])
+    bridge = bridge_factory("--url", url)
+    heard: list[tuple[str, str, int, object]] = []
+
+    def recorder(topic: str, kind: str):
+        return lambda msg, info: heard.append((topic, kind, info["received_timestamp"], msg))
+
+    frames_topic, marks_topic = f"{bridge.prefix}/frames", f"{bridge.prefix}/procedure"
+    subs = [
+        ros.node.create_subscription(
+            Float32MultiArray,
+            frames_topic,
+            recorder(frames_topic, ARRAY),
+            topics.sensor_qos(10_000),
+        ),
+        ros.node.create_subscription(
+            String, marks_topic, recorder(marks_topic, TEXT), topics.reliable_qos(100)
+        ),
+    ]
+    deadline = time.monotonic() + 20
+    while (
+        bridge.frames.get_subscription_count() < 2 or bridge.procedures.get_subscription_count() < 2
+    ):
+        assert time.monotonic() < deadline, "the recorder never matched"
+        time.sleep(0.05)
+    replay = replay_trial(bridge, held["cork"], procedures, period=0.01)
+    answers = bridge.next_answers(len(procedures), timeout=120)
+    time.sleep(0.5)
+    ros.destroy(*subs)
+    assert len([m for m in heard if m[1] == ARRAY]) == replay.frames
+
+    live = [{k: v for k, v in a.body.items() if k != "input"} for a in answers]
+    assert live == [http_answer(url, t) for t in replay.expected]
+    bag = write_bag(tmp_path / "cork_live", sorted(heard, key=lambda m: m[2]), "mcap")
+    (trial,) = bag_trials(bag, procedures)
+    expected = replay.expected[-1]
+    assert [list(p) for p in trial.phases] == expected["phases"]
+    for got, want in zip(trial.fingers, expected["fingers"], strict=True):
+        for channel, values in want.items():
+            assert np.array_equal(getattr(got, channel), np.asarray(values, np.float32)), channel
