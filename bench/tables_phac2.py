@@ -272,22 +272,32 @@ def report(dataset, seed: int, n_splits: int) -> dict:
             figures = per_touch(zsl, known, novel, known_names, novel_names)
             figures.update(measure(zsl, known, novel, known_names, novel_names, _rng(seed, split)))
             figures.update(grouped_figures(zsl, novel, split.index))
-            row.update({f"{kind}/{k}": v for k, v in figures.items()})
+            row[kind] = figures
         if times is None:
             times = timing(by_vector, known, novel)
         per_split.append(row)
         print(f"split {split.index + 1}: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
-    keys = [k for k in per_split[0] if k != "split"]
-    out = {"summary": summary(per_split, keys), "splits": per_split, "timing": times}
-    out["paired"] = {
-        k: paired(per_split, f"vector/{k}", f"vector/{k.replace('joint', 'alone')}")
-        for k in ("tables1_zsl_joint", "tables2_zsl_joint", "tables3_zsl_joint")
+    kinds = ("vector", "sentence")
+    out = {
+        "summary": {kind: summary([r[kind] for r in per_split]) for kind in kinds},
+        "splits": per_split,
+        "timing": times,
     }
-    out["paired"]["tables_mixed_gzsl_h"] = paired(
-        per_split, "vector/tables_mixed_gzsl_h", "vector/tables_mixed_alone_gzsl_h"
-    )
+    out["paired"] = {}  # joint − alone on the same tables
+    for kind in kinds:
+        rows = [r[kind] for r in per_split]
+        out["paired"][kind] = {
+            k: paired(rows, k, k.replace("joint", "alone"))
+            for k in ("tables1_zsl_joint", "tables2_zsl_joint", "tables3_zsl_joint")
+        }
+        out["paired"][kind]["tables_mixed_gzsl_h"] = paired(
+            rows, "tables_mixed_gzsl_h", "tables_mixed_alone_gzsl_h"
+        )
+        out["paired"][kind]["all_touches_grouped"] = paired(
+            rows, "all_touches_grouped", "all_touches_labelled"
+        )
     out["sentence_ratio"] = {
-        k: out["summary"][f"sentence/{k}"]["mean"] / out["summary"][f"vector/{k}"]["mean"]
+        k: out["summary"]["sentence"][k]["mean"] / out["summary"]["vector"][k]["mean"]
         for k in (
             "tables1_zsl_joint",
             "tables2_zsl_joint",
@@ -307,9 +317,9 @@ def plot(result: dict, path: Path) -> None:
     s = result["summary"]
     for kind, marker in (("vector", "o"), ("sentence", "s")):
         for how, ls in (("joint", "-"), ("alone", "--")):
-            keys = [f"{kind}/tables{k}_zsl_{how}" for k in (1, 2, 3)]
-            mean = np.array([s[k]["mean"] for k in keys])
-            ci = np.array([s[k]["ci95"] for k in keys])
+            keys = [f"tables{k}_zsl_{how}" for k in (1, 2, 3)]
+            mean = np.array([s[kind][k]["mean"] for k in keys])
+            ci = np.array([s[kind][k]["ci95"] for k in keys])
             ax.errorbar(
                 [1, 2, 3], mean, yerr=np.abs(ci.T - mean), marker=marker, ls=ls, capsize=3,
                 label=f"{kind}, {how}",
@@ -366,8 +376,10 @@ def main(argv: list[str] | None = None) -> int:
     (out_dir / "tables.json").write_text(json.dumps(result, indent=1))
     if args.mode == "report":
         plot(result, out_dir / "tables.png")
-        for k, v in result["summary"].items():
-            print(f"{k:45s} {v['mean']:.3f} [{v['ci95'][0]:.3f}, {v['ci95'][1]:.3f}]")
+        for kind, figures in result["summary"].items():
+            for k, v in figures.items():
+                lo, hi = v["ci95"]
+                print(f"{kind + ' ' + k:45s} {v['mean']:.3f} [{lo:.3f}, {hi:.3f}]")
         print("paired joint - alone:", json.dumps(result["paired"]))
         print("sentence / vector:", json.dumps(result["sentence_ratio"]))
         print("timing:", json.dumps(result["timing"]))
