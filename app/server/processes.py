@@ -139,6 +139,16 @@ def _stop_with_parent() -> None:
         os.kill(os.getpid(), signal.SIGTERM)
 
 
+def _exit_cleanly(signum: int, frame: Any) -> None:
+    """Stop by leaving the interpreter, not by the signal's default action. uvicorn stops
+    gracefully on SIGTERM or SIGINT, then raises the signal again with the handler found
+    before it ran: under the default one the process dies without its exit functions, and
+    the named semaphores it made (a spawned process's ``multiprocessing`` locks: tqdm's, once
+    a progress bar is drawn) are never unlinked, so the resource tracker reports them as
+    leaked when ``serve`` stops."""
+    raise SystemExit(0)
+
+
 def _run_one(overrides: dict[str, Any], server: dict[str, Any], index: int, serving: Any) -> None:
     class Server(uvicorn.Server):
         async def startup(self, sockets: list[socket.socket] | None = None) -> None:
@@ -156,6 +166,8 @@ def _run_one(overrides: dict[str, Any], server: dict[str, Any], index: int, serv
     from app.config import Settings
 
     configure_logging()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, _exit_cleanly)
     _stop_with_parent()
     settings = Settings(**overrides)
     sock = socket.socket(_family(settings.host), socket.SOCK_STREAM)
