@@ -349,6 +349,9 @@ def main(argv: list[str] | None = None) -> int:
         "with best's own zero-shot part only",
     )
     args = parser.parse_args(argv)
+    seeds = [int(s) for s in args.seeds.split(",")]
+    if args.mode == "development" and args.seed in seeds:
+        parser.error(f"seed {args.seed} is the reported seed: development runs never use it")
     from app.data.phac2 import load_phac2
     from app.data.sources import default_phac2_path
 
@@ -361,9 +364,6 @@ def main(argv: list[str] | None = None) -> int:
         ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
     ).stdout.strip()
     if args.mode == "development":
-        seeds = [int(s) for s in args.seeds.split(",")]
-        if 1000 in seeds:
-            parser.error("seed 1000 is the reported seed: development runs never use it")
         out_dir = args.out or Path("docs/results/tables/development")
         result = {"seeds": seeds, "splits": args.splits or 10, "commit": commit}
         result["grid"] = EDGE_GRID if args.edges else SCORER_GRID
