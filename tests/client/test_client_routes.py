@@ -11,6 +11,7 @@ import pytest
 from app.api.routes.health import Liveness
 from app.api.schemas import (
     AttributeChanged,
+    AttributeList,
     ClassCreated,
     ClassList,
     ClassOut,
@@ -112,6 +113,11 @@ def test_the_lists_answer_as_their_routes_page_by_page(best_service, best_base):
     assert models == client.get("/v1/models").json()
     assert robot.every("models") == list_all(client, "/v1/models", "models")
     assert robot.every("models")[-1]["version"] == robot.active_model()["version"]
+
+    vocabulary = robot.attributes()
+    same_shape(vocabulary, AttributeList)
+    assert vocabulary == client.get("/v1/attributes").json()
+    assert vocabulary["attributes"] == list(dataset.attribute_names)
 
     with pytest.raises(ServiceError) as refused:  # the service names the bad filter
         robot.jobs(status="lost")
