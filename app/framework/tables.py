@@ -368,7 +368,8 @@ def name_table(
 def group_touches(recognizer: Any, samples: Any, n_objects: int, seed: int = 0) -> np.ndarray:
     """Object labels (0 … n_objects-1, first-appearance order) for unlabelled touches: k-means
     (``n_init`` 10, seeded) on each touch's score vector, its known-class and novel-class
-    probabilities side by side. TableError where ``n_objects`` is not between 1 and the
+    probabilities side by side. ``samples``: fixed-shape samples (for a raw-trial model,
+    its images: ``trial_samples``). TableError where ``n_objects`` is not between 1 and the
     number of samples."""
     from sklearn.cluster import KMeans
 
