@@ -36,6 +36,7 @@ array where a part is byte for byte one of its own.
 
 from __future__ import annotations
 
+import ctypes
 import faulthandler
 import hashlib
 import itertools
@@ -62,6 +63,7 @@ from app.framework.recognizer import TactileRecognizer
 #: where the kernel's cgroup files are mounted, and this process's cgroups
 CGROUP_ROOT = Path("/sys/fs/cgroup")
 PROC_CGROUP = Path("/proc/self/cgroup")
+PR_SET_PDEATHSIG = 1  # prctl(2): the signal a process gets when its parent ends
 # cgroup v1 writes "no limit" as the largest page-aligned int64
 _V1_UNLIMITED = 2**62
 
@@ -250,6 +252,20 @@ def _failure(folder: Path, exitcode: int | None) -> tuple[str, str]:
     return "error", f"{last}; {how}" if last else how
 
 
+def _die_with_parent() -> None:
+    """Ask Linux for SIGKILL when the thread that started this child ends: an API process
+    stopped (or killed) mid-refit cannot kill its group, and the refit would go on alone
+    for up to TACTILE_REFIT_SECONDS, its result read by nobody."""
+    parent = os.getppid()
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):  # not Linux: the parent's own kill is all there is
+        return
+    if os.getppid() != parent:  # it died before we asked
+        os._exit(1)
+
+
 def _child(
     task: Callable[..., TactileRecognizer],
     args: tuple,
@@ -257,6 +273,7 @@ def _child(
     memory_limit_bytes: int,
 ) -> None:
     os.setpgid(0, 0)  # a group of its own, which a timeout kills whole
+    _die_with_parent()
     # the libraries a fit loads, before the limit: they count against it all the same (their
     # memory is data already), but faiss's library crashed while it loaded under a limit it
     # did not fit in (SIGSEGV, at 500 MiB), where an allocation refused later is an error
