@@ -36,7 +36,9 @@ def _writes_its_pid_and_sleeps(dataset, base, pid_file: str):
 @pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGTERM])
 def test_the_refit_child_dies_with_its_parent(tmp_path, how):
     pid_file = tmp_path / "refit.pid"
-    parent = subprocess.Popen([sys.executable, "-c", PARENT, str(pid_file)], cwd=ROOT)
+    # its temporary folder, which a killed parent cannot remove, in the test's own
+    env = {**os.environ, "TMPDIR": str(tmp_path)}
+    parent = subprocess.Popen([sys.executable, "-c", PARENT, str(pid_file)], cwd=ROOT, env=env)
     try:
         for _ in range(600):  # the child imports the fitting libraries first
             if pid_file.is_file() and pid_file.read_text():
