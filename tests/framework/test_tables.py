@@ -135,8 +135,15 @@ def test_fitted_model_names_a_novel_table(table_model):
         assert a.margin >= 0
     named = [a.column for a in answers if names[a.column] is not UNREGISTERED]
     assert len(named) == len(set(named))  # a registered class names one object at most
+    # alone, each object is what the route answers for its touches (same_object): known or
+    # novel by the same threshold, and the same class
+    routed = model.recognize_batch(novel.samples, 1, novel.labels)
+    alone = [names[a.alone] for a in answers]
+    assert alone == [routed.class_names[i] for i in routed.top_index[:, 0]]
+    assert [name in model.registry.novel_names for name in alone] == routed.is_novel.tolist()
     right = [names[a.column] == novel.class_names[k] for k, a in enumerate(answers)]
-    assert sum(right) >= 4
+    right_alone = [name == novel.class_names[k] for k, name in enumerate(alone)]
+    assert sum(right) >= sum(right_alone)
 
 
 def test_fitted_model_names_a_mixed_table(table_model):
