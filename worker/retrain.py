@@ -391,10 +391,16 @@ def build(
 
 def _grown(plan: Plan, model: TactileRecognizer) -> TactileRecognizer:
     """``model`` with the plan's promoted classes and known classes' new samples learnt into
-    its known part (``with_known_samples``); a class new to it keeps its description."""
+    its known part (``with_known_samples``); a class new to it keeps its description. One
+    learnt from its samples alone has none: no vector is given, and the method takes it as
+    not known (an all-NaN vector would be refused as describing nothing)."""
     return model.with_known_samples(
         {name: _samples(model, rows) for name, rows in plan.grow.items()},
-        {name: plan.vocabulary.vector(key) for name, key in plan.grow_keys.items()},
+        {
+            name: plan.vocabulary.vector(key)
+            for name, key in plan.grow_keys.items()
+            if describes(plan.vocabulary, key)
+        },
     )
 
 
