@@ -27,6 +27,8 @@ from typing import Any
 import numpy as np
 
 from app.data.biotac import RawTrial, RawTrialError, write_biotac_h5
+from app.data.biotac_phases import PhaseRule
+from app.data.contacts import ContactMarks
 from app.data.dataset import DatasetError, TactileDataset
 
 FRAMES, PROCEDURE, SAMPLES = "tactile_zsl/frames", "tactile_zsl/procedure", "tactile_zsl/samples"
@@ -98,7 +100,7 @@ def bag_trials(
     path: Path, procedures: Sequence[str] = DEFAULT_PROCEDURES, rest_frames: int = 100
 ) -> list[RawTrial]:
     """The raw trials of one bag (frames and procedure marks, or frames alone)."""
-    from app.ros2.arrays import MessageShapeError, fingers_of, frame_of
+    from app.ros2.arrays import MessageShapeError, frame_of
     from app.ros2.trials import END, MarkOrder, TrialAssembler, TrialProblem
 
     names, messages = read_messages(path, (FRAMES, PROCEDURE))
@@ -106,22 +108,20 @@ def bag_trials(
     if not frames:
         raise BagError(f"{path}: no frames on a topic ending in {FRAMES!r} (topics: {names})")
     marks = [m for topic, _, m in messages if topic == PROCEDURE]
-    if not marks:  # one recording, one trial: its phases found in its pdc
-        try:
-            stacked = np.stack([frame_of(m) for _, m in frames])
-            return [RawTrial(fingers=fingers_of(stacked))]
-        except (MessageShapeError, RawTrialError) as exc:
-            raise BagError(f"{path}: {exc}") from None
     # the bridge's own rule: marks placed among the frames by their stamps (MarkOrder),
-    # here the bag's recorded times (rosbags reads no source stamps), then assembled
+    # here the bag's recorded times (rosbags reads no source stamps), then assembled; a bag
+    # without marks is cut by contact as the bridge's contact_detection cuts (ContactMarks)
     assembler = TrialAssembler(rest_frames=rest_frames, max_frames=10**7)
     order = MarkOrder(wait=float("inf"))
+    contacts = None if marks else ContactMarks(procedures, PhaseRule(len(procedures), rest_frames))
     trials: list[RawTrial] = []
     last: list[dict[str, Any] | None] = [None]
 
     def follow(mark: tuple[str, int], late: int) -> None:
         text, stamp = mark
         where = f"{path}: {PROCEDURE} message at {stamp} ns"
+        if contacts is not None:
+            where = f"{path}: contact mark {text!r} at the frame recorded at {stamp} ns"
         try:
             done = assembler.procedure(text, procedures, late)
         except TrialProblem as exc:
@@ -138,16 +138,31 @@ def bag_trials(
             for mark in order.frame(stamp, 0.0):
                 follow(mark, 0)
             try:
-                assembler.frame(frame_of(msg))
+                frame = frame_of(msg)
             except MessageShapeError as exc:
                 raise BagError(f"{path}: {topic} message at {stamp} ns: {exc}") from None
+            for text, late in contacts.frame(frame) if contacts is not None else ():
+                follow((text, stamp), late)
+            assembler.frame(frame)
         else:
             for mark, late in order.mark((msg.data, stamp), stamp):
                 follow(mark, late)
     for mark in order.drain():
         follow(mark, 0)
+    for text, late in contacts.drain() if contacts is not None else ():
+        follow((text, messages[-1][1]), late)
+    if assembler.open and contacts is not None:
+        raise BagError(
+            f"{path}: the last trial has {contacts.done} of its {len(procedures)} contacts "
+            f"({', '.join(procedures)}); it would be incomplete"
+        )
     if assembler.open:
         raise BagError(f"{path}: the last trial has no 'end' mark; it would be incomplete")
+    if not trials and contacts is not None:
+        raise BagError(
+            f"{path}: no contact found in finger 0's pdc (none rises "
+            f"{contacts.rule.contact_counts:g} counts above its resting level); no trial to cut"
+        )
     return trials
 
 

@@ -38,6 +38,8 @@ from rclpy.node import Node
 from std_msgs.msg import Float32MultiArray, String
 
 from app.api.problems import problem_body
+from app.data.biotac_phases import PhaseRule
+from app.data.contacts import ContactMarks
 from app.ros2 import topics
 from app.ros2.arrays import MessageShapeError, frame_of, samples_of, stamped_of
 from app.ros2.backends import CLASSES, RECOGNIZE, Health, backend_of, internal_problem
@@ -114,6 +116,9 @@ PARAMETERS: dict[str, Param] = {
         16, "enrolments waiting; beyond, each gets a 503", low=1, high=100_000
     ),
     "mark_wait": Param(1.0, "seconds a mark waits for a frame to place it", low=0.0, high=3600.0),
+    "contact_detection": Param(
+        False, "cut trials from finger 0's pdc by contact, not by ~/procedure marks"
+    ),
 }
 LATENCIES_KEPT = 1000
 
@@ -159,6 +164,7 @@ class BridgeCore:
         self.enrolments = AnswerQueue(int(p["enrol_queue_size"]))
         self.assembler = TrialAssembler(int(p["rest_frames"]), int(p["max_trial_frames"]))
         self.marks = MarkOrder(float(p["mark_wait"]))
+        self.contacts: ContactMarks | None = None  # made for the model's procedures
         self.sample_gaps, self.frame_gaps = SequenceGaps(), SequenceGaps()
         self.diagnostics_period = float(p["diagnostics_period"])
         self._latencies: deque[float] = deque(maxlen=LATENCIES_KEPT)
@@ -294,6 +300,9 @@ class BridgeCore:
                 self._follow(mark, 0, time.perf_counter())
             if lost:
                 self.assembler.lost(lost)
+            if self.settings["contact_detection"]:
+                for text, late in self._contact_marks(frame):
+                    self._follow((text, InputRef.of(info)), late, time.perf_counter())
             self.assembler.frame(frame)
         except MessageShapeError as exc:
             self._counts["bad_frames"] += 1
@@ -302,8 +311,29 @@ class BridgeCore:
             log.exception("reading a frame message")
             self.assembler.fault("a frame could not be read (the bridge's log has the details)")
 
+    def _contact_marks(self, frame: np.ndarray) -> list[tuple[str, int]]:
+        """The marks contact detection finds before ``frame`` (``app.data.contacts``, as
+        ``tactile-zsl dataset bag`` cuts a bag of frames alone); none before the model is
+        known, whose procedures the contacts are."""
+        model = self.backend.model
+        if model is None or not model.procedures:
+            return []
+        if self.contacts is None or self.contacts.procedures != tuple(model.procedures):
+            rule = PhaseRule(len(model.procedures), int(self.settings["rest_frames"]))
+            self.contacts = ContactMarks(model.procedures, rule)
+        return self.contacts.frame(frame)
+
     def _on_procedure(self, msg: String, info: dict[str, Any]) -> None:
         received = time.perf_counter()
+        if self.settings["contact_detection"]:
+            detail = (
+                f"procedure mark {msg.data!r} not followed: the bridge cuts trials by contact "
+                "(contact_detection:=true)"
+            )
+            errors = [{"field": "procedure", "reason": detail}]
+            problem = problem_body(422, detail, RECOGNIZE, errors)
+            self.answers.put(Work("problem", problem, received, [InputRef.of(info)]))
+            return
         mark = (msg.data, InputRef.of(info))
         for due, late in self.marks.mark(mark, info["source_timestamp"]):
             self._follow(due, late, received)

@@ -27,6 +27,7 @@ from app.ros2.arrays import fingers_of
 END = "end"
 REST = "rest"
 RECOGNIZE = "/v1/recognize"
+REST_SLACK = 1000  # frames a mark opening a trial may come late and keep its whole rest
 
 
 class TrialProblem(Exception):
@@ -45,8 +46,9 @@ class TrialAssembler:
     def __init__(self, rest_frames: int = 100, max_frames: int = 60_000) -> None:
         if rest_frames < 1 or max_frames < 2:
             raise ValueError("rest_frames must be ≥ 1 and max_frames ≥ 2")
-        self.max_frames = max_frames
-        self._rest: deque[np.ndarray] = deque(maxlen=rest_frames)
+        self.max_frames, self.rest_frames = max_frames, rest_frames
+        # rest kept beyond rest_frames: a late mark opening a trial still gets its full rest
+        self._rest: deque[np.ndarray] = deque(maxlen=rest_frames + REST_SLACK)
         self._frames: list[np.ndarray] | None = None  # None: no trial open
         self._phases: dict[str, tuple[int, int | None]] = {}
         self._current: str | None = None
@@ -112,7 +114,7 @@ class TrialAssembler:
                 f"{', '.join(procedures) or '(none: it answers samples)'}; or {REST!r}, {END!r}"
             )
         if self._frames is None:
-            self._frames = list(self._rest)
+            self._frames = list(self._rest)[-(self.rest_frames + late) :]
             self._rest.clear()
         if name in self._phases:
             raise TrialProblem(

@@ -24,6 +24,9 @@ from .conftest import PILOT
 
 ARRAY, TEXT = "std_msgs/msg/Float32MultiArray", "std_msgs/msg/String"
 NS = "/left_hand/tactile_zsl"
+#: frames a contact-cut boundary may lie from PhaseRule's: the most over all 74 pilot
+#: trials (tests/ros2/test_contacts.py), from the resting level taken before the contact
+CONTACT_TOLERANCE = 2
 
 
 def write_bag(path: Path, messages: list[tuple[str, str, int, object]], storage: str) -> Path:
@@ -96,15 +99,36 @@ def test_bags_of_frames_and_marks_become_a_biotac_dataset_of_those_trials(
                 assert np.array_equal(getattr(got, channel), values), channel
 
 
-def test_a_bag_of_frames_alone_is_one_trial_whose_phases_are_found(pilot_trials, tmp_path):
-    messages, _ = recorded(pilot_trials["cork"][:1], marks=False)
+def test_a_bag_of_frames_alone_is_cut_into_trials_by_contact(pilot_trials, tmp_path):
+    """Two recordings one after the other, no marks: two trials, each cut where its
+    contacts are (``ContactMarks``), within ``CONTACT_TOLERANCE`` frames of the phases
+    ``PhaseRule`` finds in the whole recording, with the recorded frames."""
+    messages, _ = recorded(pilot_trials["cork"], marks=False)
     bag = write_bag(tmp_path / "cork_touch", messages, "mcap")
     out = tmp_path / "dataset"
     assert main(["dataset", "bag", "--out", str(out), f"cork={bag}"]) == 0
-    (trial,) = load_biotac(out).trials
-    assert trial.phases is None
-    assert np.array_equal(frames_of(trial), frames_of(pilot_trials["cork"][0]))
-    assert trial.phase_bounds() == pilot_trials["cork"][0].phase_bounds()
+    got = load_biotac(out).trials
+    assert len(got) == len(pilot_trials["cork"])
+    for trial, source in zip(got, pilot_trials["cork"], strict=True):
+        cut, phases = [list(p) for p in trial.phases], source.phase_bounds()[0]
+        assert cut[0][0] == 100  # the rest before the first contact, as with marks
+        # the recorded frames, from where the contact cut begins near PhaseRule's
+        near = range(phases[0][0] - 100 - CONTACT_TOLERANCE, phases[0][0] - 99 + CONTACT_TOLERANCE)
+        length, recorded_frames = len(frames_of(trial)), frames_of(source)
+        (origin,) = [
+            o for o in near if np.array_equal(frames_of(trial), recorded_frames[o : o + length])
+        ]
+        for (s, e), (ms, me) in zip(cut, phases, strict=True):
+            assert abs(origin + s - ms) <= CONTACT_TOLERANCE, (origin, cut, phases)
+            assert abs(origin + e - me) <= CONTACT_TOLERANCE, (origin, cut, phases)
+
+
+def test_a_bag_of_frames_alone_whose_contacts_stop_short_is_refused(pilot_trials, tmp_path, capsys):
+    messages, expected = recorded(pilot_trials["cork"][:1], marks=False)
+    hold_end = expected[0][1][1][1] + pilot_trials["cork"][0].phase_bounds()[0][0][0] - 100
+    bag = write_bag(tmp_path / "cut_short", messages[: hold_end + 30], "mcap")
+    assert main(["dataset", "bag", "--out", str(tmp_path / "out"), f"cork={bag}"]) == 2
+    assert "the last trial has 2 of its 3 contacts" in capsys.readouterr().err
 
 
 def test_bags_of_samples_become_a_folder_dataset(tmp_path, capsys):
