@@ -49,8 +49,9 @@ SCORER_GRID = {
     "unregistered_prior": (0.01, 0.05, 0.2),
     "novel_temperature": (1.0, 2.0, 4.0),
 }
-#: a second development grid, past the corner where the first one's best lay (slope 0.5,
-#: offset 2, unregistered 0.01, temperature 4 on seeds 1-2)
+#: a second development grid (``--edges``), past the first grid's corner at offset 2, where
+#: its best lay with the classes' probabilities scored raw (until ea67f43); offsets above 0
+#: are no longer chosen (``TableScorer``'s docstring)
 EDGE_GRID = {
     "novelty_slope": (0.25, 0.5),
     "novelty_offset": (2.0, 3.0, 4.0),
