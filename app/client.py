@@ -156,35 +156,20 @@ class TactileClient:
             try:
                 answer = self._send("POST", "/v1/recognize", json=body, params=params).json()
             except ServiceUnreachable as exc:
-                from app.service.table_answers import answer_table, check_labels, table_records
+                from app.service.table_answers import table_body
 
                 model, meta = self._offline_model(exc)
-                x = model.validate_samples(x, partial=True)
-                labels = check_labels(objects, len(x))
-                policy = outliers or ABSTAIN
-                table = answer_table(
+                body = table_body(
                     model,
-                    labels,
+                    meta,
+                    objects,
                     x,
-                    None,
                     self.offline_top_k,
                     target_confidence,
                     model.operating_point(known_kept),
-                    policy,
+                    outliers or ABSTAIN,
                 )
-                ids = meta.get("class_ids", {})
-                batch = table.batch
-                results = table_records(
-                    table,
-                    batch.records(ids, policy),
-                    lambda name: {"class_id": ids.get(name), "class_name": name},
-                    dict(zip(batch.class_names, batch.class_kinds, strict=True)),
-                )
-                return {
-                    "model_version": meta.get("version"),
-                    "results": results,
-                    "source": "offline",
-                }
+                return {**body, "source": "offline"}
             return {**answer, "source": "service"}
         x = np.asarray(samples, dtype=np.float32)
         params = _query(

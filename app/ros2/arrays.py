@@ -140,9 +140,10 @@ def header_of(value: Any) -> dict[str, Any]:
     return {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": frame_id}
 
 
-def stamped_of(text: str) -> tuple[np.ndarray, dict[str, Any]]:
+def stamped_of(text: str) -> tuple[np.ndarray, dict[str, Any], list[Any] | None]:
     """A ``~/samples_stamped`` message's JSON, ``{"header": {...}, "samples": [...]}``: the
-    samples (nested lists, one sample or several) and the robot's header."""
+    samples (nested lists, one sample or several), the robot's header, and the optional
+    ``objects``, a table's label of each sample's object (docs/TABLES.md; None without)."""
     import json
 
     try:
@@ -158,4 +159,7 @@ def stamped_of(text: str) -> tuple[np.ndarray, dict[str, Any]]:
         raise MessageShapeError(
             "samples: nested lists of numbers of one shape are needed"
         ) from None
-    return x, header
+    objects = body.get("objects")
+    if objects is not None and not isinstance(objects, list):
+        raise MessageShapeError("objects: a list of labels, one per sample, is needed")
+    return x, header, objects

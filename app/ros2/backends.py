@@ -90,12 +90,17 @@ class ServiceBackend:
         samples: np.ndarray,
         target_confidence: float | None = None,
         known_kept: float | None = None,
+        objects: list[Any] | None = None,
     ) -> dict[str, Any]:
-        """``target_confidence``, ``known_kept``: the request's (None: the service's)."""
+        """``target_confidence``, ``known_kept``: the request's (None: the service's);
+        ``objects``: a table's labels, one per sample (named jointly, docs/TABLES.md)."""
         return self._call(
             RECOGNIZE,
             lambda: self.client.recognize(
-                samples, target_confidence=target_confidence, known_kept=known_kept
+                samples,
+                target_confidence=target_confidence,
+                known_kept=known_kept,
+                objects=objects,
             ),
         )
 
@@ -225,12 +230,16 @@ class ModelFileBackend:
         samples: np.ndarray,
         target_confidence: float | None = None,
         known_kept: float | None = None,
+        objects: list[Any] | None = None,
     ) -> dict[str, Any]:
-        """``target_confidence``, ``known_kept``: this answer's (None: the backend's)."""
+        """``target_confidence``, ``known_kept``: this answer's (None: the backend's);
+        ``objects``: a table's labels, one per sample, named as the service names them."""
         from app.api.routes.recognize import Body, takes_kind
 
         target = TARGET_CONFIDENCE if target_confidence is None else target_confidence
         kept = self.known_kept if known_kept is None else known_kept
+        if objects is not None:
+            return self._table(samples, objects, target_confidence, kept)
 
         def run(rec: Any) -> Any:
             takes_kind(rec, Body(samples, None, 1))
@@ -243,6 +252,36 @@ class ModelFileBackend:
                 )
 
         return self._answered(run)
+
+    def _table(
+        self, samples: np.ndarray, objects: list[Any], target: float | None, kept: float | None
+    ) -> dict[str, Any]:
+        """A table named from the model file, as ``POST /v1/recognize`` names it."""
+        from app.api.routes.recognize import Body, takes_kind
+        from app.service.table_answers import LabelError, table_body
+
+        with self._lock:
+            rec = self._current()
+            try:
+                takes_kind(rec, Body(samples, None, 1))
+                with blame("samples"):
+                    return table_body(
+                        rec,
+                        self._meta,
+                        objects,
+                        samples,
+                        self.top_k,
+                        target,
+                        rec.operating_point(None, kept),
+                        self.outliers,
+                    )
+            except LabelError as exc:
+                field = [{"field": exc.field, "reason": str(exc)}]
+                return problem_body(422, str(exc), RECOGNIZE, field)
+            except Problem as exc:
+                return problem_body(exc.status_code, str(exc.detail), RECOGNIZE, exc.errors)
+            except FrameworkError as exc:
+                return framework_problem(exc, RECOGNIZE)
 
     def recognize_trial(
         self, trial: dict[str, Any], known_kept: float | None = None

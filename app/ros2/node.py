@@ -276,12 +276,15 @@ class BridgeCore:
         ref = InputRef.of(info)
         self.sample_gaps.seen(info)
         try:
-            x, header = stamped_of(msg.data)
+            x, header, objects = stamped_of(msg.data)
             ref = InputRef(ref.sequence, ref.stamp, None, header)
             model = self.backend.model
             shape = model.input_shape if model else None
             several = bool(shape) and x.ndim == len(shape) + 1
-            work = Work("samples", (x, several), received, [ref])
+            if objects is None:
+                work = Work("samples", (x, several), received, [ref])
+            else:  # a table: one answer, one result per object
+                work = Work("table", (x, objects), received, [ref])
         except MessageShapeError as exc:
             field = str(exc).split(":", 1)[0].split(".", 1)[0]
             problem = problem_body(422, str(exc), RECOGNIZE, [{"field": field, "reason": str(exc)}])
@@ -419,6 +422,12 @@ class BridgeCore:
             if several and isinstance(results, list) and len(results) == len(x):
                 return [({**body, "results": [r]}, ref.at(k)) for k, r in enumerate(results)]
             return [(body, ref)]
+        if work.kind == "table":
+            x, objects = work.payload
+            table = self.backend.recognize(
+                x, self._setting("target_confidence"), self._setting("known_kept"), objects
+            )
+            return [(table, ref)]
         if work.kind == "trial":
             return [(self.backend.recognize_trial(work.payload, self._setting("known_kept")), ref)]
         if work.kind == "refused":

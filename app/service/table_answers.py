@@ -209,3 +209,31 @@ def _named(
     if name is None:
         return {**{k: None for k in ("class_id", "class_name") if k in record}, "kind": "novel"}
     return {**label(name), "kind": kinds[name]}
+
+
+def table_body(
+    rec: TactileRecognizer,
+    meta: Mapping[str, Any],
+    objects: Sequence[Any],
+    samples: Any,
+    top_k: int = 3,
+    target_confidence: float | None = None,
+    known_kept: float | None = None,
+    outliers: str = ABSTAIN,
+) -> dict[str, Any]:
+    """``POST /v1/recognize``'s body for a table, answered by a model file away from the
+    service (the client's offline model, the ROS 2 bridge's ``--model``): ``meta`` is the
+    file's description (``version``, ``class_ids``); ``known_kept`` the operating point
+    as ``TactileRecognizer.operating_point`` gives it. LabelError for bad labels."""
+    x = rec.validate_samples(samples, partial=True)
+    labels = check_labels(objects, len(x))
+    table = answer_table(rec, labels, x, None, top_k, target_confidence, known_kept, outliers)
+    ids = meta.get("class_ids", {})
+    batch = table.batch
+    results = table_records(
+        table,
+        batch.records(ids, outliers),
+        lambda name: {"class_id": ids.get(name), "class_name": name},
+        dict(zip(batch.class_names, batch.class_kinds, strict=True)),
+    )
+    return {"model_version": meta.get("version"), "results": results}

@@ -462,3 +462,53 @@ def test_stamped_samples_get_the_robots_header_echoed(samples_service, bridge_fa
     problem = got[3].body
     assert problem["status"] == 422 and problem["errors"][0]["field"] == "header"
     assert "header.stamp" in problem["detail"]
+
+
+def test_a_table_on_stamped_samples_is_named_as_http_names_it(
+    samples_service, bridge_factory, ros, tmp_path
+):
+    """A table over ROS 2: one ``~/samples_stamped`` message with ``objects``, one answer
+    holding a result per object, as ``POST /v1/recognize`` gives it, from the service and
+    from a model file; bad labels are the route's 422."""
+    from std_msgs.msg import String
+
+    from app.ros2 import topics
+
+    model_file = tmp_path / "robot.bundle"
+    with TactileClient(samples_service, model_file=model_file) as client:
+        assert client.sync_model()
+    x = quick_dataset().samples[:6].astype(np.float32)
+    objects = ["cup", 7, "cup", "box", 7, "box"]
+    want = httpx.post(
+        f"{samples_service}/v1/recognize", json={"samples": x.tolist(), "objects": objects}
+    ).json()
+    assert [r["object"] for r in want["results"]] == ["cup", 7, "box"]
+    header = {"stamp": {"sec": 1700000000, "nanosec": 0}, "frame_id": "tray"}
+    for args in (("--url", samples_service), ("--model", str(model_file))):
+        bridge = bridge_factory(*args)
+        publisher = ros.node.create_publisher(
+            String, f"{bridge.prefix}/samples_stamped", topics.reliable_qos(10)
+        )
+        try:
+            deadline = time.monotonic() + 20
+            while not publisher.get_subscription_count():
+                assert time.monotonic() < deadline, "the bridge never subscribed"
+                time.sleep(0.05)
+            for labels in (objects, objects[:2]):
+                body = {"header": header, "samples": x.tolist(), "objects": labels}
+                publisher.publish(String(data=json.dumps(body)))
+            table, bad = bridge.next_answers(2)
+        finally:
+            ros.destroy(publisher)
+        assert table.body["input"]["header"] == header and table.body["input"]["index"] is None
+        got = without_input([table])[0]
+        keys = ("object", "class_name", "kind", "alone", "touches", "is_novel")
+        assert [{k: r[k] for k in keys} for r in got["results"]] == [
+            {k: r[k] for k in keys} for r in want["results"]
+        ], args
+        np.testing.assert_allclose(
+            [r["margin"] for r in got["results"]], [r["margin"] for r in want["results"]]
+        )
+        problem = bad.body
+        assert problem["status"] == 422 and problem["errors"][0]["field"] == "objects"
+        assert "2 labels for 6 samples" in problem["detail"], problem
