@@ -75,16 +75,19 @@ def test_the_tuning_reads_the_curve_of_as_many_touches_and_keeps_it_in_its_dict(
     assert NoveltyTuning.from_dict(old).threshold_keeping_touches(0.9, 3)[1] == 0
 
 
-@pytest.fixture(scope="module")
-def best_model():
+@pytest.fixture(scope="module", params=["best", "prototypes"])
+def best_model(request):
+    """Each method that measures fused curves: ``best`` on its held-out probe trials,
+    ``prototypes`` on its training touches scored without their own trial."""
     data = simulate_dataset(n_objects=30, trials_per_object=8, seed=2)
-    return make_method("best", n_estimators=40, tuning_rounds=5, seed=0).fit(data), data
+    params = {"n_estimators": 40, "tuning_rounds": 5} if request.param == "best" else {}
+    return make_method(request.param, seed=0, **params).fit(data), data
 
 
 def test_fused_answers_are_routed_by_the_curve_of_their_touches(best_model, tmp_path):
     model, data = best_model
     tuning = model.novelty_tuning
-    assert 3 in tuning.touches  # best measures them on its held-out probe trials
+    assert 3 in tuning.touches
     x = data.samples[:6]
     groups = np.array([0, 0, 0, 1, 1, 2])
     batch = model.recognize_batch(x, groups=groups, known_kept=0.9)

@@ -4,6 +4,7 @@ gives for the same samples, in order, problems included."""
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import socket
@@ -427,12 +428,13 @@ def test_the_readmes_rclpy_snippet_runs_against_a_real_bridge(samples_service, b
     assert sequence == "1" and "class_name" in results, out.stdout
 
 
-def test_stamped_samples_get_the_robots_header_echoed(samples_service, bridge_factory, ros):
+@contextlib.contextmanager
+def stamped_publisher(ros, bridge):
+    """A publisher on ``bridge``'s ``~/samples_stamped``, once the bridge subscribed."""
     from std_msgs.msg import String
 
     from app.ros2 import topics
 
-    bridge = bridge_factory("--url", samples_service)
     publisher = ros.node.create_publisher(
         String, f"{bridge.prefix}/samples_stamped", topics.reliable_qos(10)
     )
@@ -441,15 +443,20 @@ def test_stamped_samples_get_the_robots_header_echoed(samples_service, bridge_fa
         while not publisher.get_subscription_count():
             assert time.monotonic() < deadline, "the bridge never subscribed"
             time.sleep(0.05)
-        x = quick_dataset().samples[:2].astype(np.float32)
-        header = {"stamp": {"sec": 1700000000, "nanosec": 5}, "frame_id": "left_index_tip"}
-        publisher.publish(String(data=json.dumps({"header": header, "samples": x[0].tolist()})))
-        publisher.publish(String(data=json.dumps({"header": header, "samples": x.tolist()})))
-        bad = {"header": {"stamp": {"sec": 1}}, "samples": x[0].tolist()}
-        publisher.publish(String(data=json.dumps(bad)))
-        got = bridge.next_answers(4)
+        yield lambda body: publisher.publish(String(data=json.dumps(body)))
     finally:
         ros.destroy(publisher)
+
+
+def test_stamped_samples_get_the_robots_header_echoed(samples_service, bridge_factory, ros):
+    bridge = bridge_factory("--url", samples_service)
+    with stamped_publisher(ros, bridge) as publish:
+        x = quick_dataset().samples[:2].astype(np.float32)
+        header = {"stamp": {"sec": 1700000000, "nanosec": 5}, "frame_id": "left_index_tip"}
+        publish({"header": header, "samples": x[0].tolist()})
+        publish({"header": header, "samples": x.tolist()})
+        publish({"header": {"stamp": {"sec": 1}}, "samples": x[0].tolist()})
+        got = bridge.next_answers(4)
     assert [a.body["input"].get("header") for a in got] == [header] * 3 + [None]
     assert [(a.body["input"]["sequence"], a.body["input"]["index"]) for a in got] == [
         (1, None),
@@ -470,10 +477,6 @@ def test_a_table_on_stamped_samples_is_named_as_http_names_it(
     """A table over ROS 2: one ``~/samples_stamped`` message with ``objects``, one answer
     holding a result per object, as ``POST /v1/recognize`` gives it, from the service and
     from a model file; bad labels are the route's 422."""
-    from std_msgs.msg import String
-
-    from app.ros2 import topics
-
     model_file = tmp_path / "robot.bundle"
     with TactileClient(samples_service, model_file=model_file) as client:
         assert client.sync_model()
@@ -486,20 +489,10 @@ def test_a_table_on_stamped_samples_is_named_as_http_names_it(
     header = {"stamp": {"sec": 1700000000, "nanosec": 0}, "frame_id": "tray"}
     for args in (("--url", samples_service), ("--model", str(model_file))):
         bridge = bridge_factory(*args)
-        publisher = ros.node.create_publisher(
-            String, f"{bridge.prefix}/samples_stamped", topics.reliable_qos(10)
-        )
-        try:
-            deadline = time.monotonic() + 20
-            while not publisher.get_subscription_count():
-                assert time.monotonic() < deadline, "the bridge never subscribed"
-                time.sleep(0.05)
+        with stamped_publisher(ros, bridge) as publish:
             for labels in (objects, objects[:2]):
-                body = {"header": header, "samples": x.tolist(), "objects": labels}
-                publisher.publish(String(data=json.dumps(body)))
+                publish({"header": header, "samples": x.tolist(), "objects": labels})
             table, bad = bridge.next_answers(2)
-        finally:
-            ros.destroy(publisher)
         assert table.body["input"]["header"] == header and table.body["input"]["index"] is None
         got = without_input([table])[0]
         keys = ("object", "class_name", "kind", "alone", "touches", "is_novel")
