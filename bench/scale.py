@@ -404,8 +404,9 @@ def machine() -> dict:
     (``tests/test_docs_figures.py``): its code is in no commit."""
 
     def git(*args: str) -> str:
-        return subprocess.run(["git", *args], capture_output=True, text=True).stdout.strip()
+        return subprocess.run(["git", *args], capture_output=True, text=True).stdout
 
+    # unstripped: a porcelain line's status columns may begin with a space (" M path")
     changed = git("status", "--porcelain", "--untracked-files=no").splitlines()
     pages = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     return {
@@ -414,7 +415,7 @@ def machine() -> dict:
         "cpus": os.cpu_count(),
         "memory_gb": round(pages / 1e9, 1),
         "python": platform.python_version(),
-        "commit": git("rev-parse", "--short", "HEAD"),
+        "commit": git("rev-parse", "--short", "HEAD").strip(),
         "dirty": bool(changed),
         "changed": [line[3:] for line in changed],
     }
