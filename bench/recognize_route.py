@@ -2,7 +2,8 @@
 a table of objects against as many single recognitions.
 
     .venv/bin/python -m bench.recognize_route [--against DIR] [--rounds 5] [--requests 2000]
-                                              [--objects 12] [--json OUT]
+                                              [--objects 12] [--method NAME] [--clients 1]
+                                              [--no-tables] [--json OUT]
 
 Each tree (this one, and ``--against``: another checkout, e.g. ``git worktree add
 /tmp/base <commit>``) runs in a process of its own: the quick service of ``app.testing``
@@ -11,7 +12,11 @@ its ASGI app called directly (no socket, no client: the route's own CPU, the fas
 included) with one-sample JSON bodies, the simulator's first sample. The two alternate,
 ``--requests`` requests each a round, taking turns going first; each round's ratio (this
 tree over the other, CPU microseconds a request) is taken between adjacent phases, and
-the median and range over ``--rounds`` are reported.
+the median and range over ``--rounds`` are reported. ``--method NAME`` serves that method
+instead, fitted with its default parameters on the embedded default's dataset (the
+simulator's 60 objects), as ``tactile-zsl serve`` would; ``--clients N`` sends the requests
+N at a time (``asyncio.gather``), so that they share the batcher's passes as a loaded
+service's do.
 
 Then, in this tree only, as many rounds: a table of ``--objects`` objects, one touch each
 (``{"samples", "objects"}``), against ``--objects`` single-sample requests one after
@@ -72,30 +77,39 @@ async def _call(app, body: bytes) -> bytes:
     return sent[-1]["body"]
 
 
-async def _per_request(app, body: bytes, n: int) -> float:
+async def _per_request(app, body: bytes, n: int, clients: int = 1) -> float:
     """Microseconds a request: the process's CPU time, every thread's (the batcher's and
-    the thread pool's too), so a shared machine's waits are left out."""
+    the thread pool's too), so a shared machine's waits are left out; ``clients`` at a
+    time."""
+    waves = max(1, n // clients)
     start = time.process_time()
-    for _ in range(n):
-        await _call(app, body)
-    return (time.process_time() - start) / n * 1e6
+    for _ in range(waves):
+        if clients == 1:
+            await _call(app, body)
+        else:
+            await asyncio.gather(*(_call(app, body) for _ in range(clients)))
+    return (time.process_time() - start) / (waves * clients) * 1e6
 
 
-async def _child() -> None:
+async def _child(method: str | None, clients: int) -> None:
     """Serve measurements for the parent: one line in ('single N', 'table N K'), one
     JSON line out."""
     sys.path.insert(0, os.getcwd())  # the tree this process was started in
     import numpy as np
 
     from app.api.main import create_app
+    from app.data.simulator import simulate_dataset
     from app.framework.registry import make_method
     from app.testing.service import BEST_PARAMS, quick_dataset, quick_settings
 
-    dataset = quick_dataset()
-    model = make_method("best", **BEST_PARAMS).fit(dataset)
+    if method is None:  # the tests' quick service
+        dataset, method, params = quick_dataset(), "best", BEST_PARAMS
+    else:  # the method as the embedded default fits it
+        dataset, params = simulate_dataset(), {}
+    model = make_method(method, **params).fit(dataset)
     x = dataset.samples
     # no rate limit: capacity is measured (as bench/load.py runs the service)
-    settings = {"method": "best", "method_params": {"best": BEST_PARAMS}, "rate_limit": 0}
+    settings = {"method": method, "method_params": {method: params}, "rate_limit": 0}
     with tempfile.TemporaryDirectory() as tmp:
         app = create_app(quick_settings(Path(tmp), **settings), trainer=lambda: (model, dataset))
         async with app.router.lifespan_context(app):
@@ -107,7 +121,7 @@ async def _child() -> None:
                 what, *args = line.split()
                 n = int(args[0])
                 if what == "single":
-                    out = {"us": await _per_request(app, one, n)}
+                    out = {"us": await _per_request(app, one, n, clients)}
                 else:
                     k = int(args[1])
                     rows = np.arange(k) % len(x)
@@ -131,10 +145,11 @@ async def _child() -> None:
 
 
 # ----------------------------------------------------------------- parent side
-def _start(tree: Path) -> subprocess.Popen:
+def _start(tree: Path, method: str | None, clients: int) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(tree), "TACTILE_TORCH_THREADS": "1"}
+    options = ["--clients", str(clients)] + (["--method", method] if method else [])
     proc = subprocess.Popen(
-        [sys.executable, str(Path(__file__).resolve()), "--child"],
+        [sys.executable, str(Path(__file__).resolve()), "--child", *options],
         cwd=tree,
         env=env,
         stdin=subprocess.PIPE,
@@ -179,13 +194,20 @@ def main() -> int:
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--requests", type=int, default=2000)
     parser.add_argument("--objects", type=int, default=12)
+    parser.add_argument(
+        "--method", help="serve this method as the embedded default fits it (default: best, quick)"
+    )
+    parser.add_argument("--clients", type=int, default=1, help="requests sent at a time")
+    parser.add_argument("--no-tables", action="store_true", help="single requests only")
     parser.add_argument("--json", type=Path, help="write the report here too")
     args = parser.parse_args()
     if args.child:
-        asyncio.run(_child())
+        asyncio.run(_child(args.method, args.clients))
         return 0
-    this = _start(HERE)
-    other = _start(args.against.resolve()) if args.against else None
+    if args.clients < 1:
+        parser.error(f"--clients must be at least 1, got {args.clients}")
+    this = _start(HERE, args.method, args.clients)
+    other = _start(args.against.resolve(), args.method, args.clients) if args.against else None
     rounds: list[dict] = []
     try:
         for i in range(args.rounds):
@@ -198,7 +220,7 @@ def main() -> int:
                 row["ratio"] = row["this_us"] / row["other_us"]
             rounds.append(row)
             print(json.dumps({k: round(v, 3) for k, v in row.items()}), flush=True)
-        for row in rounds:  # tables after every single-request round: none disturbs them
+        for row in [] if args.no_tables else rounds:  # after every single-request round
             row.update(_ask(this, f"table {args.requests // 4} {args.objects}"))
             row["table_over_singles"] = row["table_us"] / row["singles_us"]
             row["table_over_batch"] = row["table_us"] / row["batch_us"]
@@ -213,10 +235,13 @@ def main() -> int:
         "against": _git(args.against) if args.against else None,
         "rounds": rounds,
         "single_us": _spread([r["this_us"] for r in rounds], 1),
-        "objects": args.objects,
-        "table_over_singles": _spread([r["table_over_singles"] for r in rounds]),
-        "table_over_batch": _spread([r["table_over_batch"] for r in rounds]),
+        "method": args.method or "best (the tests' quick parameters)",
+        "clients": args.clients,
     }
+    if not args.no_tables:
+        report["objects"] = args.objects
+        report["table_over_singles"] = _spread([r["table_over_singles"] for r in rounds])
+        report["table_over_batch"] = _spread([r["table_over_batch"] for r in rounds])
     if other is not None:
         report["single_us_against"] = _spread([r["other_us"] for r in rounds], 1)
         report["single_ratio"] = _spread([r["ratio"] for r in rounds])

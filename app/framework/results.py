@@ -172,9 +172,12 @@ class RecognitionBatch:
         names = self.procedures
         if self.procedures_used is None or self.next_procedure is None:
             return [(list(names), None)] * len(self)
+        # on Python lists: numpy's per-call cost on each row of a few procedures was most of it
         return [
-            ([names[j] for j in np.flatnonzero(used)], names[nxt] if nxt >= 0 else None)
-            for used, nxt in zip(self.procedures_used, self.next_procedure.tolist(), strict=True)
+            ([n for n, u in zip(names, used, strict=True) if u], names[nxt] if nxt >= 0 else None)
+            for used, nxt in zip(
+                self.procedures_used.tolist(), self.next_procedure.tolist(), strict=True
+            )
         ]
 
     @property

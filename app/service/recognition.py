@@ -1,11 +1,11 @@
 """What ``POST /v1/recognize`` does once its body is parsed, behind one dependency.
 
 Small requests (up to ``coalesce`` samples) are validated on their own, so each gets
-its own errors, then share forward passes through the RecognitionBatcher; larger
-ones run alone in the thread pool. Recognitions are counted for /metrics, their inputs'
-health kept for it (``app.service.input_monitor``), and the
-answer's JSON is built here from the arrays, with what is constant per model version
-(each class's name and store id) built once per served model.
+its own errors, then share forward passes through the RecognitionBatcher, which counts
+each pass, keeps its inputs' health (``app.service.input_monitor``) and builds its answers'
+records once (``_finish``), each request then taking its rows; larger ones run alone in the
+thread pool. The answer's JSON is built here from the arrays, with what is constant per
+model version (each class's name and store id) built once per served model.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ class RecognitionService:
         self.top_k = top_k
         self.batch_limit = batch_limit
         self.coalesce = coalesce
-        self.batcher = batcher or RecognitionBatcher()
+        self.batcher = batcher or RecognitionBatcher(finish=self._finish)
         # the served model and its classes' labels ({"class_id", "class_name"}, and the
         # kind of each), built once per model: rebuilding them for 60 classes cost
         # ~15 µs of a single-sample request
@@ -69,28 +69,32 @@ class RecognitionService:
         n: int,
         target_confidence: float | None = None,
         known_kept: float | None = None,
-    ) -> RecognitionBatch:
-        """Recognise ``n`` samples with ``model``, the caller's snapshot to the end; a
-        ``target_confidence`` other than the model's default (None) runs alone. Novel
-        above the threshold keeping ``known_kept`` of known touches (None: the service's
-        ``known_kept``, else the model's own threshold)."""
+        outliers: str | None = None,
+    ) -> list[dict[str, Any]]:
+        """The answers' records (``records``) of ``n`` samples recognised with ``model``,
+        the caller's snapshot to the end; a ``target_confidence`` other than the model's
+        default (None) runs alone. Novel above the threshold keeping ``known_kept`` of
+        known touches (None: the service's ``known_kept``, else the model's own
+        threshold); ``outliers`` None: the service's policy."""
         rec = model.recognizer
         kept = self._kept(rec, known_kept)
-        if target_confidence is not None:
-            return self._counted(
-                model,
-                await run_in_threadpool(
-                    rec.recognize_batch, samples, self.top_k, None, target_confidence, kept
-                ),
-            )
-        if n <= self.coalesce:
+        policy = outliers or self.outliers
+        if target_confidence is None and n <= self.coalesce:
             x = rec.validate_samples(samples, partial=True)
-            results = await self.batcher.recognize(model, x, self.top_k, kept)
-        else:
-            results = await run_in_threadpool(
-                rec.recognize_batch, samples, self.top_k, known_kept=kept
-            )
-        return self._counted(model, results)
+            return await self.batcher.recognize(model, x, self.top_k, kept, policy)
+        target = TARGET_CONFIDENCE if target_confidence is None else target_confidence
+        results = await run_in_threadpool(
+            rec.recognize_batch, samples, self.top_k, None, target, kept
+        )
+        return self._finish(model, results, policy)
+
+    def _finish(
+        self, model: LoadedModel, results: RecognitionBatch, outliers: str
+    ) -> list[dict[str, Any]]:
+        """``results`` counted, their inputs observed, as records: once per batcher pass,
+        whichever requests share it."""
+        self._counted(model, results)
+        return self.records(model, results, outliers)
 
     async def recognize_object(
         self,
@@ -197,9 +201,12 @@ class RecognitionService:
         by ``model``: ``{"model_version", "results"}``, each result what
         ``RecognitionBatch.records(model.class_ids, outliers)`` gives (a test holds them
         equal); ``outliers`` None: the service's."""
-        return orjson.dumps(
-            {"model_version": model.version, "results": self.records(model, results, outliers)}
-        )
+        return self.json_of(model, self.records(model, results, outliers))
+
+    @staticmethod
+    def json_of(model: LoadedModel, records: list[dict[str, Any]]) -> bytes:
+        """The RecognizeResponse body of ``records`` answered by ``model``."""
+        return orjson.dumps({"model_version": model.version, "results": records})
 
     def records(
         self, model: LoadedModel, results: RecognitionBatch, outliers: str | None = None

@@ -236,12 +236,13 @@ async def answer(request: Request) -> bytes:
     if body.trials is not None:
         with blame("trials"):
             results = await service.recognize_trials(model, body.trials, same_object, kept)
+    elif same_object:
+        with blame("samples"):
+            results = await service.recognize_object(model, body.samples, target, kept)
     else:
         with blame("samples"):
-            if same_object:
-                results = await service.recognize_object(model, body.samples, target, kept)
-            else:
-                results = await service.recognize(model, body.samples, body.n, target, kept)
+            records = await service.recognize(model, body.samples, body.n, target, kept, outliers)
+        return service.json_of(model, records)
     return service.to_json(model, results, outliers)
 
 
