@@ -37,7 +37,9 @@ round between the two HTTP batch phases while the servers idle), and the in-proc
 
 Before anything starts, it waits (polling every 30 s, at most ``--max-wait`` seconds) until
 the 1-minute load average is below ``--max-load``: other work on a shared machine spoils
-the figures; the load at the start and at the end is in the report.
+the figures; the load at the start and at the end is in the report. Once every server is
+up it waits until they idle (``settle``; ``settled_s`` in the report): a service is ready
+before each of its processes has loaded its sentence-embedding model in the background.
 
 It prints JSON: the ratios first, then the targets they are compared with, then the
 absolute figures of this machine (each load phase with the cores each server process, the
@@ -120,6 +122,12 @@ def service(data_dir: Path, processes: int, database_url: str = "", method: str 
 # ----------------------------------------------------------------- measurements
 
 
+#: the servers have settled once they use less than this share of a core over a second,
+#: waited for at most SETTLE_MOST_S seconds
+SETTLE_CPU = 0.05
+SETTLE_MOST_S = 180.0
+
+
 def load_phase(url: str, pid: int, seconds: float, clients: int, request: bytes) -> dict:
     """``bench/load.py``'s ``hammer`` after a short warm-up, on a fresh uvloop loop; with
     ``cores_used``: the cores each server process, the load generator and everything else
@@ -136,6 +144,28 @@ def load_phase(url: str, pid: int, seconds: float, clients: int, request: bytes)
         return out
 
     return uvloop.run(go())
+
+
+def settle(pids: list[int], most_s: float = SETTLE_MOST_S) -> float:
+    """Seconds until the servers ``pids`` (with their child processes) idle: less than
+    ``SETTLE_CPU`` of a core over a second, at most ``most_s``. A service is ready before
+    it is done starting: each process then loads the sentence-embedding model in the
+    background (``app.api.warm``, many seconds of CPU on a slow machine), which a phase
+    measured meanwhile would count as the service's cost per request."""
+    from bench.load import process_cpu_s
+
+    def used() -> float:
+        return sum(process_cpu_s(p, children=False) or 0.0 for q in pids for p in process_tree(q))
+
+    start = time.monotonic()
+    before = used()
+    while time.monotonic() - start < most_s:
+        time.sleep(1.0)
+        now = used()
+        if now - before < SETTLE_CPU:
+            break
+        before = now
+    return round(time.monotonic() - start, 1)
 
 
 def process_tree(pid: int) -> list[int]:
@@ -420,6 +450,7 @@ def run(
                 url, pid, store = up.enter_context(service(tmp / name, n, store, method))
                 servers[name] = url, pid
                 r["start_s"][name] = round(time.monotonic() - t, 1)  # the first trains
+        r["settled_s"] = settle([pid for _, pid in servers.values()])
         model = load_model(fetch_bundle(servers["service_1_process"][0]))
         r["in_process_method"] = model.method
         # the pairs of each ratio side by side in the order

@@ -132,3 +132,24 @@ def test_waits_for_the_load_at_most_max_wait(monkeypatch) -> None:
     assert next(loads, None) is None  # polled until it fell below 1.0
     monkeypatch.setattr(sbs, "loadavg", lambda: [9.0, 9, 9])
     assert sbs.wait_for_load(1.0, 0) == 0  # no waiting allowed: starts at once
+
+
+def test_settle_waits_while_a_server_is_busy_and_not_after() -> None:
+    import subprocess
+    import sys
+
+    busy = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import time\nend = time.time() + 2.5\nwhile time.time() < end: pass\ntime.sleep(60)",
+        ]
+    )
+    try:
+        waited = sbs.settle([busy.pid], most_s=30)
+        assert 2.0 <= waited < 10  # busy for 2.5 s, idle after
+        assert sbs.settle([busy.pid], most_s=30) < 2.5  # idle: one quiet second
+        assert sbs.settle([os.getpid()], most_s=0.5) < 2  # never longer than most_s
+    finally:
+        busy.kill()
+        busy.wait()
