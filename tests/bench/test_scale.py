@@ -11,7 +11,8 @@ from tests.bench import ROOT, run_bench
 
 FIELDS = (
     "objects", "fit_s", "fit_peak_gb", "bundle_mb", "enrol_ms", "one_shot_ms", "promote_s",
-    "recognise_1_us", "batch_per_sample_us", "throughput_per_s", "known_acc", "nn1_acc",
+    "recognise_1_us", "batch_per_sample_us", "batch256_per_sample_us", "throughput_per_s",
+    "known_acc", "nn1_acc",
     "zsl_acc", "vectors_distinct", "novel_vectors_taken", "separation", "fit_timings",
     "by_procedure_s", "known_acc_one_procedure",
 )  # fmt: skip
@@ -36,6 +37,7 @@ def test_tiny_sizes_give_every_figure_a_table_and_a_plot(tmp_path):
     for r in report["sizes"]:
         assert set(FIELDS) <= set(r)
         assert r["fit_s"] > 0 and r["fit_peak_gb"] > 0 and r["recognise_1_us"] > 0
+        assert r["batch256_per_sample_us"] > 0
         assert 0 < r["promote_s"] < r["fit_s"]
         assert r["separation"] == "phac2"
         assert 0 < r["fit_timings"]["total_s"] <= r["fit_s"]  # the model's own breakdown
