@@ -333,10 +333,12 @@ def _with_attributes(
 
 #: how libraries say an allocation was refused (torch's CPU allocator, OpenBLAS, C's
 #: errno, the dynamic loader mapping a library under a limit its imports do not fit in,
-#: C++'s std::bad_alloc, which faiss raises as MemoryError or wraps in its own error)
+#: C++'s std::bad_alloc, which faiss raises as MemoryError or wraps in its own error), and
+#: the last line of Python's traceback of a MemoryError that escaped before the child's own
+#: report was written (under a limit below what its imports hold, writing it needs memory)
 _MEMORY_WORDS = re.compile(
     r"can't allocate memory|memory allocation|cannot allocate memory|out of memory"
-    r"|cannot map zero-fill pages|failed to map segment|bad_alloc",
+    r"|cannot map zero-fill pages|failed to map segment|bad_alloc|^MemoryError\b",
     re.I,
 )
 

@@ -129,6 +129,16 @@ def _aborts_on_bad_alloc(dataset, base):
     os.abort()
 
 
+def _memory_error_escapes(dataset, base):
+    """Ends as a child does whose MemoryError escaped before its report was written (under
+    a limit below what its imports hold, writing the report needs memory too): Python's
+    traceback on stderr, then exit code 1."""
+    os.write(2, b"Traceback (most recent call last):\n")
+    os.write(2, b'  File "worker/refit.py", line 304, in _child\n')
+    os.write(2, b"MemoryError\n")
+    os._exit(1)
+
+
 def _is_killed(dataset, base):
     """Ends as the kernel's out-of-memory killer ends a process."""
     os.kill(os.getpid(), signal.SIGKILL)
@@ -176,6 +186,8 @@ def test_numpys_memory_error_a_kill_and_an_abort_for_memory_are_memory_stops(dat
         run_in_child(_is_killed, (), dataset, limit)
     with pytest.raises(RefitMemoryError, match=r"instance of 'std::bad_alloc'; ended by SIGABRT"):
         run_in_child(_aborts_on_bad_alloc, (), dataset, limit)
+    with pytest.raises(RefitMemoryError, match=r"\(MemoryError; exit code 1\)"):
+        run_in_child(_memory_error_escapes, (), dataset, limit)
 
 
 def test_an_attribute_refit_in_a_child_is_the_one_in_process_sharing_the_rest(dataset):
