@@ -36,15 +36,15 @@ class _Request:
     samples: np.ndarray  # validated (n, *input_shape)
     top_k: int
     known_kept: float | None  # the operating point the answer is routed by (None: the model's)
-    shape: Hashable  # what ``finish`` makes of the answer (the service: the outlier policy)
+    finish_with: Hashable  # passed to ``finish`` (the service: the outlier policy)
     answer: asyncio.Future
 
 
-#: ``finish(model, the pass's batch, shape)``: what each request takes its rows of
+#: ``finish(model, the pass's batch, finish_with)``: what each request takes its rows of
 Finish = Callable[[LoadedModel, RecognitionBatch, Any], Sequence]
 
 
-def _as_batch(model: LoadedModel, batch: RecognitionBatch, shape: Any) -> RecognitionBatch:
+def _as_batch(model: LoadedModel, batch: RecognitionBatch, finish_with: Any) -> RecognitionBatch:
     return batch
 
 
@@ -64,12 +64,12 @@ class RecognitionBatcher:
         samples: np.ndarray,
         top_k: int,
         known_kept: float | None = None,
-        shape: Hashable = None,
+        finish_with: Hashable = None,
     ) -> Sequence:
         """The rows of ``samples`` in what ``finish`` made of their pass (by default a
-        ``RecognitionBatch``); ``shape`` is passed to ``finish``."""
+        ``RecognitionBatch``); ``finish_with`` is passed to ``finish``."""
         loop = asyncio.get_running_loop()
-        request = _Request(model, samples, top_k, known_kept, shape, loop.create_future())
+        request = _Request(model, samples, top_k, known_kept, finish_with, loop.create_future())
         self._queue.append(request)
         if not self._draining:
             self._draining = True
@@ -81,11 +81,11 @@ class RecognitionBatcher:
             await asyncio.sleep(0)  # requests parsed in this loop iteration join the first pass
             while self._queue:
                 batch = self._take()
-                # one pass per model snapshot, top_k, operating point and shape: a swap
-                # mid-queue changes no answer
+                # one pass per model snapshot, top_k, operating point and finish_with: a
+                # swap mid-queue changes no answer
                 groups: dict[tuple, list[_Request]] = {}
                 for r in batch:
-                    key = (id(r.model), r.top_k, r.known_kept, r.shape)
+                    key = (id(r.model), r.top_k, r.known_kept, r.finish_with)
                     groups.setdefault(key, []).append(r)
                 for group in groups.values():
                     self._pass(group)
@@ -108,7 +108,7 @@ class RecognitionBatcher:
             batch = first.model.recognizer.recognize_batch(
                 x, first.top_k, known_kept=first.known_kept
             )
-            results = self.finish(first.model, batch, first.shape)
+            results = self.finish(first.model, batch, first.finish_with)
         except Exception as exc:
             for r in group:
                 if not r.answer.done():  # a caller that went away is not answered

@@ -38,7 +38,6 @@ class RecognitionService:
         top_k: int,
         batch_limit: int,
         coalesce: int = 64,
-        batcher: RecognitionBatcher | None = None,
         input_window: int = 256,
         known_kept: float | None = None,
         outliers: str = ABSTAIN,
@@ -53,7 +52,8 @@ class RecognitionService:
         self.top_k = top_k
         self.batch_limit = batch_limit
         self.coalesce = coalesce
-        self.batcher = batcher or RecognitionBatcher(finish=self._finish)
+        # each pass counted and made into records once (_finish), its requests taking rows
+        self.batcher = RecognitionBatcher(finish=self._finish)
         # the served model and its classes' labels ({"class_id", "class_name"}, and the
         # kind of each), built once per model: rebuilding them for 60 classes cost
         # ~15 µs of a single-sample request

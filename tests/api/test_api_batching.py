@@ -89,3 +89,26 @@ def test_concurrent_http_requests_match_single_ones(client, dataset):
     for one, other in zip(singles, concurrent_answers, strict=True):
         assert one["class_name"] == other["class_name"]
         assert one["novelty_score"] == pytest.approx(other["novelty_score"], rel=1e-4)
+
+
+def test_finish_runs_once_a_pass_with_each_requests_own_finish_with():
+    echo, finished = Echo("m"), []
+
+    def finish(model, batch, finish_with):
+        finished.append((len(batch), finish_with))
+        return [(*row, finish_with) for row in batch]
+
+    model = LoadedModel(1, echo, {})
+    batcher = RecognitionBatcher(finish=finish)
+
+    async def main():
+        return await asyncio.gather(
+            batcher.recognize(model, np.zeros((2, 1)), 3, None, "abstain"),
+            batcher.recognize(model, np.ones((1, 1)), 3, None, "abstain"),
+            batcher.recognize(model, np.ones((1, 1)), 3, None, "answer"),
+        )
+
+    a, b, c = asyncio.run(main())
+    assert a == [("m", 0.0, 3, "abstain")] * 2 and b == [("m", 1.0, 3, "abstain")]
+    assert c == [("m", 1.0, 3, "answer")]
+    assert sorted(finished) == [(1, "answer"), (3, "abstain")]  # one finish a pass
